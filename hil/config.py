@@ -1,0 +1,243 @@
+"""Trial configuration: YAML (safe loading) validated into typed, frozen models.
+
+Units are in the key names (deg, deg/h, ug, ppm, arcsec, s); the rest of the code works in SI and
+converts at the edges through the ``*_si`` helpers below. Unknown keys and bad values raise
+:class:`ConfigError` naming the key path and the reason, e.g.
+``imu.errors.accel_bias_ug: expected 3 numbers, got 2``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+
+UG = 9.80665e-6  # m/s^2 per micro-g (standard gravity)
+DEG = math.pi / 180.0
+DEG_PER_H = DEG / 3600.0
+ARCSEC = DEG / 3600.0
+PPM = 1e-6
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot be used; the message names the key path and the reason."""
+
+
+def _vector(n: int):
+    def check(value: Any) -> Any:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            raise ValueError(f"expected {n} numbers, got a single number")
+        if not isinstance(value, (list, tuple)):
+            raise ValueError(f"expected a list of {n} numbers, got {type(value).__name__}")
+        if len(value) != n:
+            raise ValueError(f"expected {n} numbers, got {len(value)}")
+        for v in value:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"expected {n} finite numbers, got {v!r}")
+        return tuple(float(v) for v in value)
+
+    return BeforeValidator(check)
+
+
+Vec3 = Annotated[tuple[float, float, float], _vector(3)]
+Vec2 = Annotated[tuple[float, float], _vector(2)]
+Vec6 = Annotated[tuple[float, float, float, float, float, float], _vector(6)]
+ZERO3 = (0.0, 0.0, 0.0)
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TrialConfig(_Model):
+    name: str = "trial"
+    duration_s: float = Field(gt=0)
+    rate_hz: float = Field(200.0, gt=0, le=10000)
+    seed: int = 0
+
+
+class SiteConfig(_Model):
+    latitude_deg: float = Field(ge=-90, le=90)
+    longitude_deg: float = Field(0.0, ge=-180, le=360)
+    height_m: float = Field(0.0, ge=-1000, le=20000)
+
+
+class AxisMotion(_Model):
+    """One gimbal's commanded motion: swing ``amplitude*sin(2*pi*t/period + phase) + center``, or a rate."""
+
+    amplitude_deg: float = 0.0
+    period_s: float | None = Field(None, gt=0)
+    phase_deg: float = 0.0
+    center_deg: float = 0.0
+    rate_dps: float = 0.0
+
+    @model_validator(mode="after")
+    def _period_for_amplitude(self) -> AxisMotion:
+        if self.amplitude_deg != 0.0 and self.period_s is None:
+            raise ValueError("period_s is required when amplitude_deg is not zero")
+        return self
+
+
+class Position(_Model):
+    """A dwell position of the ``positions`` motion."""
+
+    outer_deg: float = 0.0
+    middle_deg: float = 0.0
+    inner_deg: float = 0.0
+    dwell_s: float = Field(gt=0)
+
+
+class Axes(_Model):
+    outer: AxisMotion = AxisMotion()
+    middle: AxisMotion = AxisMotion()
+    inner: AxisMotion = AxisMotion()
+
+
+class MotionConfig(_Model):
+    kind: Literal["swing", "static", "positions", "rate"] = "swing"
+    axes: Axes = Axes()
+    positions: list[Position] = []
+    rate_limit_dps: float = Field(20.0, gt=0)  # positions: move rate limit
+    accel_limit_dps2: float = Field(20.0, gt=0)  # positions: move acceleration limit
+
+    @model_validator(mode="after")
+    def _positions_listed(self) -> MotionConfig:
+        if self.kind == "positions" and not self.positions:
+            raise ValueError("kind 'positions' needs a non-empty 'positions' list")
+        return self
+
+
+class LimitsConfig(_Model):
+    """Turntable limits per axis, ordered (outer, middle, inner)."""
+
+    position_min_deg: Vec3 = (-180.0, -90.0, -180.0)
+    position_max_deg: Vec3 = (180.0, 90.0, 180.0)
+    rate_dps: Vec3 = (100.0, 100.0, 100.0)
+    accel_dps2: Vec3 = (100.0, 100.0, 100.0)
+
+
+class TurntableConfig(_Model):
+    source: Literal["emulator", "serial"] = "emulator"
+    data_port: str | None = None
+    command_port: str | None = None
+    baudrate: int = Field(115200, gt=0)
+    motion: MotionConfig = MotionConfig()
+    azimuth_deg: float = 0.0  # azimuth of the outer axis zero, from north towards east
+    tilt_deg: Vec2 = (0.0, 0.0)  # small tilt of the table base about east (x) and north (y)
+    mounting_deg: Vec3 = ZERO3  # IMU mounting on the inner gimbal, yaw/pitch/roll (z, x, y)
+    latch_delay_us: float = Field(0.0, ge=0)
+    limits: LimitsConfig = LimitsConfig()
+
+    @model_validator(mode="after")
+    def _serial_has_port(self) -> TurntableConfig:
+        if self.source == "serial" and not self.data_port:
+            raise ValueError("source 'serial' needs data_port (a pyserial URL)")
+        return self
+
+
+class ImuErrors(_Model):
+    """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
+
+    accel_bias_ug: Vec3 = ZERO3
+    accel_noise_ug: Vec3 = ZERO3  # white, 1-sigma per sample
+    accel_drift_ug_per_h: Vec3 = ZERO3  # linear bias drift b = b_s + k t
+    accel_random_walk_ug_per_sqrt_h: Vec3 = ZERO3  # bias random walk
+    accel_scale_ppm: Vec3 = ZERO3
+    accel_misalignment_arcsec: Vec6 = (0.0,) * 6  # (xy, xz, yx, yz, zx, zy)
+    accel_nonlinearity_ug_per_g2: Vec3 = ZERO3  # quadratic scale factor term K_nl
+    gyro_bias_dph: Vec3 = ZERO3
+    gyro_noise_dph: Vec3 = ZERO3  # white, 1-sigma per sample
+    gyro_drift_dph_per_h: Vec3 = ZERO3
+    gyro_random_walk_dph_per_sqrt_h: Vec3 = ZERO3
+    gyro_scale_ppm: Vec3 = ZERO3
+    gyro_misalignment_arcsec: Vec6 = (0.0,) * 6
+    dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
+    dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
+
+
+class CanConfig(_Model):
+    interface: str = "virtual"
+    channel: str = "hil"
+    dbc: str = "configs/imu_lab_highres.dbc"
+    bitrate: int = Field(1_000_000, gt=0)
+
+
+class ImuConfig(_Model):
+    source: Literal["emulator", "serial", "can"] = "emulator"
+    protocol: Literal["kvh1750", "xsens-mtdata2", "can-dbc"] = "kvh1750"
+    port: str | None = None
+    baudrate: int = Field(921600, gt=0)
+    can: CanConfig | None = None
+    rate_hz: float | None = Field(None, gt=0)  # defaults to trial.rate_hz
+    errors: ImuErrors = ImuErrors()
+
+    @model_validator(mode="after")
+    def _transport_given(self) -> ImuConfig:
+        if self.source == "serial" and not self.port:
+            raise ValueError("source 'serial' needs port (a pyserial URL)")
+        if self.source == "can" and self.can is None:
+            raise ValueError("source 'can' needs a 'can' block (interface, channel, dbc)")
+        return self
+
+
+class EstimatorConfig(_Model):
+    solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
+    rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
+
+
+class OutputConfig(_Model):
+    dir: str | None = None
+    figures: bool = True
+
+
+class Config(_Model):
+    trial: TrialConfig
+    site: SiteConfig
+    turntable: TurntableConfig = TurntableConfig()
+    imu: ImuConfig = ImuConfig()
+    estimator: EstimatorConfig = EstimatorConfig()
+    output: OutputConfig = OutputConfig()
+
+    @property
+    def imu_rate_hz(self) -> float:
+        return self.imu.rate_hz or self.trial.rate_hz
+
+
+def _describe(error: ValidationError) -> str:
+    lines = []
+    for item in error.errors():
+        path = ".".join(str(p) for p in item["loc"])
+        msg = item["msg"].removeprefix("Value error, ")
+        if item["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif item["type"] == "missing":
+            msg = "required key is missing"
+        lines.append(f"{path}: {msg}" if path else msg)
+    return "; ".join(lines)
+
+
+def parse_config(data: Any, source: str = "config") -> Config:
+    """Validate a mapping (already parsed YAML) into a :class:`Config`."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
+    try:
+        return Config.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(f"{source}: {_describe(exc)}") from None
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a YAML trial configuration (safe loader only)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+    return parse_config(data, str(path))

@@ -1,0 +1,127 @@
+"""Earth model, frames and turntable kinematics.
+
+Frames: n is East-North-Up, b is Right-Forward-Up, n0 is n frozen in inertial space at the trial
+start. Attitude angles follow the turntable's gimbal order: ``C_b^n = Rz(yaw) Rx(pitch) Ry(roll)``,
+i.e. scipy's intrinsic ``"ZXY"`` sequence. Gimbal angle arrays are ordered (outer, middle, inner).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hil.config import DEG, TurntableConfig
+
+EARTH_RATE = 7.2921151467e-5  # rad/s, WGS-84
+WGS84_A = 6378137.0  # m, semi-major axis
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = 0.00669437999013
+WGS84_GE = 9.7803253359  # m/s^2, normal gravity at the equator
+WGS84_K = 0.00193185265241  # Somigliana constant
+WGS84_M = 0.00344978650684  # omega^2 a^2 b / GM
+
+EULER_SEQ = "ZXY"  # yaw (z), pitch (x), roll (y); intrinsic
+
+
+def normal_gravity(latitude: float, height: float = 0.0) -> float:
+    """WGS-84 normal gravity (m/s^2) at geodetic latitude (rad) and ellipsoidal height (m).
+
+    Somigliana's closed form on the ellipsoid, with the second-order free-air correction in height.
+    """
+    s2 = math.sin(latitude) ** 2
+    g0 = WGS84_GE * (1.0 + WGS84_K * s2) / math.sqrt(1.0 - WGS84_E2 * s2)
+    c1 = 2.0 / WGS84_A * (1.0 + WGS84_F + WGS84_M - 2.0 * WGS84_F * s2)
+    return g0 * (1.0 - c1 * height + 3.0 * height**2 / WGS84_A**2)
+
+
+@dataclass(frozen=True)
+class Earth:
+    """Site-dependent earth quantities in the ENU navigation frame."""
+
+    latitude: float  # rad
+    height: float = 0.0  # m
+
+    @property
+    def g(self) -> float:
+        return normal_gravity(self.latitude, self.height)
+
+    @property
+    def omega_n(self) -> np.ndarray:
+        """Earth rate in n (ENU): [0, W cos L, W sin L]."""
+        return EARTH_RATE * np.array([0.0, math.cos(self.latitude), math.sin(self.latitude)])
+
+    @property
+    def f_n(self) -> np.ndarray:
+        """Specific force sensed at rest, in n: [0, 0, g]."""
+        return np.array([0.0, 0.0, self.g])
+
+    def n_to_n0(self, t: np.ndarray | float) -> Rotation:
+        """C_n^n0(t): the navigation frame at t seen in the start navigation frame (earth rotation)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        return Rotation.from_rotvec(np.outer(t, self.omega_n))
+
+    @classmethod
+    def from_degrees(cls, latitude_deg: float, height_m: float = 0.0) -> Earth:
+        return cls(latitude_deg * DEG, height_m)
+
+
+def euler_rotation(yaw_pitch_roll: np.ndarray) -> Rotation:
+    """Rotation Rz(yaw) Rx(pitch) Ry(roll) from angles (rad), shape (3,) or (N, 3)."""
+    return Rotation.from_euler(EULER_SEQ, yaw_pitch_roll)
+
+
+def euler_angles(rotation: Rotation) -> np.ndarray:
+    """(yaw, pitch, roll) in rad of C_b^n, the inverse of :func:`euler_rotation`."""
+    return rotation.as_euler(EULER_SEQ)
+
+
+@dataclass(frozen=True)
+class TableGeometry:
+    """How the turntable sits on the site and how the IMU sits on the inner gimbal."""
+
+    azimuth: float = 0.0  # rad, rotation of the outer-axis zero about up (same sense as the outer angle)
+    tilt: tuple[float, float] = (0.0, 0.0)  # rad, base tilt about east (x) and north (y)
+    mounting: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad, (yaw, pitch, roll) of b in the inner gimbal
+
+    @classmethod
+    def from_config(cls, table: TurntableConfig) -> TableGeometry:
+        return cls(
+            table.azimuth_deg * DEG,
+            (table.tilt_deg[0] * DEG, table.tilt_deg[1] * DEG),
+            tuple(a * DEG for a in table.mounting_deg),
+        )
+
+    @property
+    def table_to_n(self) -> Rotation:
+        """C_table^n = R_tilt . Rz(azimuth)."""
+        tilt = Rotation.from_rotvec([self.tilt[0], self.tilt[1], 0.0])
+        return tilt * Rotation.from_euler("z", self.azimuth)
+
+    @property
+    def body_to_mount(self) -> Rotation:
+        """C_b^mount: the IMU case in the inner gimbal frame."""
+        return euler_rotation(np.asarray(self.mounting))
+
+    def attitude(self, angles: np.ndarray) -> Rotation:
+        """C_b^n = C_table^n . Rz(outer) Rx(middle) Ry(inner) . C_b^mount; angles (rad) (3,) or (N, 3)."""
+        return self.table_to_n * euler_rotation(angles) * self.body_to_mount
+
+    def body_rate(self, angles: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
+        """omega_nb^b (rad/s) from gimbal angles and their rates, both (N, 3) ordered (outer, middle, inner).
+
+        omega = C_mount^b [ Ry(i)^T Rx(m)^T z * d(outer) + Ry(i)^T x * d(middle) + y * d(inner) ].
+        """
+        angles = np.atleast_2d(angles)
+        rates = np.atleast_2d(angle_rates)
+        inner = Rotation.from_euler("y", angles[:, 2])
+        inner_middle = Rotation.from_euler("XY", angles[:, 1:3])
+        n = len(angles)
+        w_mount = (
+            inner_middle.apply(np.tile([0.0, 0.0, 1.0], (n, 1)), inverse=True) * rates[:, 0:1]
+            + inner.apply(np.tile([1.0, 0.0, 0.0], (n, 1)), inverse=True) * rates[:, 1:2]
+            + np.array([0.0, 1.0, 0.0]) * rates[:, 2:3]
+        )
+        return self.body_to_mount.apply(w_mount, inverse=True)

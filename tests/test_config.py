@@ -1,0 +1,48 @@
+import pytest
+
+from hil.config import ConfigError, load_config, parse_config
+
+MINIMAL = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
+
+
+def test_minimal_config_takes_documented_defaults():
+    cfg = parse_config(MINIMAL)
+    assert cfg.trial.rate_hz == 200
+    assert cfg.imu.protocol == "kvh1750"
+    assert cfg.imu.errors.accel_bias_ug == (0.0, 0.0, 0.0)
+
+
+def test_wrong_vector_length_names_the_key_path():
+    data = {**MINIMAL, "imu": {"errors": {"accel_bias_ug": [1, 2]}}}
+    with pytest.raises(ConfigError, match=r"imu\.errors\.accel_bias_ug: expected 3 numbers, got 2"):
+        parse_config(data)
+
+
+def test_unknown_key_is_an_error():
+    data = {**MINIMAL, "turntable": {"motoin": {}}}
+    with pytest.raises(ConfigError, match=r"turntable\.motoin: unknown key"):
+        parse_config(data)
+
+
+def test_missing_required_key_is_named():
+    with pytest.raises(ConfigError, match=r"site: required key is missing"):
+        parse_config({"trial": {"duration_s": 1}})
+
+
+def test_swing_axis_without_period_is_rejected():
+    data = {**MINIMAL, "turntable": {"motion": {"axes": {"inner": {"amplitude_deg": 3}}}}}
+    with pytest.raises(ConfigError, match=r"turntable\.motion\.axes\.inner: period_s is required"):
+        parse_config(data)
+
+
+def test_yaml_tags_are_not_executed(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("trial: !!python/object/apply:os.system ['true']\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config(path)
+
+
+@pytest.mark.parametrize("name", ["emulated_swing.yaml", "liu2019_sim.yaml"])
+def test_shipped_configs_validate(name):
+    cfg = load_config(f"configs/{name}")
+    assert cfg.turntable.motion.kind == "swing"

@@ -1,0 +1,87 @@
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_angles, euler_rotation, normal_gravity
+
+
+def rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+@pytest.mark.parametrize(
+    "lat_deg, expected",
+    [(0.0, 9.7803253359), (90.0, 9.8321849378), (-90.0, 9.8321849378)],  # WGS-84 equatorial and polar gravity
+)
+def test_normal_gravity_matches_published_wgs84_values(lat_deg, expected):
+    assert normal_gravity(math.radians(lat_deg)) == pytest.approx(expected, abs=2e-9)
+
+
+def test_free_air_gradient_is_about_3086_ugal_per_m():
+    lat = math.radians(32)
+    gradient = (normal_gravity(lat, 0.0) - normal_gravity(lat, 100.0)) / 100.0
+    assert gradient == pytest.approx(3.086e-6, rel=2e-3)
+
+
+def test_earth_rate_in_enu():
+    earth = Earth.from_degrees(32.0)
+    np.testing.assert_allclose(
+        earth.omega_n, EARTH_RATE * np.array([0, math.cos(math.radians(32)), math.sin(math.radians(32))])
+    )
+
+
+def test_gimbal_attitude_is_rz_rx_ry_product():
+    angles = np.array([0.3, -0.2, 0.7])  # outer, middle, inner
+    c = TableGeometry().attitude(angles).as_matrix()
+    np.testing.assert_allclose(c, rz(0.3) @ rx(-0.2) @ ry(0.7), atol=1e-15)
+
+
+def test_table_azimuth_tilt_and_mounting_compose_in_documented_order():
+    geo = TableGeometry(azimuth=0.1, tilt=(1e-3, -2e-3), mounting=(0.02, 0.01, -0.03))
+    angles = np.array([0.3, -0.2, 0.7])
+    tilt = Rotation.from_rotvec([1e-3, -2e-3, 0]).as_matrix()
+    mount = rz(0.02) @ rx(0.01) @ ry(-0.03)
+    expected = tilt @ rz(0.1) @ rz(0.3) @ rx(-0.2) @ ry(0.7) @ mount
+    np.testing.assert_allclose(geo.attitude(angles).as_matrix(), expected, atol=1e-15)
+
+
+def test_euler_angles_round_trip():
+    ypr = np.array([[0.1, 0.2, -0.3], [2.0, -0.5, 1.0]])
+    np.testing.assert_allclose(euler_angles(euler_rotation(ypr)), ypr, atol=1e-14)
+
+
+def test_body_rate_matches_finite_difference_of_attitude():
+    geo = TableGeometry(azimuth=0.2, tilt=(1e-3, 0.0), mounting=(0.05, -0.02, 0.03))
+    t = 0.37
+    def angles(t):
+        return np.array([0.3 * math.sin(t), 0.2 * math.cos(1.3 * t), 0.5 * math.sin(0.7 * t + 1)])
+    def rates(t):
+        return np.array([0.3 * math.cos(t), -0.26 * math.sin(1.3 * t), 0.35 * math.cos(0.7 * t + 1)])
+    h = 1e-6
+    c_minus = geo.attitude(angles(t - h)).as_matrix()
+    c_plus = geo.attitude(angles(t + h)).as_matrix()
+    c = geo.attitude(angles(t)).as_matrix()
+    skew = c.T @ (c_plus - c_minus) / (2 * h)  # C^T dC/dt = [omega x]
+    expected = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+    np.testing.assert_allclose(geo.body_rate(angles(t), rates(t))[0], expected, atol=1e-9)
+
+
+def test_n_to_n0_rotates_about_the_earth_axis():
+    earth = Earth.from_degrees(32.0)
+    c = earth.n_to_n0(3600.0)
+    axis = earth.omega_n / EARTH_RATE
+    np.testing.assert_allclose(c.apply(axis)[0], axis, atol=1e-15)
+    assert c.magnitude()[0] == pytest.approx(EARTH_RATE * 3600.0, rel=1e-14)
