@@ -1,0 +1,170 @@
+"""Sensor error model: ideal IMU increments -> measured increments.
+
+Per interval k of length T = 1/rate_hz ending at t_k, with the interval-mean rate w = dtheta/T and
+specific force f = dv/T (all per axis x, y, z; products and squares element-wise):
+
+    1. misalignment and scale (three-stage self-calibration 2018, Eqs. (5)-(6)):
+           w1 = (I + S_g) C_g w,          f1 = (I + S_a) C_a f
+    2. quadratic nonlinearity, accelerometers only (Eq. (6), K_nl term, first order):
+           f2 = f1 + K_nl f1^2
+    3. bias: repeatability, linear drift (gravity-vector 2018, Eq. (90): b = b_s + k t, here averaged
+       over the interval), random walk and white noise (1-sigma per sample, Liu 2019 Table 2):
+           w3 = w1 + b_g + k_g (t_k - T/2) + r_g[k] + sigma_g n_g[k]
+           f3 = f2 + b_a + k_a (t_k - T/2) + r_a[k] + sigma_a n_a[k]
+       with r[k] = r[k-1] + q sqrt(T) m[k], r[0] = 0 (a Wiener process sampled per interval), n, m ~ N(0, 1)
+    4. output quantisation with the remainder carried to the next sample:
+           dtheta_out = Q_dtheta(w3 T),   dv_out = Q_dv(f3 T)
+
+Eq. (6) writes the ideal force through SF^-1 C_p^a; here SF^-1 = I + S with S = diag(scale factor
+errors). C_p^a maps platform axes to the non-orthogonal sensor axes; its rows are the sensitive axes.
+Sensor axis i is turned by beta_ij about platform axis j (right-handed; the signs that a plain-text
+copy of Eq. (5) loses follow from that geometry):
+
+    C = [[ 1,       beta_xz, -beta_xy],
+         [-beta_yz, 1,        beta_yx],
+         [ beta_zy, -beta_zx, 1      ]]
+
+The same form is used for the gyros. The implicit Eq. (6), f_a = ... + K_nl (f_a - b)^2, is taken to
+first order in K_nl: the square is of the misaligned, scaled force f1.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hil.config import ARCSEC, DEG_PER_H, PPM, UG, ImuErrors
+
+_SECONDS_PER_HOUR = 3600.0
+# Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the
+# first sample) so that the running fractional sum keeps its precision over long trials.
+_QUANT_BLOCK = 4096
+
+
+def misalignment_matrix(angles_rad: tuple[float, ...] | np.ndarray) -> np.ndarray:
+    """C_p^a of the 2018 three-stage paper, Eq. (5), from angles ordered (xy, xz, yx, yz, zx, zy)."""
+    xy, xz, yx, yz, zx, zy = angles_rad
+    return np.array([[1.0, xz, -xy], [-yz, 1.0, yx], [zy, -zx, 1.0]])
+
+
+class _Quantiser:
+    """Rounds increments to whole quanta, carrying the remainder so that the output sum tracks the input sum."""
+
+    def __init__(self, quantum: float) -> None:
+        self._quantum = quantum
+        self._carry = np.zeros(3)  # running sum of fractional parts, in quanta
+        self._count = 0  # samples processed so far
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        u = x / self._quantum
+        whole = np.rint(u)
+        frac = u - whole  # exact; the carry only has to track these
+        counts = np.empty_like(u)
+        start = 0
+        while start < len(u):
+            stop = min(len(u), start + _QUANT_BLOCK - self._count % _QUANT_BLOCK)
+            running = np.cumsum(np.vstack([self._carry, frac[start:stop]]), axis=0)
+            counts[start:stop] = whole[start:stop] + np.diff(np.rint(running), axis=0)
+            self._carry = running[-1]
+            self._count += stop - start
+            if self._count % _QUANT_BLOCK == 0:
+                self._carry = self._carry - np.rint(self._carry)
+            start = stop
+        return counts * self._quantum
+
+
+class _Channel:
+    """One sensor triad (gyros or accelerometers): static coefficients in SI and the random-walk state."""
+
+    def __init__(
+        self,
+        bias: np.ndarray,
+        noise: np.ndarray,
+        drift: np.ndarray,
+        random_walk: np.ndarray,
+        scale: np.ndarray,
+        misalignment: np.ndarray,
+        nonlinearity: np.ndarray,
+        quantum: float,
+        period: float,
+    ) -> None:
+        matrix = np.diag(1.0 + scale) @ misalignment_matrix(misalignment)
+        self._matrix = None if np.array_equal(matrix, np.eye(3)) else matrix
+        self._bias, self._noise, self._drift, self._nonlinearity = bias, noise, drift, nonlinearity
+        self._walk_step = random_walk * math.sqrt(period)
+        self._walk = np.zeros(3)
+        self._period = period
+        self._quantise = _Quantiser(quantum) if quantum > 0.0 else None
+
+    def __call__(self, t: np.ndarray, x: np.ndarray, white: np.ndarray, walk: np.ndarray) -> np.ndarray:
+        """Measured increments from ideal increments x (N, 3); white and walk are N(0, 1) draws (N, 3)."""
+        period = self._period
+        if self._matrix is not None:
+            x = x @ self._matrix.T
+        if self._nonlinearity.any():
+            x = x + self._nonlinearity * x * x / period  # K f^2 T with f = x / T
+        walk_state = np.cumsum(np.vstack([self._walk, self._walk_step * walk]), axis=0)[1:]
+        if len(walk_state):
+            self._walk = walk_state[-1]
+        rate_error = self._bias + np.outer(t - period / 2.0, self._drift) + walk_state + self._noise * white
+        x = x + rate_error * period
+        return self._quantise(x) if self._quantise is not None else x
+
+
+class SensorErrorModel:
+    """Applies an IMU's errors (see the module docstring for the measurement equation) chunk by chunk.
+
+    Stateful: successive calls on consecutive chunks give exactly the output of one call on the whole
+    series (random-walk state, random stream and quantisation remainders carry over).
+    """
+
+    def __init__(self, errors: ImuErrors, rate_hz: float, seed: int, gravity: float = 9.80665) -> None:
+        if not rate_hz > 0.0:
+            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+        period = 1.0 / rate_hz
+        sqrt_hour = math.sqrt(_SECONDS_PER_HOUR)
+        e = errors
+        self._rng = np.random.Generator(np.random.PCG64(seed))
+        self._gyro = _Channel(
+            bias=np.array(e.gyro_bias_dph) * DEG_PER_H,
+            noise=np.array(e.gyro_noise_dph) * DEG_PER_H,
+            drift=np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / _SECONDS_PER_HOUR,
+            random_walk=np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / sqrt_hour,
+            scale=np.array(e.gyro_scale_ppm) * PPM,
+            misalignment=np.array(e.gyro_misalignment_arcsec) * ARCSEC,
+            nonlinearity=np.zeros(3),
+            quantum=e.dtheta_quantum_rad,
+            period=period,
+        )
+        self._accel = _Channel(
+            bias=np.array(e.accel_bias_ug) * UG,
+            noise=np.array(e.accel_noise_ug) * UG,
+            drift=np.array(e.accel_drift_ug_per_h) * UG / _SECONDS_PER_HOUR,
+            random_walk=np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / sqrt_hour,
+            scale=np.array(e.accel_scale_ppm) * PPM,
+            misalignment=np.array(e.accel_misalignment_arcsec) * ARCSEC,
+            nonlinearity=np.array(e.accel_nonlinearity_ug_per_g2) * UG / gravity**2,
+            quantum=e.dv_quantum_mps,
+            period=period,
+        )
+
+    def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured increments from ideal ones over consecutive intervals ending at t (N,).
+
+        dtheta (N, 3) in rad and dv (N, 3) in m/s; returns (dtheta, dv) as measured, same shapes.
+        """
+        t = np.asarray(t, dtype=float)
+        dtheta = np.asarray(dtheta, dtype=float)
+        dv = np.asarray(dv, dtype=float)
+        n = len(t)
+        if t.shape != (n,) or dtheta.shape != (n, 3) or dv.shape != (n, 3):
+            raise ValueError(
+                f"expected t (N,), dtheta (N, 3) and dv (N, 3); got {t.shape}, {dtheta.shape}, {dv.shape}"
+            )
+        # A fixed number of draws per sample, in a fixed order, keeps the stream independent of chunking.
+        draws = self._rng.standard_normal((n, 12))
+        return (
+            self._gyro(t, dtheta, draws[:, 0:3], draws[:, 6:9]),
+            self._accel(t, dv, draws[:, 3:6], draws[:, 9:12]),
+        )
