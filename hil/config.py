@@ -158,11 +158,33 @@ class ImuErrors(_Model):
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
 
 
+class CanSignals(_Model):
+    """Which DBC signals carry which quantity, as ``Message.Signal`` (x, y, z order).
+
+    Each signal's DBC unit says what it is: an increment (rad, deg, m/s) or a rate (rad/s, deg/s,
+    m/s^2, g), which the driver converts to increments with the IMU rate.
+    """
+
+    gyro: tuple[str, str, str] = ("IMU_DThetaX.DThetaX", "IMU_DThetaY.DThetaY", "IMU_DThetaZ.DThetaZ")
+    accel: tuple[str, str, str] = ("IMU_DVX.DVX", "IMU_DVY.DVY", "IMU_DVZ.DVZ")
+    sync: str | None = "SyncCounter"  # signal name present in every message above; None: count samples
+    status: str | None = "Status"  # fault flags present in every message above (OR-ed), or None
+
+
 class CanConfig(_Model):
     interface: str = "virtual"
     channel: str = "hil"
     dbc: str = "configs/imu_lab_highres.dbc"
     bitrate: int = Field(1_000_000, gt=0)
+    signals: CanSignals = CanSignals()
+
+
+class Kvh1750Format(_Model):
+    """How the KVH 1750 itself is configured to output (its own settings, mirrored here)."""
+
+    gyro_unit: Literal["rad", "deg"] = "rad"
+    gyro_output: Literal["delta", "rate"] = "delta"
+    accel_unit: Literal["g", "m/s^2"] = "g"
 
 
 class ImuConfig(_Model):
@@ -171,6 +193,7 @@ class ImuConfig(_Model):
     port: str | None = None
     baudrate: int = Field(921600, gt=0)
     can: CanConfig | None = None
+    kvh1750: Kvh1750Format = Kvh1750Format()
     rate_hz: float | None = Field(None, gt=0)  # defaults to trial.rate_hz
     errors: ImuErrors = ImuErrors()
 
