@@ -1,0 +1,196 @@
+"""IMU over CAN: frames described by a DBC and decoded with cantools; which signal is which is config.
+
+A sample is the set of configured messages that share one sync counter (or, without a counter, one
+of each message in turn). A set left incomplete when the next one starts is counted as corrupt.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import can
+import cantools
+
+from drivers.codec import Codec, Decoded, Framer, RawChunk
+from drivers.framing import SequenceUnwrapper
+from hil.samples import ImuSample
+
+G0 = 9.80665
+DEG = math.pi / 180.0
+# DBC unit -> (what it measures, factor to SI)
+UNITS: dict[str, tuple[str, float]] = {
+    "rad": ("angle", 1.0), "deg": ("angle", DEG), "mrad": ("angle", 1e-3), "urad": ("angle", 1e-6),
+    "rad/s": ("angular rate", 1.0), "deg/s": ("angular rate", DEG),
+    "m/s": ("velocity", 1.0), "mm/s": ("velocity", 1e-3),
+    "m/s^2": ("acceleration", 1.0), "m/s2": ("acceleration", 1.0), "g": ("acceleration", G0),
+    "mg": ("acceleration", 1e-3 * G0),
+}
+_INCREMENT = {"gyro": "angle", "accel": "velocity"}
+_RATE = {"gyro": "angular rate", "accel": "acceleration"}
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class CanImuFrame:
+    """One sample's signal values in the DBC's units (gyro and accel x, y, z), counter and status."""
+
+    gyro: Vec3
+    accel: Vec3
+    sync_counter: int | None
+    status: int
+
+
+class CanDbcCodec(Codec[CanImuFrame]):
+    """Encode samples to CAN messages and decode them back through a DBC."""
+
+    name: ClassVar[str] = "can-dbc"
+    kind: ClassVar[str] = "imu"
+
+    def __init__(self, dbc: str | Path, rate_hz: float, gyro: tuple[str, str, str], accel: tuple[str, str, str],
+                 sync: str | None = None, status: str | None = None) -> None:
+        self.db = cantools.database.load_file(str(dbc))
+        self.rate_hz = rate_hz
+        self.sync, self.status = sync, status
+        self.quantities = [self._signal(name) for name in (*gyro, *accel)]  # (message, signal)
+        self.messages = list(dict.fromkeys(message for message, _ in self.quantities))
+        self.units = [signal.unit or "" for _, signal in self.quantities]
+        self.scales = [self._scale(i, name) for i, name in enumerate((*gyro, *accel))]
+        for message in self.messages:
+            for extra in (sync, status):
+                if extra is not None and extra not in [s.name for s in message.signals]:
+                    raise ValueError(f"{dbc}: message {message.name} has no signal {extra!r}, "
+                                     "which must be in every configured message")
+        self.sync_modulus = 1 << self.messages[0].get_signal_by_name(sync).length if sync else None
+        self.messages_by_id = {(m.frame_id, m.is_extended_frame): m for m in self.messages}
+
+    @classmethod
+    def from_config(cls, imu: Any, rate_hz: float) -> CanDbcCodec:
+        c = imu.can
+        return cls(c.dbc, rate_hz, c.signals.gyro, c.signals.accel, c.signals.sync, c.signals.status)
+
+    def _signal(self, name: str) -> tuple[Any, Any]:
+        message_name, _, signal_name = name.partition(".")
+        try:
+            message = self.db.get_message_by_name(message_name)
+            return message, message.get_signal_by_name(signal_name)
+        except KeyError:
+            raise ValueError(f"DBC has no signal {name!r} (expected Message.Signal)") from None
+
+    def _scale(self, index: int, name: str) -> float:
+        """Factor from the signal's device unit to an SI increment over one sample interval."""
+        group = "gyro" if index < 3 else "accel"
+        unit = self.units[index]
+        kind, factor = UNITS.get(unit, ("unknown", 0.0))
+        if kind == _INCREMENT[group]:
+            return factor
+        if kind == _RATE[group]:
+            return factor / self.rate_hz
+        raise ValueError(f"DBC signal {name} has unit {unit!r}; a {group} signal needs a unit of "
+                         f"{_INCREMENT[group]} or {_RATE[group]}: one of {', '.join(UNITS)}")
+
+    def encode(self, record: CanImuFrame) -> list[can.Message]:
+        """The CAN messages of one sample, in DBC order."""
+        values = dict(zip(((m.name, s.name) for m, s in self.quantities), (*record.gyro, *record.accel)))
+        out = []
+        for message in self.messages:
+            data: dict[str, float] = {}
+            for signal in message.signals:
+                if (message.name, signal.name) in values:
+                    data[signal.name] = values[message.name, signal.name]
+                elif signal.name == self.sync:
+                    data[signal.name] = record.sync_counter or 0
+                elif signal.name == self.status:
+                    data[signal.name] = record.status
+                else:
+                    low = signal.minimum if signal.minimum is not None else signal.offset
+                    data[signal.name] = max(low, signal.offset)
+            out.append(can.Message(arbitration_id=message.frame_id, is_extended_id=message.is_extended_frame,
+                                   data=message.encode(data, padding=True)))
+        return out
+
+    def framer(self) -> CanFramer:
+        return CanFramer(self)
+
+    def to_sample(self, decoded: Decoded[CanImuFrame]) -> ImuSample:
+        r, s = decoded.record, self.scales
+        return ImuSample(decoded.sync_index, (r.gyro[0] * s[0], r.gyro[1] * s[1], r.gyro[2] * s[2]),
+                         (r.accel[0] * s[3], r.accel[1] * s[4], r.accel[2] * s[5]), decoded.host_time, None,
+                         r.status)
+
+    def from_sample(self, sample: ImuSample) -> CanImuFrame:
+        s = self.scales
+        counter = sample.sync_index % self.sync_modulus if self.sync_modulus else None
+        return CanImuFrame(tuple(x / k for x, k in zip(sample.dtheta, s[:3])),
+                           tuple(x / k for x, k in zip(sample.dv, s[3:])), counter, sample.status)
+
+    def csv_header(self) -> list[str]:
+        units = [u.replace("/", "_").replace("^", "") for u in self.units]
+        return ([f"gyro_{c}_{u}" for c, u in zip("xyz", units[:3])]
+                + [f"accel_{c}_{u}" for c, u in zip("xyz", units[3:])] + ["sync_counter", "status"])
+
+    def csv_row(self, record: CanImuFrame) -> list[Any]:
+        return [*record.gyro, *record.accel, record.sync_counter, record.status]
+
+
+class CanFramer(Framer):
+    """Collects the configured messages of one sample; ignores other traffic (counted as skipped bytes)."""
+
+    def __init__(self, codec: CanDbcCodec) -> None:
+        super().__init__()
+        self.codec = codec
+        self.unwrapper = SequenceUnwrapper(codec.sync_modulus, codec.rate_hz)
+        self._pending: dict[str, dict[str, float]] = {}
+        self._pending_bytes = 0
+        self._counter: int | None = None
+
+    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
+        codec, counters = self.codec, self.counters
+        message = codec.messages_by_id.get((chunk.arbitration_id, chunk.is_extended_id))
+        if message is None:
+            counters.skipped_bytes += len(chunk.data)
+            return []
+        try:
+            values = message.decode(chunk.data, decode_choices=False)
+        except Exception:  # cantools raises several types for short or malformed data
+            counters.corrupt += 1
+            counters.skipped_bytes += len(chunk.data)
+            return []
+        counter = int(values[codec.sync]) if codec.sync else None
+        if self._pending and (counter != self._counter or message.name in self._pending):
+            self._drop_pending()
+        self._counter = counter
+        self._pending[message.name] = values
+        self._pending_bytes += len(chunk.data)
+        if len(self._pending) < len(codec.messages):
+            return []
+        return [self._complete(chunk.host_time)]
+
+    def _complete(self, host_time: float) -> Decoded:
+        codec, pending = self.codec, self._pending
+        numbers = [float(pending[m.name][s.name]) for m, s in codec.quantities]
+        status = 0
+        if codec.status:
+            for values in pending.values():
+                status |= int(values[codec.status])
+        record = CanImuFrame(tuple(numbers[:3]), tuple(numbers[3:]), self._counter, status)
+        index, missing = self.unwrapper.next(self._counter, host_time)
+        if missing:
+            self.counters.gaps += 1
+            self.counters.missing += missing
+        self.counters.frames += 1
+        decoded = Decoded(record, index, host_time, self._pending_bytes)
+        self._pending, self._pending_bytes = {}, 0
+        return decoded
+
+    def _drop_pending(self) -> None:
+        self.counters.corrupt += 1
+        self.counters.skipped_bytes += self._pending_bytes
+        self._pending, self._pending_bytes = {}, 0
+
+    def reset(self) -> None:
+        if self._pending:
+            self._drop_pending()

@@ -1,0 +1,103 @@
+"""What every codec offers: frame records <-> wire, records -> SI samples, and a stream framer.
+
+A codec is the plug-in for one protocol (see :mod:`drivers.registry`). Records keep the device's own
+fields and units; :meth:`Codec.to_sample` converts to the SI records of :mod:`hil.samples` and
+:meth:`Codec.from_sample` builds a record from SI values (the emulators encode with it).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Generic, TypeVar
+
+from hil.samples import ImuSample, TableSample
+
+R = TypeVar("R")
+Sample = ImuSample | TableSample
+
+
+class DecodeError(ValueError):
+    """Bytes or a frame that do not form a valid record of the protocol."""
+
+
+@dataclass(frozen=True, slots=True)
+class Decoded(Generic[R]):
+    """A valid frame as it came off the wire: the device record, its unwrapped sync index, host time."""
+
+    record: R
+    sync_index: int
+    host_time: float
+    size: int  # bytes the frame occupied on the wire (CAN: payload bytes of all its messages)
+
+
+@dataclass(frozen=True, slots=True)
+class RawChunk:
+    """Whatever one read returned, good or bad, before any parsing: bytes, or one CAN frame."""
+
+    stream: str
+    host_time: float
+    data: bytes
+    arbitration_id: int | None = None  # CAN only
+    is_extended_id: bool = False
+
+
+class Framer(ABC):
+    """Turns raw chunks into decoded frames; never raises on bad input and counts what it dropped."""
+
+    def __init__(self) -> None:
+        self.counters = Counters()
+
+    @abstractmethod
+    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
+        """Decoded frames completed by this chunk."""
+
+    def reset(self) -> None:
+        """Forget a partial frame (after a reconnect); sequence continuity is kept."""
+
+
+@dataclass
+class Counters:
+    """Running totals of one framer (mutable state, not a record)."""
+
+    frames: int = 0  # valid frames decoded
+    corrupt: int = 0  # frames that failed their CRC/checksum or structure check
+    skipped_bytes: int = 0  # bytes that ended up in no valid frame
+    gaps: int = 0  # jumps of the sequence counter by more than one
+    missing: int = 0  # frames those jumps imply were lost
+
+    def as_dict(self) -> dict[str, int]:
+        """The four headline counters, as ``hil decode`` prints them."""
+        return {"frames": self.frames, "corrupt": self.corrupt, "skipped_bytes": self.skipped_bytes,
+                "gaps": self.gaps}
+
+
+class Codec(ABC, Generic[R]):
+    """One protocol: encode and decode its frames, convert them to SI samples."""
+
+    name: ClassVar[str]
+    kind: ClassVar[str]  # "imu" or "table"
+
+    @abstractmethod
+    def encode(self, record: R) -> Any:
+        """The record on the wire (bytes, or CAN messages)."""
+
+    @abstractmethod
+    def framer(self) -> Framer:
+        """A fresh stream framer for this codec."""
+
+    @abstractmethod
+    def to_sample(self, decoded: Decoded[R]) -> Sample:
+        """The SI sample of a decoded frame."""
+
+    @abstractmethod
+    def from_sample(self, sample: Any, **device_fields: Any) -> R:
+        """A record carrying an SI sample (device-only fields such as temperature as keywords)."""
+
+    @abstractmethod
+    def csv_header(self) -> list[str]:
+        """Column names of :meth:`csv_row`, unit in each name; ``sync_index`` is added in front."""
+
+    @abstractmethod
+    def csv_row(self, record: R) -> list[Any]:
+        """The record's fields in device units, in :meth:`csv_header` order."""

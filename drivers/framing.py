@@ -1,0 +1,137 @@
+"""Stream framing for byte protocols: find sync words, check frames, resynchronise, count.
+
+Every byte fed ends up in exactly one of: a decoded frame, ``counters.skipped_bytes``, or the
+buffer awaiting more data (:attr:`ByteFramer.buffered`). After a bad frame the search restarts one
+byte after its sync word, so an intact frame that follows damage is always found.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import abstractmethod
+from typing import ClassVar
+
+from drivers.codec import Codec, Decoded, DecodeError, Framer, R, RawChunk
+
+
+class SequenceUnwrapper:
+    """Unwraps a device counter that counts modulo ``modulus`` into a monotonic index.
+
+    A counter that did not move is taken as one full wrap (devices never repeat a number). With the
+    device rate known, the host receive times resolve wraps lost in an outage longer than the counter
+    period (a 7-bit counter at 1 kHz wraps every 128 ms).
+    """
+
+    def __init__(self, modulus: int | None, rate_hz: float | None = None) -> None:
+        self.modulus = modulus
+        self.rate_hz = rate_hz
+        self._index: int | None = None
+        self._sequence = 0
+        self._time = math.nan
+
+    def next(self, sequence: int | None, host_time: float) -> tuple[int, int]:
+        """(index of this frame, frames missing since the previous one)."""
+        if self._index is None:
+            step = 0
+            self._index = sequence if sequence is not None else 0
+        elif sequence is None or self.modulus is None:
+            step = 1
+        else:
+            step = (sequence - self._sequence) % self.modulus or self.modulus
+            elapsed = host_time - self._time
+            if self.rate_hz and math.isfinite(elapsed):
+                wraps = round((elapsed * self.rate_hz - step) / self.modulus)
+                step += self.modulus * max(wraps, 0)
+        self._index += step
+        self._sequence = sequence if sequence is not None else 0
+        self._time = host_time
+        return self._index, max(step - 1, 0)
+
+
+class ByteCodec(Codec[R]):
+    """A codec for a byte stream whose frames start with a fixed sync word."""
+
+    sync: ClassVar[bytes]
+    header_size: ClassVar[int]  # bytes from the sync word needed to know the frame length
+    sequence_modulus: ClassVar[int | None] = None  # None: the frame carries no counter
+    rate_hz: float | None = None
+
+    @abstractmethod
+    def frame_length(self, buf: bytearray, start: int) -> int:
+        """Total length of the frame whose header is at ``buf[start:]``; 0 if the header is impossible."""
+
+    @abstractmethod
+    def decode(self, frame: bytes) -> R:
+        """The record of one complete frame; raises :class:`DecodeError` if it is not valid."""
+
+    def sequence(self, record: R) -> int | None:
+        """The frame's own counter, or None."""
+        return None
+
+    def framer(self) -> ByteFramer:
+        return ByteFramer(self)
+
+
+class ByteFramer(Framer):
+    """Splits a byte stream into valid frames of one :class:`ByteCodec`."""
+
+    def __init__(self, codec: ByteCodec) -> None:
+        super().__init__()
+        self.codec = codec
+        self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, codec.rate_hz)
+        self._buf = bytearray()
+
+    @property
+    def buffered(self) -> int:
+        """Bytes held back waiting for the rest of a frame."""
+        return len(self._buf)
+
+    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
+        return self.feed(chunk.data, chunk.host_time)
+
+    def feed(self, data: bytes, host_time: float = math.nan) -> list[Decoded]:
+        """Decoded frames completed by ``data``, received at ``host_time``."""
+        codec, counters, buf = self.codec, self.counters, self._buf
+        buf += data
+        sync, header_size = codec.sync, codec.header_size
+        out: list[Decoded] = []
+        pos, end = 0, len(buf)
+        while True:
+            start = buf.find(sync, pos)
+            if start < 0:
+                # Keep a tail that may be the beginning of a sync word.
+                keep_from = max(pos, end - len(sync) + 1)
+                counters.skipped_bytes += keep_from - pos
+                pos = keep_from
+                break
+            counters.skipped_bytes += start - pos
+            pos = start
+            if end - start < header_size:
+                break
+            length = codec.frame_length(buf, start)
+            if length <= 0:
+                counters.skipped_bytes += 1
+                pos += 1
+                continue
+            if end - start < length:
+                break
+            try:
+                record = codec.decode(bytes(buf[start:start + length]))
+            except DecodeError:
+                counters.corrupt += 1
+                counters.skipped_bytes += 1
+                pos += 1
+                continue
+            index, missing = self.unwrapper.next(codec.sequence(record), host_time)
+            if missing:
+                counters.gaps += 1
+                counters.missing += missing
+            counters.frames += 1
+            out.append(Decoded(record, index, host_time, length))
+            pos = start + length
+        del buf[:pos]
+        return out
+
+    def reset(self) -> None:
+        self.counters.skipped_bytes += len(self._buf)
+        self._buf.clear()

@@ -1,0 +1,102 @@
+"""KVH 1750 "format A": 36-byte big-endian frames with a CRC-32/MPEG-2 (DESIGN.md, Wire protocols)."""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from drivers.codec import Decoded, DecodeError
+from drivers.crc import crc32_mpeg2
+from drivers.framing import ByteCodec
+from hil.samples import ImuSample
+
+HEADER = b"\xfe\x81\xff\x55"
+FRAME_SIZE = 36
+STATUS_ALL_VALID = 0x77  # gyro x/y/z 0x01/0x02/0x04, accel x/y/z 0x10/0x20/0x40
+G0 = 9.80665  # m/s^2 per g
+_BODY = struct.Struct(">4s6fBBh")
+_CRC = struct.Struct(">I")
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class KvhFrame:
+    """One frame in device units: gyro per the IMU's setting (rad|deg, delta|rate), accel in g or m/s^2."""
+
+    gyro: Vec3
+    accel: Vec3
+    status: int
+    sequence: int  # 0..127
+    temperature: int  # deg C
+
+
+class Kvh1750Codec(ByteCodec[KvhFrame]):
+    """Encode and decode KVH 1750 frames; gyro and accel units follow the IMU's own configuration."""
+
+    name: ClassVar[str] = "kvh1750"
+    kind: ClassVar[str] = "imu"
+    sync: ClassVar[bytes] = HEADER
+    header_size: ClassVar[int] = len(HEADER)
+    sequence_modulus: ClassVar[int] = 128
+
+    def __init__(self, rate_hz: float, gyro_unit: str = "rad", gyro_output: str = "delta",
+                 accel_unit: str = "g") -> None:
+        if gyro_unit not in ("rad", "deg") or gyro_output not in ("delta", "rate"):
+            raise ValueError(f"kvh1750: gyro must be rad|deg and delta|rate, got {gyro_unit}, {gyro_output}")
+        if accel_unit not in ("g", "m/s^2"):
+            raise ValueError(f"kvh1750: accel unit must be g or m/s^2, got {accel_unit!r}")
+        self.rate_hz = rate_hz
+        self.gyro_unit, self.gyro_output, self.accel_unit = gyro_unit, gyro_output, accel_unit
+        dt = 1.0 / rate_hz
+        # Device units -> rad and m/s over one sample interval.
+        self._gyro_scale = (math.pi / 180.0 if gyro_unit == "deg" else 1.0) * (dt if gyro_output == "rate" else 1.0)
+        self._accel_scale = (G0 if accel_unit == "g" else 1.0) * dt
+
+    @classmethod
+    def from_config(cls, imu: Any, rate_hz: float) -> Kvh1750Codec:
+        """The codec for an ``imu`` config block (:class:`hil.config.ImuConfig`)."""
+        f = imu.kvh1750
+        return cls(rate_hz, f.gyro_unit, f.gyro_output, f.accel_unit)
+
+    def frame_length(self, buf: bytearray, start: int) -> int:
+        return FRAME_SIZE
+
+    def decode(self, frame: bytes) -> KvhFrame:
+        if len(frame) != FRAME_SIZE or not frame.startswith(HEADER):
+            raise DecodeError(f"kvh1750: expected {FRAME_SIZE} bytes starting {HEADER.hex()}")
+        (crc,) = _CRC.unpack_from(frame, 32)
+        if crc32_mpeg2(frame[:32]) != crc:
+            raise DecodeError("kvh1750: CRC mismatch")
+        _, gx, gy, gz, ax, ay, az, status, sequence, temperature = _BODY.unpack_from(frame)
+        return KvhFrame((gx, gy, gz), (ax, ay, az), status, sequence, temperature)
+
+    def encode(self, record: KvhFrame) -> bytes:
+        body = _BODY.pack(HEADER, *record.gyro, *record.accel, record.status, record.sequence & 0x7F,
+                          record.temperature)
+        return body + _CRC.pack(crc32_mpeg2(body))
+
+    def sequence(self, record: KvhFrame) -> int:
+        return record.sequence
+
+    def to_sample(self, decoded: Decoded[KvhFrame]) -> ImuSample:
+        r, g, a = decoded.record, self._gyro_scale, self._accel_scale
+        return ImuSample(decoded.sync_index, (r.gyro[0] * g, r.gyro[1] * g, r.gyro[2] * g),
+                         (r.accel[0] * a, r.accel[1] * a, r.accel[2] * a), decoded.host_time, None, r.status)
+
+    def from_sample(self, sample: ImuSample, temperature: int = 25) -> KvhFrame:
+        """The frame for an SI sample; its status byte is ``sample.status`` (use STATUS_ALL_VALID)."""
+        g, a = self._gyro_scale, self._accel_scale
+        return KvhFrame(tuple(x / g for x in sample.dtheta), tuple(x / a for x in sample.dv),
+                        sample.status, sample.sync_index % 128, temperature)
+
+    def csv_header(self) -> list[str]:
+        gyro = self.gyro_unit + ("_s" if self.gyro_output == "rate" else "")
+        accel = "g" if self.accel_unit == "g" else "mps2"
+        return ([f"gyro_{c}_{gyro}" for c in "xyz"] + [f"accel_{c}_{accel}" for c in "xyz"]
+                + ["status", "sequence", "temperature_c"])
+
+    def csv_row(self, record: KvhFrame) -> list[Any]:
+        return [*record.gyro, *record.accel, f"0x{record.status:02X}", record.sequence, record.temperature]

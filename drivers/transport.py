@@ -1,0 +1,131 @@
+"""Transports: a byte port chosen by a pyserial URL, and a CAN bus through python-can.
+
+Both return whatever has arrived as :class:`RawChunk` records and never wait for a whole frame.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+
+import can
+import serial
+
+from drivers.codec import RawChunk
+from drivers.tap import message_to_chunk
+
+POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request promptly
+
+
+class TransportError(OSError):
+    """The transport cannot be opened or has gone away (unplugged, remote closed)."""
+
+
+class Transport(ABC):
+    """A source of raw chunks that can be reopened after it fails."""
+
+    stream: str
+
+    @abstractmethod
+    def open(self) -> None:
+        """Open the device; raises :class:`TransportError`."""
+
+    @abstractmethod
+    def read(self) -> RawChunk | None:
+        """What has arrived (None after ``POLL_S`` of silence); raises :class:`TransportError`."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the device; safe to call twice."""
+
+
+class SerialTransport(Transport):
+    """A pyserial port by URL: ``/dev/ttyUSB0``, ``socket://host:port``, ``rfc2217://host:port``, ``loop://``."""
+
+    def __init__(self, url: str, baudrate: int, stream: str) -> None:
+        self.url, self.baudrate, self.stream = url, baudrate, stream
+        self.port: serial.SerialBase | None = None
+
+    def open(self) -> None:
+        try:
+            port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=POLL_S)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(f"{self.stream}: cannot open {self.url}: {exc}") from exc
+        try:
+            port.set_low_latency_mode(True)  # FTDI and similar USB adapters: no 16 ms batching
+        except (AttributeError, NotImplementedError, OSError, ValueError):
+            pass  # not a local UART (pty, socket, rfc2217): nothing to tune
+        self.port = port
+
+    def read(self) -> RawChunk | None:
+        if self.port is None:
+            raise TransportError(f"{self.stream}: {self.url} is not open")
+        try:
+            data = self.port.read(self.port.in_waiting or 1)
+            if data:
+                data += self.port.read(self.port.in_waiting)
+        except (serial.SerialException, OSError) as exc:
+            raise TransportError(f"{self.stream}: read from {self.url} failed: {exc}") from exc
+        return RawChunk(self.stream, time.time(), data) if data else None
+
+    def write(self, data: bytes) -> None:
+        if self.port is None:
+            raise TransportError(f"{self.stream}: {self.url} is not open")
+        try:
+            self.port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise TransportError(f"{self.stream}: write to {self.url} failed: {exc}") from exc
+
+    def close(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            except (serial.SerialException, OSError):
+                pass  # already gone
+            self.port = None
+
+
+def open_can_bus(interface: str, channel: str, bitrate: int | None = None) -> can.BusABC:
+    """A python-can bus; ``udp_multicast`` always with hop_limit=0 so frames never leave this host."""
+    kwargs: dict = {"interface": interface, "channel": channel}
+    if interface == "udp_multicast":
+        kwargs["hop_limit"] = 0
+    elif bitrate is not None and interface not in ("virtual",):
+        kwargs["bitrate"] = bitrate
+    return can.Bus(**kwargs)
+
+
+class CanTransport(Transport):
+    """A python-can bus as a transport of raw CAN chunks."""
+
+    def __init__(self, interface: str, channel: str, stream: str, bitrate: int | None = None) -> None:
+        self.interface, self.channel, self.bitrate, self.stream = interface, channel, bitrate, stream
+        self.bus: can.BusABC | None = None
+
+    def open(self) -> None:
+        try:
+            self.bus = open_can_bus(self.interface, self.channel, self.bitrate)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise TransportError(f"{self.stream}: cannot open CAN {self.interface}:{self.channel}: {exc}") from exc
+
+    def read(self) -> RawChunk | None:
+        if self.bus is None:
+            raise TransportError(f"{self.stream}: CAN {self.interface}:{self.channel} is not open")
+        try:
+            message = self.bus.recv(timeout=POLL_S)
+        except (can.CanError, OSError) as exc:
+            raise TransportError(f"{self.stream}: CAN receive failed: {exc}") from exc
+        return None if message is None else message_to_chunk(message, self.stream)
+
+    def send(self, message: can.Message) -> None:
+        if self.bus is None:
+            raise TransportError(f"{self.stream}: CAN {self.interface}:{self.channel} is not open")
+        try:
+            self.bus.send(message)
+        except (can.CanError, OSError) as exc:
+            raise TransportError(f"{self.stream}: CAN send failed: {exc}") from exc
+
+    def close(self) -> None:
+        if self.bus is not None:
+            self.bus.shutdown()
+            self.bus = None

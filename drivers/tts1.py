@@ -1,0 +1,105 @@
+"""Turntable data ``tts1``: one 24-byte frame of sync-latched gimbal angles per external sync pulse."""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from drivers.codec import Decoded, DecodeError
+from drivers.crc import crc16_xmodem
+from drivers.framing import ByteCodec
+from hil.samples import TableSample
+
+SYNC = b"\x54\x53\x01"  # sync word "TS" and version 1
+FRAME_SIZE = 24
+UDEG_PER_RAD = 180e6 / math.pi
+_FULL_TURN_UDEG = 360_000_000
+_BODY = struct.Struct("<2sBBIiiiH")
+_CRC = struct.Struct(">H")
+
+
+class Status(enum.IntFlag):
+    """Status byte bits 0-4; bits 5-7 hold the :class:`Mode`."""
+
+    INTERLOCKS_CLOSED = 0x01
+    MOVING = 0x02
+    LIMIT_REACHED = 0x04
+    FAULT = 0x08
+    FREE_RUNNING = 0x10  # no external sync: frames paced by the table's own clock
+
+
+class Mode(enum.IntEnum):
+    OFF = 0
+    POSITION = 1
+    RATE = 2
+    SYNTHESIS = 3
+
+
+def status_byte(flags: Status, mode: Mode) -> int:
+    """The status byte for flags and a mode."""
+    return int(flags) | (int(mode) << 5)
+
+
+def wrap_udeg(value: float) -> int:
+    """An angle in micro-degrees, rounded and wrapped to [-180e6, 180e6)."""
+    return (round(value) + _FULL_TURN_UDEG // 2) % _FULL_TURN_UDEG - _FULL_TURN_UDEG // 2
+
+
+@dataclass(frozen=True, slots=True)
+class Tts1Frame:
+    """One frame in device units: angles (outer, middle, inner) in 1e-6 deg, latch delay in us."""
+
+    status: int
+    sync_counter: int  # uint32, pulses since the output was enabled
+    angles_udeg: tuple[int, int, int]
+    latch_delay_us: int
+
+
+class Tts1Codec(ByteCodec[Tts1Frame]):
+    """Encode and decode ``tts1`` frames."""
+
+    name: ClassVar[str] = "tts1"
+    kind: ClassVar[str] = "table"
+    sync: ClassVar[bytes] = SYNC
+    header_size: ClassVar[int] = len(SYNC)
+    sequence_modulus: ClassVar[int] = 1 << 32
+
+    def frame_length(self, buf: bytearray, start: int) -> int:
+        return FRAME_SIZE
+
+    def decode(self, frame: bytes) -> Tts1Frame:
+        if len(frame) != FRAME_SIZE or not frame.startswith(SYNC):
+            raise DecodeError(f"tts1: expected {FRAME_SIZE} bytes starting {SYNC.hex()}")
+        (crc,) = _CRC.unpack_from(frame, 22)
+        if crc16_xmodem(frame[2:22]) != crc:
+            raise DecodeError("tts1: CRC mismatch")
+        _, _, status, counter, outer, middle, inner, delay = _BODY.unpack_from(frame)
+        return Tts1Frame(status, counter, (outer, middle, inner), delay)
+
+    def encode(self, record: Tts1Frame) -> bytes:
+        body = _BODY.pack(SYNC[:2], SYNC[2], record.status, record.sync_counter & 0xFFFFFFFF,
+                          *(wrap_udeg(a) for a in record.angles_udeg), record.latch_delay_us)
+        return body + _CRC.pack(crc16_xmodem(body[2:]))
+
+    def sequence(self, record: Tts1Frame) -> int:
+        return record.sync_counter
+
+    def to_sample(self, decoded: Decoded[Tts1Frame]) -> TableSample:
+        r = decoded.record
+        o, m, i = (a / UDEG_PER_RAD for a in r.angles_udeg)
+        return TableSample(decoded.sync_index, (o, m, i), decoded.host_time, None, r.latch_delay_us * 1e-6,
+                           r.status)
+
+    def from_sample(self, sample: TableSample) -> Tts1Frame:
+        """The frame for an SI sample; the status byte is ``sample.status`` (see :func:`status_byte`)."""
+        angles = tuple(wrap_udeg(a * UDEG_PER_RAD) for a in sample.angles)
+        return Tts1Frame(sample.status, sample.sync_index & 0xFFFFFFFF, angles, round(sample.latch_delay * 1e6))
+
+    def csv_header(self) -> list[str]:
+        return ["status", "sync_counter", "outer_udeg", "middle_udeg", "inner_udeg", "latch_delay_us"]
+
+    def csv_row(self, record: Tts1Frame) -> list[Any]:
+        return [f"0x{record.status:02X}", record.sync_counter, *record.angles_udeg, record.latch_delay_us]
