@@ -109,19 +109,42 @@ class TableGeometry:
         """C_b^n = C_table^n . Rz(outer) Rx(middle) Ry(inner) . C_b^mount; angles (rad) (3,) or (N, 3)."""
         return self.table_to_n * euler_rotation(angles) * self.body_to_mount
 
-    def body_rate(self, angles: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
-        """omega_nb^b (rad/s) from gimbal angles and their rates, both (N, 3) ordered (outer, middle, inner).
+    def attitude_matrix(self, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Batch form of :meth:`attitude` as matrices: (C_b^n, Rx(middle) Ry(inner), Ry(inner)), each (N, 3, 3).
+
+        The two inner products are what :meth:`body_rate_from` needs; batched matrix products are used
+        because composing N scipy rotations costs about 0.7 us each against 0.1 us here.
+        """
+        angles = np.atleast_2d(angles)
+        rz, rx, ry = (_axis_matrices(angles[:, k], axis) for k, axis in enumerate((2, 0, 1)))
+        inner = ry
+        middle_inner = rx @ ry
+        c_bn = self.table_to_n.as_matrix() @ rz @ middle_inner @ self.body_to_mount.as_matrix()
+        return c_bn, middle_inner, inner
+
+    def body_rate_from(self, middle_inner: np.ndarray, inner: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
+        """omega_nb^b (rad/s) from the matrices of :meth:`attitude_matrix` and the gimbal rates (N, 3).
 
         omega = C_mount^b [ Ry(i)^T Rx(m)^T z * d(outer) + Ry(i)^T x * d(middle) + y * d(inner) ].
         """
-        angles = np.atleast_2d(angles)
         rates = np.atleast_2d(angle_rates)
-        inner = Rotation.from_euler("y", angles[:, 2])
-        inner_middle = Rotation.from_euler("XY", angles[:, 1:3])
-        n = len(angles)
-        w_mount = (
-            inner_middle.apply(np.tile([0.0, 0.0, 1.0], (n, 1)), inverse=True) * rates[:, 0:1]
-            + inner.apply(np.tile([1.0, 0.0, 0.0], (n, 1)), inverse=True) * rates[:, 1:2]
-            + np.array([0.0, 1.0, 0.0]) * rates[:, 2:3]
-        )
-        return self.body_to_mount.apply(w_mount, inverse=True)
+        w_mount = middle_inner[:, 2, :] * rates[:, 0:1] + inner[:, 0, :] * rates[:, 1:2]
+        w_mount[:, 1] += rates[:, 2]
+        return w_mount @ self.body_to_mount.as_matrix()
+
+    def body_rate(self, angles: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
+        """omega_nb^b (rad/s) from gimbal angles and their rates, both (N, 3) ordered (outer, middle, inner)."""
+        _, middle_inner, inner = self.attitude_matrix(angles)
+        return self.body_rate_from(middle_inner, inner, angle_rates)
+
+
+def _axis_matrices(angle: np.ndarray, axis: int) -> np.ndarray:
+    """Elementary rotations about one coordinate axis, (N, 3, 3)."""
+    rotvec = np.zeros((len(angle), 3))
+    rotvec[:, axis] = angle
+    return Rotation.from_rotvec(rotvec).as_matrix()
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """The cross-product matrix [v x] of a 3-vector."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

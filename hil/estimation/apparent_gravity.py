@@ -1,0 +1,167 @@
+"""Gravitational apparent acceleration model and accelerometer bias, by recursive least squares.
+
+Model (2019 eqs. 9-15): ``f^ib0(t) = A [cos wt, sin wt, 1]^T + C_b^ib0(t) bias + noise`` with the
+12-state vector ``[A11..A33, bx, by, bz]``; without the bias columns it is the 9-state model of the
+2014 paper ("method 1"). Each IMU increment gives one 3-row measurement: the mean specific force in
+i_b0 over its interval, against the interval means of the regressors.
+
+The recursion is kept in information form: the normal matrix ``W = sum H^T H`` (the observability
+Gram matrix of 2019 eq. 19 in discrete form) and ``sum H^T z`` are accumulated per sample and solved
+when a solution is asked for. This equals batch least squares exactly and stays sound over a
+24-hour trial, where covariance-form RLS with a large P0 does not. Two numerical choices:
+
+- the gravity basis is held as ``[1 - cos wt, sin wt, 1]`` (about ``t^2/2, t, 1`` early in a trial),
+  whose sums carry no cancellation; ``A`` in the paper's basis is recovered exactly;
+- ``W`` is judged and solved after symmetric diagonal scaling (unit diagonal), so rank and
+  condition number describe the motion, not the units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve, eigh
+
+from hil.frames import EARTH_RATE
+
+N_GRAVITY = 9  # A11..A33
+N_FULL = 12  # plus bias x, y, z
+
+
+def gravity_basis(t_start: np.ndarray, t_end: np.ndarray, omega: float = EARTH_RATE) -> np.ndarray:
+    """Interval means of ``[1 - cos wt, sin wt, 1]`` over (t_start, t_end], (N, 3), free of cancellation."""
+    half = 0.5 * omega * (t_end - t_start)
+    mid = 0.5 * omega * (t_end + t_start)
+    sinc = np.sinc(half / np.pi)  # sin(h)/h
+    one_minus_sinc = np.where(np.abs(half) < 1e-4, half**2 / 6.0 - half**4 / 120.0, 1.0 - sinc)
+    one_minus_cos = 2.0 * np.sin(0.5 * mid) ** 2 + np.cos(mid) * one_minus_sinc
+    return np.column_stack((one_minus_cos, np.sin(mid) * sinc, np.ones_like(mid)))
+
+
+def paper_basis_matrix(a_internal: np.ndarray) -> np.ndarray:
+    """A in the paper's basis [cos, sin, 1] from A in the internal basis [1 - cos, sin, 1]."""
+    a = a_internal.copy()
+    a[:, 0] = -a_internal[:, 0]
+    a[:, 2] = a_internal[:, 2] + a_internal[:, 0]
+    return a
+
+
+@dataclass(frozen=True)
+class Observability:
+    """Rank and conditioning of the scaled Gram matrix (2019 eqs. 17-19)."""
+
+    rank: int
+    condition: float
+    eigenvalues: np.ndarray
+
+    def full(self, n: int) -> bool:
+        return self.rank == n
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A least-squares solution of the 12-state (with bias) or 9-state model at time ``t``."""
+
+    t: float
+    samples: int
+    a_internal: np.ndarray  # (3, 3) in the basis [1 - cos wt, sin wt, 1]
+    bias: np.ndarray | None  # (3,) m/s^2, None for the 9-state model or when unobservable
+    bias_sigma: np.ndarray | None  # (3,) m/s^2, 1-sigma
+    noise_sigma: float  # m/s^2, residual RMS per axis and sample
+    observability: Observability
+    observable: bool
+
+    @property
+    def a(self) -> np.ndarray:
+        """A11..A33 as in 2019 eq. 9 (basis [cos wt, sin wt, 1])."""
+        return paper_basis_matrix(self.a_internal)
+
+    def apparent_gravity(self, t: np.ndarray | float, omega: float = EARTH_RATE) -> np.ndarray:
+        """Reconstructed gravitational apparent acceleration f^ib0 at instants t (2014 eq. 17), (N, 3)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        wt = omega * t
+        basis = np.column_stack((2.0 * np.sin(0.5 * wt) ** 2, np.sin(wt), np.ones_like(wt)))
+        return basis @ self.a_internal.T
+
+
+class ApparentGravityEstimator:
+    """Accumulates the normal equations of the 12-state model; the 9-state model is its leading block."""
+
+    def __init__(self, rank_tolerance: float = 1e-6, omega: float = EARTH_RATE) -> None:
+        self.rank_tolerance = rank_tolerance
+        self.omega = omega
+        self.info = np.zeros((N_FULL, N_FULL))
+        self.rhs = np.zeros(N_FULL)
+        self.zz = 0.0
+        self.samples = 0
+        self.t = 0.0
+
+    def update_many(self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray) -> None:
+        """Add N measurements: mean specific force in i_b0 (N, 3) and the mean of C_b^ib0 over each interval (N, 3, 3).
+
+        Row r of one sample's H is ``[e_r (x) w^T, C[r, :]]`` (2019 eq. 14), so the Gram blocks are
+        ``I (x) sum w w^T``, ``sum w (x) C[r, :]`` and ``sum C^T C``.
+        """
+        w = gravity_basis(t_start, t_end, self.omega)
+        ww = w.T @ w
+        wc = np.einsum("ni,nrj->rij", w, c_mean)  # (row r, basis i, bias j)
+        info = self.info
+        for r in range(3):
+            block = slice(3 * r, 3 * r + 3)
+            info[block, block] += ww
+            info[block, N_GRAVITY:] += wc[r]
+            info[N_GRAVITY:, block] += wc[r].T
+            self.rhs[block] += w.T @ f_ib0[:, r]
+        info[N_GRAVITY:, N_GRAVITY:] += np.einsum("nri,nrj->ij", c_mean, c_mean)
+        self.rhs[N_GRAVITY:] += np.einsum("nri,nr->i", c_mean, f_ib0)
+        self.zz += float(np.einsum("ni,ni->", f_ib0, f_ib0))
+        self.samples += len(t_end)
+        self.t = float(t_end[-1])
+
+    def observability(self, n: int = N_FULL) -> Observability:
+        """Rank and condition number of the diagonally scaled Gram matrix of the first n states."""
+        scaled, _ = self._scaled(n)
+        eig = eigh(scaled, eigvals_only=True)
+        top = max(float(eig[-1]), np.finfo(float).tiny)
+        rank = int(np.sum(eig > self.rank_tolerance * top))
+        condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
+        return Observability(rank, condition, eig)
+
+    def _scaled(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        diag = np.diag(self.info)[:n]
+        scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+        return self.info[:n, :n] * np.outer(scale, scale), scale
+
+    def solve(self, with_bias: bool = True) -> Solution:
+        """The least-squares solution now: 12-state (with bias) or 9-state ("method 1")."""
+        n = N_FULL if with_bias else N_GRAVITY
+        obs = self.observability(n)
+        scaled, scale = self._scaled(n)
+        rhs = self.rhs[:n] * scale
+        observable = obs.full(n)
+        if observable:
+            factor = cho_factor(scaled)
+            y = cho_solve(factor, rhs)
+            cov_scaled_diag = np.diag(cho_solve(factor, np.eye(n)))
+        else:
+            y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
+            cov_scaled_diag = np.full(n, np.nan)
+        x = y * scale
+        dof = max(3 * self.samples - n, 1)
+        rss = max(self.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
+        noise_var = rss / dof
+        bias = bias_sigma = None
+        if with_bias and observable:
+            bias = x[N_GRAVITY:].copy()
+            bias_sigma = np.sqrt(noise_var * cov_scaled_diag[N_GRAVITY:]) * scale[N_GRAVITY:]
+        return Solution(
+            t=self.t,
+            samples=self.samples,
+            a_internal=x[:N_GRAVITY].reshape(3, 3),
+            bias=bias,
+            bias_sigma=bias_sigma,
+            noise_sigma=float(np.sqrt(noise_var)),
+            observability=obs,
+            observable=observable,
+        )

@@ -1,0 +1,130 @@
+"""The estimator as one object, fed sample by sample live or batch by batch offline.
+
+Per sample: strapdown C_b^ib0 and f^ib0, the 12/9-state normal equations and, when the turntable
+angles are known, the table-referenced bias. At the solve rate (display rate) it forms a
+:class:`Snapshot`: bias and its sigma, observability, and the method-1/method-2 alignment errors
+against the table attitude together with the theoretical error of 2019 eq. 8.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.estimation.alignment import alignment_matrix, attitude_error, body_attitude, theoretical_error
+from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
+from hil.estimation.strapdown import Strapdown
+from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
+from hil.frames import Earth, TableGeometry
+from hil.samples import AlignedBatch, AlignedSample
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The estimator's state of knowledge at time ``t`` (SI units)."""
+
+    t: float
+    samples: int
+    full: Solution  # 12-state, with bias
+    gravity_only: Solution  # 9-state, method 1
+    attitude: np.ndarray  # C_b^ib0 at t
+    error_method1: np.ndarray | None  # (pitch, roll, yaw) rad against the table, None without angles
+    error_method2: np.ndarray | None
+    error_theoretical: np.ndarray | None  # (pitch, roll) rad, 2019 eq. 8 with the estimated bias
+
+
+class OnlineEstimator:
+    """Strapdown + apparent-gravity least squares + alignment, with ``update``/``update_many``/``solution``."""
+
+    def __init__(
+        self,
+        earth: Earth,
+        geometry: TableGeometry | None = None,
+        solve_period: float = 1.0,
+        rank_tolerance: float = 1e-6,
+        t0: float = 0.0,
+    ) -> None:
+        self.earth = earth
+        self.geometry = geometry or TableGeometry()
+        self.solve_period = solve_period
+        self.t0 = t0  # the start of the first interval: i_b0 and t = 0 of the model
+        self.strapdown = Strapdown()
+        self.gravity = ApparentGravityEstimator(rank_tolerance)
+        self.table = TableReferenceEstimator(earth.f_n, rank_tolerance)
+        self.snapshots: list[Snapshot] = []
+        self._t_last = t0
+        self._angle_history: np.ndarray | None = None  # last two latched angles (2, 3)
+        self._next_solve = t0 + solve_period
+        self._attitude = np.eye(3)
+        self._angles: np.ndarray | None = None
+
+    def update(self, sample: AlignedSample) -> Snapshot | None:
+        """Add one sample; returns a new snapshot when a solve instant was passed."""
+        before = len(self.snapshots)
+        self.update_many(AlignedBatch.from_samples([sample], self._t_last))
+        return self.snapshots[-1] if len(self.snapshots) > before else None
+
+    def update_many(self, batch: AlignedBatch) -> None:
+        """Add consecutive samples, solving at every solve instant they pass."""
+        start = 0
+        while start < len(batch):
+            stop = int(np.searchsorted(batch.t, self._next_solve, side="right"))
+            if stop <= start:
+                stop = len(batch)
+            chunk = batch.slice(start, stop)
+            self._accumulate(chunk)
+            if chunk.t[-1] >= self._next_solve:
+                self.snapshots.append(self._snapshot())
+                periods = math.floor((chunk.t[-1] - self._next_solve) / self.solve_period) + 1
+                self._next_solve += periods * self.solve_period
+            start = stop
+
+    def solution(self) -> Snapshot:
+        """The solution with everything received so far."""
+        if not self.snapshots or self.snapshots[-1].samples != self.gravity.samples:
+            self.snapshots.append(self._snapshot())
+        return self.snapshots[-1]
+
+    def table_referenced(self) -> TableReferencedBias:
+        return self.table.solve()
+
+    def _accumulate(self, chunk: AlignedBatch) -> None:
+        t_end = chunk.t - self.t0
+        t_start = np.concatenate(([self._t_last - self.t0], t_end[:-1]))
+        dt = (t_end - t_start)[:, None]
+        step = self.strapdown.update_many(chunk.dtheta, chunk.dv, dt[:, 0])
+        self.gravity.update_many(t_start, t_end, step.dv_ib0 / dt, step.c_mean)
+        if chunk.angles is not None:
+            self.table.update_many(chunk.dv / dt, self._mean_table_attitude(chunk.angles))
+            self._angles = chunk.angles[-1]
+        self._attitude = step.c_end[-1]
+        self._t_last = float(chunk.t[-1])
+
+    def _mean_table_attitude(self, angles: np.ndarray) -> np.ndarray:
+        """Mean of C_b^n over each interval by Simpson's rule; the mid-interval angles come from the
+        quadratic through the last three latched angles (weights -1/8, 3/4, 3/8)."""
+        history = self._angle_history if self._angle_history is not None else np.vstack((angles[0], angles[0]))
+        series = np.unwrap(np.vstack((history, angles)), axis=0)
+        mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
+        c_end = self.geometry.attitude_matrix(series[1:])[0]
+        c_mid = self.geometry.attitude_matrix(mid)[0]
+        self._angle_history = series[-2:]
+        return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0
+
+    def _snapshot(self) -> Snapshot:
+        full = self.gravity.solve(with_bias=True)
+        gravity_only = self.gravity.solve(with_bias=False)
+        t = self._t_last - self.t0
+        errors: list[np.ndarray | None] = [None, None, None]
+        if self._angles is not None and t > 0:
+            reference = self.geometry.attitude_matrix(self._angles)[0][0]
+            for k, solution in enumerate((gravity_only, full)):
+                vectors = solution.apparent_gravity(np.array([0.0, t]))
+                c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], t, self.earth)
+                errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, t, self.earth), reference)
+            if full.bias is not None:
+                errors[2] = theoretical_error(full.bias, reference, self.earth.g)
+        return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors)
+

@@ -1,0 +1,102 @@
+"""Strapdown attitude in the initial-body inertial frame and the apparent acceleration there.
+
+Within each sample interval the angular rate and specific force are taken as the quadratics whose
+integrals match the last three increments (exact for motion that is quadratic over 3 samples; the
+constant-rate case where history is missing or uneven). From them:
+
+- attitude (2019 eq. 5, discretised): ``C_k = C_{k-1} exp(phi_k)`` with the rotation vector to second
+  order, ``phi = alpha(h) + 1/2 int alpha x omega`` (Bortz), which with the quadratic rate is
+  ``dtheta + (A x B + A x C) / 12 + B x C / 60`` for the scaled coefficients A, B, C below;
+- velocity increment in i_b0 (2019 eq. 4 in increment form):
+  ``dv^ib0_k = C_{k-1} int exp([alpha(tau) x]) f(tau) dtau`` by 3-node Gauss-Legendre quadrature, which
+  carries rotation and sculling compensation to the order the quadratic allows;
+- the interval mean of C_b^ib0 (the bias regressor of 2019 eq. 14), by the same quadrature.
+
+Attitudes are (N, 3, 3) direction cosine matrices in the batch path: composing N scipy rotations costs
+about 0.7 us each on this class of machine, a batched matrix product about 0.1 us.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
+NODES = 0.5 * (_NODES + 1.0)  # on [0, 1]
+WEIGHTS = 0.5 * _WEIGHTS
+
+
+@dataclass(frozen=True)
+class StrapdownStep:
+    """What one batch of increments gives, per sample."""
+
+    c_start: np.ndarray  # (N, 3, 3) C_b^ib0 at the start of each interval
+    c_end: np.ndarray  # (N, 3, 3) C_b^ib0 at the end of each interval
+    c_mean: np.ndarray  # (N, 3, 3) mean of C_b^ib0 over each interval
+    dv_ib0: np.ndarray  # (N, 3) velocity increment resolved in i_b0
+
+
+def cumulative_product(steps: np.ndarray) -> np.ndarray:
+    """Prefix products ``steps[0] @ ... @ steps[k]`` of (N, 3, 3) matrices; work-efficient scan (~2N products)."""
+    n = len(steps)
+    if n == 1:
+        return steps.copy()
+    pairs = steps[0 : n - 1 : 2] @ steps[1:n:2]  # products of (0,1), (2,3), ...
+    pair_prefix = cumulative_product(pairs)
+    out = np.empty_like(steps)
+    out[0] = steps[0]
+    out[1:n:2] = pair_prefix
+    out[2:n:2] = pair_prefix[: (n - 1) // 2] @ steps[2:n:2]
+    return out
+
+
+def quadratic_coefficients(x: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) with ``integral over the current interval up to s = A s + B s^2/2 + C s^3/3`` (s in [0, 1]).
+
+    The rate ``(A + B s + C s^2) / h`` integrates to x over the current interval, x1 over the one
+    before and x2 over the one before that.
+    """
+    b = x - x1
+    c = 0.5 * (x - 2.0 * x1 + x2)
+    return x - 0.5 * b - c / 3.0, b, c
+
+
+class Strapdown:
+    """C_b^ib0 from gyro increments; starts at identity (i_b0 is the body at the first sample's start)."""
+
+    def __init__(self) -> None:
+        self.attitude = np.eye(3)
+        self._history: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # last 2 (dtheta, dv, dt)
+
+    def update_many(self, dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray) -> StrapdownStep:
+        """Advance over N consecutive increments (N, 3) with interval lengths dt (N,)."""
+        if self._history is None:  # no history: constant rate over the first intervals
+            self._history = (np.vstack((dtheta[0], dtheta[0])), np.vstack((dv[0], dv[0])), np.full(2, dt[0]))
+        th_all = np.vstack((self._history[0], dtheta))
+        v_all = np.vstack((self._history[1], dv))
+        dt_all = np.concatenate((self._history[2], dt))
+        even = (np.abs(dt_all[1:-1] - dt) <= 1e-3 * dt) & (np.abs(dt_all[:-2] - dt) <= 1e-3 * dt)
+        keep = even[:, None].astype(float)  # uneven history: drop to the constant-rate case
+        a_th, b_th, c_th = quadratic_coefficients(dtheta, th_all[1:-1], th_all[:-2])
+        a_v, b_v, c_v = quadratic_coefficients(dv, v_all[1:-1], v_all[:-2])
+        a_th, b_th, c_th = np.where(keep > 0, a_th, dtheta), b_th * keep, c_th * keep
+        a_v, b_v, c_v = np.where(keep > 0, a_v, dv), b_v * keep, c_v * keep
+
+        phi = dtheta + (np.cross(a_th, b_th) + np.cross(a_th, c_th)) / 12.0 + np.cross(b_th, c_th) / 60.0
+        c_end = self.attitude @ cumulative_product(Rotation.from_rotvec(phi).as_matrix())
+        c_start = np.concatenate((self.attitude[None], c_end[:-1]))
+
+        s = NODES[None, :, None]
+        alpha = a_th[:, None] * s + b_th[:, None] * s**2 / 2.0 + c_th[:, None] * s**3 / 3.0  # (N, 3 nodes, 3)
+        force = a_v[:, None] + b_v[:, None] * s + c_v[:, None] * s**2
+        rot = Rotation.from_rotvec(alpha.reshape(-1, 3))
+        n = len(dtheta)
+        dv_body = (rot.apply(force.reshape(-1, 3)).reshape(n, 3, 3) * WEIGHTS[None, :, None]).sum(axis=1)
+        r_mean = np.einsum("nkij,k->nij", rot.as_matrix().reshape(n, 3, 3, 3), WEIGHTS)
+
+        # Re-orthonormalise the carried attitude so rounding cannot build up over a long trial.
+        self.attitude = Rotation.from_matrix(c_end[-1]).as_matrix()
+        self._history = (th_all[-2:], v_all[-2:], dt_all[-2:])
+        return StrapdownStep(c_start, c_end, c_start @ r_mean, np.einsum("nij,nj->ni", c_start, dv_body))

@@ -1,0 +1,45 @@
+import numpy as np
+import pytest
+
+from hil.config import Config, ImuErrors, parse_config
+from hil.estimation.online import OnlineEstimator
+from emulators.simulation import Simulation
+
+SWING = {
+    "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
+    "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
+    "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6},
+}
+PAPER_ERRORS = {
+    "accel_bias_ug": [60, 150, 260],
+    "accel_noise_ug": [50, 50, 50],
+    "gyro_bias_dph": [0.01, 0.01, 0.01],
+    "gyro_noise_dph": [0.01, 0.01, 0.01],
+}
+
+
+def make_config(duration=60.0, rate=100.0, kind="swing", errors=None, seed=1, turntable=None) -> Config:
+    table = {"motion": {"kind": kind, "axes": SWING}}
+    table.update(turntable or {})
+    return parse_config(
+        {
+            "trial": {"name": "test", "duration_s": duration, "rate_hz": rate, "seed": seed},
+            "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+            "turntable": table,
+            "imu": {"errors": errors or {}},
+        }
+    )
+
+
+def run_estimator(cfg: Config, solve_period=10.0, geometry=None) -> OnlineEstimator:
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, geometry or sim.truth.geometry, solve_period=solve_period)
+    for batch in sim.batches():
+        est.update_many(batch)
+    est.solution()
+    return est
+
+
+@pytest.fixture
+def config_factory():
+    return make_config
