@@ -147,6 +147,11 @@ class CanFramer(Framer):
         self._pending_bytes = 0
         self._counter: int | None = None
 
+    @property
+    def buffered(self) -> int:
+        """Bytes of an incomplete sample held back waiting for its other messages."""
+        return self._pending_bytes
+
     def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
         codec, counters = self.codec, self.counters
         message = codec.messages_by_id.get((chunk.arbitration_id, chunk.is_extended_id))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterable
 
-from drivers.codec import Codec, Counters, DecodeError, Framer
+from drivers.codec import Codec, Counters, DecodeError, Framer, RawChunk
 from drivers.tap import RawListener, SampleListener
 from drivers.transport import Transport, TransportError
 
@@ -78,7 +78,7 @@ class DeviceSession:
             if chunk is not None:
                 self._handle(chunk)
 
-    def _handle(self, chunk) -> None:
+    def _handle(self, chunk: RawChunk) -> None:
         for listener in self.raw_listeners:
             listener.on_raw(chunk)
         for decoded in self.framer.feed_chunk(chunk):

@@ -1,0 +1,177 @@
+"""Stream framers under damage: random bytes, truncations, bit flips, frames buried in garbage."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from drivers.can_dbc import CanDbcCodec
+from drivers.codec import RawChunk
+from drivers.framing import SequenceUnwrapper
+from drivers.kvh1750 import Kvh1750Codec, KvhFrame
+from drivers.tts1 import Tts1Codec, Tts1Frame
+from drivers.xsens import MtData2Frame, XsensCodec
+from hil.config import CanSignals
+from hil.samples import ImuSample
+
+DETERMINISTIC = settings(derandomize=True, max_examples=150, deadline=None,
+                         suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+def kvh_frame(codec, i):
+    return codec.encode(KvhFrame((1e-5 * i, -2e-5, 3e-6 * (i % 7)), (0.01, -0.02, -1.0 + 1e-4 * i), 0x77, i % 128, 30))
+
+
+def tts1_frame(codec, i):
+    return codec.encode(Tts1Frame(0x21, i, (1000 * i, -5_000_000 + i, 179_000_000), 50))
+
+
+def xsens_frame(codec, i):
+    return codec.encode(MtData2Frame(i % 65536, 100 * i, 0, (1.0, 1e-6 * i, 0.0, -1e-6),
+                                     (0.001 * (i % 5), 0.0, 0.098)))
+
+
+CODECS = {
+    "kvh1750": (lambda: Kvh1750Codec(rate_hz=1000), kvh_frame),
+    "tts1": (Tts1Codec, tts1_frame),
+    "xsens-mtdata2": (lambda: XsensCodec(rate_hz=400), xsens_frame),
+}
+
+# One stream element: an intact frame, a damaged one, or garbage between frames.
+ELEMENT = st.one_of(
+    st.just(("intact",)),
+    st.tuples(st.just("truncated"), st.floats(0.0, 0.999)),
+    st.tuples(st.just("flipped"), st.floats(0.0, 0.999), st.integers(0, 7)),
+    st.tuples(st.just("garbage"), st.binary(min_size=1, max_size=80)),
+)
+
+
+def build_stream(codec, make_frame, plan):
+    """The stream bytes and the sync indices of the intact frames in it."""
+    stream, intact = bytearray(), []
+    for i, element in enumerate(plan):
+        frame = make_frame(codec, i)
+        if element[0] == "intact":
+            stream += frame
+            intact.append(i)
+        elif element[0] == "truncated":
+            stream += frame[: int(element[1] * len(frame))]
+        elif element[0] == "flipped":
+            damaged = bytearray(frame)
+            damaged[int(element[1] * len(frame))] ^= 1 << element[2]
+            stream += damaged
+        else:
+            stream += element[1]
+    return bytes(stream), intact
+
+
+@pytest.mark.parametrize("name", CODECS)
+@DETERMINISTIC
+@given(plan=st.lists(ELEMENT, max_size=40), cuts=st.lists(st.integers(0, 4000), max_size=12))
+def test_every_intact_frame_is_recovered_and_counters_add_up(name, plan, cuts):
+    make_codec, make_frame = CODECS[name]
+    codec = make_codec()
+    stream, intact = build_stream(codec, make_frame, plan)
+    framer = codec.framer()
+    decoded = []
+    bounds = sorted({0, len(stream), *(c for c in cuts if c < len(stream))})
+    for start, stop in zip(bounds, bounds[1:]):
+        decoded += framer.feed(stream[start:stop], math.nan)
+    assert [d.record for d in decoded] == [codec.decode(make_frame(codec, i)) for i in intact]
+    assert [d.sync_index for d in decoded] == intact
+    assert sum(d.size for d in decoded) + framer.counters.skipped_bytes + framer.buffered == len(stream)
+    assert framer.counters.frames == len(intact)
+    breaks = sum(1 for a, b in zip(intact, intact[1:]) if b != a + 1)
+    assert framer.counters.gaps == breaks
+    assert framer.counters.missing == sum(b - a - 1 for a, b in zip(intact, intact[1:]))
+
+
+@pytest.mark.parametrize("name", CODECS)
+@DETERMINISTIC
+@given(data=st.binary(max_size=2000))
+def test_random_bytes_never_raise_and_are_all_accounted_for(name, data):
+    codec = CODECS[name][0]()
+    framer = codec.framer()
+    decoded = framer.feed(data)
+    assert sum(d.size for d in decoded) + framer.counters.skipped_bytes + framer.buffered == len(data)
+
+
+def test_garbage_ending_in_a_partial_header_does_not_hide_the_next_frame():
+    codec = Kvh1750Codec(rate_hz=100)
+    frame = kvh_frame(codec, 5)
+    framer = codec.framer()
+    assert framer.feed(b"\x00\xfe\x81\xff") == []
+    assert framer.feed(frame)[0].sync_index == 5
+    assert framer.counters.skipped_bytes == 4 and framer.counters.corrupt == 0
+
+
+def test_a_bad_crc_is_counted_as_corrupt_and_the_next_frame_is_kept():
+    codec = Tts1Codec()
+    good, bad = tts1_frame(codec, 1), bytearray(tts1_frame(codec, 2))
+    bad[10] ^= 0x10
+    framer = codec.framer()
+    out = framer.feed(good + bytes(bad) + tts1_frame(codec, 3))
+    assert [d.sync_index for d in out] == [1, 3]
+    assert framer.counters.as_dict() == {"frames": 2, "corrupt": 1, "skipped_bytes": 24, "gaps": 1}
+
+
+def test_seven_bit_sequence_unwraps_monotonically_across_wraps():
+    unwrapper = SequenceUnwrapper(128)
+    indices = [unwrapper.next(i % 128, math.nan)[0] for i in range(120, 400)]
+    assert indices == list(range(120, 400))
+
+
+def test_host_time_resolves_an_outage_longer_than_the_counter_period():
+    unwrapper = SequenceUnwrapper(128, rate_hz=1000.0)
+    unwrapper.next(10, 0.0)
+    index, missing = unwrapper.next(15, 0.261)  # 261 samples later: 5 + 2 * 128
+    assert (index, missing) == (10 + 261, 260)
+
+
+HIGHRES = CanSignals()
+
+
+def can_codec():
+    return CanDbcCodec("configs/imu_lab_highres.dbc", 200.0, HIGHRES.gyro, HIGHRES.accel, HIGHRES.sync,
+                       HIGHRES.status)
+
+
+CAN_ELEMENT = st.one_of(
+    st.just(("intact",)),
+    st.tuples(st.just("dropped"), st.integers(0, 5)),
+    st.tuples(st.just("short"), st.integers(0, 5), st.integers(0, 7)),
+    st.tuples(st.just("foreign"), st.integers(0, 0x7FF).filter(lambda i: not 0x100 <= i <= 0x105),
+              st.binary(max_size=8)),
+)
+
+
+@DETERMINISTIC
+@given(plan=st.lists(CAN_ELEMENT, max_size=30))
+def test_can_framer_recovers_every_complete_sample(plan):
+    codec = can_codec()
+    framer = codec.framer()
+    decoded, intact, total = [], [], 0
+    for i, element in enumerate(plan):
+        sample = ImuSample(i, (1e-6 * i, 2e-6, -3e-6), (1e-4, -2e-4, 0.049))
+        messages = codec.encode(codec.from_sample(sample))
+        if element[0] == "intact":
+            intact.append(i)
+        elif element[0] == "dropped":
+            del messages[element[1]]
+        elif element[0] == "short":
+            m = messages[element[1]]
+            m.data = m.data[: element[2]]
+        else:
+            intact.append(i)
+            messages.insert(0, type(messages[0])(arbitration_id=element[1], data=element[2], is_extended_id=False))
+        for m in messages:
+            total += len(m.data)
+            decoded += framer.feed_chunk(RawChunk("imu", math.nan, bytes(m.data), m.arbitration_id,
+                                                  m.is_extended_id))
+    assert [d.sync_index for d in decoded] == intact
+    for d in decoded:
+        assert codec.to_sample(d).dtheta == pytest.approx((1e-6 * d.sync_index, 2e-6, -3e-6), abs=1e-9)
+    assert sum(d.size for d in decoded) + framer.counters.skipped_bytes + framer.buffered == total
