@@ -128,3 +128,18 @@ class OnlineEstimator:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
         return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors)
 
+
+
+def convergence_time(snapshots: list[Snapshot]) -> float | None:
+    """First time after which every bias estimate stays inside the final estimate's +-3 sigma band."""
+    final = snapshots[-1].full if snapshots else None
+    if final is None or final.bias is None:
+        return None
+    band = 3.0 * final.bias_sigma
+    converged_at = snapshots[-1].t
+    for snap in reversed(snapshots):
+        bias = snap.full.bias
+        if bias is None or np.any(np.abs(bias - final.bias) > band):
+            break
+        converged_at = snap.t
+    return converged_at

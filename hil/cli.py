@@ -1,0 +1,144 @@
+"""The ``hil`` command line: run, simulate, estimate, decode."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from hil.config import ConfigError, load_config
+
+DEFAULT_CONFIG = "configs/emulated_swing.yaml"
+
+
+class UsageError(ValueError):
+    """A command that cannot be carried out as asked."""
+
+
+def _out_dir(args: argparse.Namespace, name: str, configured: str | None) -> Path:
+    if args.out:
+        return Path(args.out)
+    return Path(configured) if configured else Path("runs") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _summary(result: dict, out: Path) -> str:
+    est = result["estimate"]
+    lines = [f"{result['trial']['name']}: {result['trial']['samples']} samples, {result['trial']['duration_s']:.1f} s"]
+    if est["observable"]:
+        bias = ", ".join(f"{b:.3f} +- {s:.3f}" for b, s in zip(est["accel_bias_ug"], est["accel_bias_sigma_ug"]))
+        lines.append(f"  accelerometer bias (ug): {bias}")
+        lines.append(f"  converged at {est['converged_at_s']:.0f} s, Gram rank {est['gram_rank']}")
+    else:
+        lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
+    table = result["table_reference"]["accel_bias_ug"]
+    if table is not None:
+        lines.append("  table-referenced bias (ug): " + ", ".join(f"{b:.3f}" for b in table))
+    if "truth" in result:
+        lines.append("  truth (ug): " + ", ".join(f"{b:.3f}" for b in result["truth"]["accel_bias_ug"]))
+    m2 = result["alignment_deg"]["method2"]
+    if m2:
+        lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
+    lines.append(f"  outputs in {out}")
+    return "\n".join(lines)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from emulators.simulation import Simulation
+    from hil.estimation.online import OnlineEstimator
+    from hil.results import StreamCounts, build_result, write_outputs
+
+    cfg = load_config(args.config)
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(
+        sim.truth.earth,
+        sim.truth.geometry,
+        solve_period=1.0 / cfg.estimator.solve_rate_hz,
+        rank_tolerance=cfg.estimator.rank_tolerance,
+    )
+    for batch in sim.batches():
+        est.update_many(batch)
+    n = sim.samples
+    result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
+    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
+    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures)
+    print(_summary(result, out))
+    return 0
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    from hil.csv_input import read_increments_csv
+    from hil.estimation.online import OnlineEstimator
+    from hil.frames import Earth, TableGeometry
+    from hil.results import StreamCounts, build_result, write_outputs
+
+    cfg = load_config(args.config)
+    batch = read_increments_csv(args.data)
+    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+    est = OnlineEstimator(
+        earth,
+        TableGeometry.from_config(cfg.turntable),
+        solve_period=1.0 / cfg.estimator.solve_rate_hz,
+        rank_tolerance=cfg.estimator.rank_tolerance,
+        t0=batch.t0,
+    )
+    est.update_many(batch)
+    n = len(batch)
+    result = build_result(cfg.trial.name, est, StreamCounts(n, n if batch.angles is not None else 0, n))
+    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
+    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures)
+    print(_summary(result, out))
+    return 0
+
+
+def cmd_decode(args: argparse.Namespace) -> int:
+    from drivers.capture import decode_capture
+
+    counters = decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    print(json.dumps(counters))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
+    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
+    p.add_argument("data", help="CSV: t_s, dtheta_[xyz]_rad, dv_[xyz]_mps[, outer_deg, middle_deg, inner_deg]")
+    p.add_argument("--config", required=True, help="trial YAML (trial and site are enough)")
+    p.add_argument("--out")
+    p.add_argument("--no-figures", action="store_true")
+    p.set_defaults(func=cmd_estimate)
+
+    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters as JSON on the last line")
+    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc")
+    p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
+    p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
+    p.add_argument("--dbc", help="DBC file for can-dbc")
+    p.set_defaults(func=cmd_decode)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from hil.csv_input import DataError
+
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (ConfigError, DataError, UsageError) as exc:
+        print(f"hil: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("hil: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

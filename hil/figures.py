@@ -1,0 +1,73 @@
+"""PNG figures in the style of the 2019 paper: Fig. 2 (Gram rank), Fig. 3 (bias), Fig. 4 (alignment)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hil.results import SERIES_COLUMNS  # noqa: E402
+
+FIGURES = ("observability.png", "bias.png", "alignment.png")
+
+
+def _col(series: np.ndarray, name: str) -> np.ndarray:
+    return series[:, SERIES_COLUMNS.index(name)]
+
+
+def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
+    t = _col(series, "t_s")
+    truth = (result.get("truth") or {}).get("accel_bias_ug")
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax1.step(t, _col(series, "gram_rank"), where="post", label="12-state")
+    ax1.step(t, _col(series, "gram_rank_9"), where="post", label="9-state", linestyle="--")
+    ax1.set_ylabel("rank of scaled Gram matrix")
+    ax1.legend()
+    ax2.semilogy(t, _col(series, "gram_condition"))
+    ax2.set_ylabel("condition number")
+    ax2.set_xlabel("time (s)")
+    fig.suptitle("Observability (cf. Liu 2019 Fig. 2)")
+    fig.savefig(out / FIGURES[0], dpi=100)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    for k, (ax, axis) in enumerate(zip(axes, "xyz")):
+        b, s = _col(series, f"bias_{axis}_ug"), _col(series, f"sigma_{axis}_ug")
+        ax.plot(t, b, label="estimate")
+        ax.fill_between(t, b - 3 * s, b + 3 * s, alpha=0.3, label="+-3 sigma")
+        if truth is not None:
+            ax.axhline(truth[k], color="k", linestyle=":", label="truth")
+        ax.set_ylabel(f"bias {axis} (ug)")
+        finite = b[np.isfinite(b)]
+        if finite.size:
+            centre, spread = finite[-1], max(np.ptp(finite[len(finite) // 4 :]), 5.0)
+            ax.set_ylim(centre - 2 * spread, centre + 2 * spread)
+    axes[0].legend(loc="upper right")
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle("Accelerometer bias (cf. Liu 2019 Fig. 3)")
+    fig.savefig(out / FIGURES[1], dpi=100)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    for ax, angle in zip(axes, ("pitch", "roll", "yaw")):
+        ax.plot(t, _col(series, f"method1_{angle}_deg"), "--", label="method 1")
+        ax.plot(t, _col(series, f"method2_{angle}_deg"), label="method 2")
+        if angle != "yaw":
+            ax.plot(t, _col(series, f"theoretical_{angle}_deg"), ":", label="theoretical")
+        ax.axhline(0.0, color="k", linewidth=0.5)
+        ax.set_ylabel(f"{angle} error (deg)")
+        tail = _col(series, f"method1_{angle}_deg")[len(t) // 10 :]
+        tail = tail[np.isfinite(tail)]
+        if tail.size:
+            lim = 3 * max(np.max(np.abs(tail)), 1e-4)
+            ax.set_ylim(-lim, lim)
+    axes[0].legend(loc="upper right")
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle("Alignment error against the turntable (cf. Liu 2019 Fig. 4)")
+    fig.savefig(out / FIGURES[2], dpi=100)
+    plt.close(fig)

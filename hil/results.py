@@ -1,0 +1,125 @@
+"""Trial outputs: result.json (schema in DESIGN.md), series.csv and the paper-style figures."""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hil.config import DEG, UG
+from hil.estimation.online import OnlineEstimator, Snapshot, convergence_time
+
+SERIES_COLUMNS = (
+    "t_s", "samples",
+    "bias_x_ug", "bias_y_ug", "bias_z_ug", "sigma_x_ug", "sigma_y_ug", "sigma_z_ug",
+    "observable", "gram_rank", "gram_condition", "gram_rank_9",
+    "method1_pitch_deg", "method1_roll_deg", "method1_yaw_deg",
+    "method2_pitch_deg", "method2_roll_deg", "method2_yaw_deg",
+    "theoretical_pitch_deg", "theoretical_roll_deg",
+)  # fmt: skip
+
+
+@dataclass
+class StreamCounts:
+    imu_frames: int = 0
+    table_frames: int = 0
+    aligned: int = 0
+    dropped: int = 0
+    corrupt: int = 0
+    extra: dict[str, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, int]:
+        return {
+            "imu_frames": self.imu_frames,
+            "table_frames": self.table_frames,
+            "aligned": self.aligned,
+            "dropped": self.dropped,
+            "corrupt": self.corrupt,
+            **self.extra,
+        }
+
+
+def _ug(v: np.ndarray | None) -> list[float] | None:
+    return None if v is None else [float(x) for x in np.asarray(v) / UG]
+
+
+def _angles(v: np.ndarray | None, names=("pitch", "roll", "yaw")) -> dict[str, float] | None:
+    return None if v is None else {n: float(x) / DEG for n, x in zip(names, v)}
+
+
+def _tail_mean(snapshots: list[Snapshot], attr: str, duration: float) -> np.ndarray | None:
+    """Mean of a snapshot error over the last 10 % of the trial."""
+    rows = [getattr(s, attr) for s in snapshots if s.t >= 0.9 * duration and getattr(s, attr) is not None]
+    return np.mean(rows, axis=0) if rows else None
+
+
+def build_result(
+    name: str, estimator: OnlineEstimator, streams: StreamCounts, truth_bias_ug: list[float] | None = None
+) -> dict:
+    """The result.json document of a trial."""
+    final = estimator.solution()
+    snapshots = estimator.snapshots
+    duration = final.t
+    table = estimator.table_referenced()
+    result = {
+        "trial": {"name": name, "duration_s": duration, "samples": final.samples},
+        "streams": streams.as_dict(),
+        "estimate": {
+            "accel_bias_ug": _ug(final.full.bias),
+            "accel_bias_sigma_ug": _ug(final.full.bias_sigma),
+            "observable": final.full.observable,
+            "gram_rank": final.full.observability.rank,
+            "gram_condition": final.full.observability.condition,
+            "converged_at_s": convergence_time(snapshots),
+            "noise_ug": final.full.noise_sigma / UG,
+        },
+        "table_reference": {
+            "accel_bias_ug": _ug(table.bias),
+            "accel_bias_sigma_ug": _ug(table.bias_sigma),
+            "tilt_deg": None if table.tilt is None else [float(x) / DEG for x in table.tilt],
+        },
+        "alignment_deg": {
+            "method1": _angles(_tail_mean(snapshots, "error_method1", duration)),
+            "method2": _angles(_tail_mean(snapshots, "error_method2", duration)),
+            "theoretical": _angles(_tail_mean(snapshots, "error_theoretical", duration), ("pitch", "roll")),
+        },
+    }
+    if truth_bias_ug is not None:
+        result["truth"] = {"accel_bias_ug": list(truth_bias_ug)}
+    return result
+
+
+def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
+    """One row per snapshot, in SERIES_COLUMNS order (empty cells where a value does not exist)."""
+    nan3 = [float("nan")] * 3
+    rows = []
+    for s in snapshots:
+        bias = _ug(s.full.bias) or nan3
+        sigma = _ug(s.full.bias_sigma) or nan3
+        m1 = list(s.error_method1 / DEG) if s.error_method1 is not None else nan3
+        m2 = list(s.error_method2 / DEG) if s.error_method2 is not None else nan3
+        theo = list(s.error_theoretical / DEG) if s.error_theoretical is not None else nan3[:2]
+        obs = s.full.observability
+        rows.append(
+            [s.t, s.samples, *bias, *sigma, int(s.full.observable), obs.rank, obs.condition,
+             s.gravity_only.observability.rank, *m1, *m2, *theo]
+        )  # fmt: skip
+    return rows
+
+
+def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: bool = True) -> None:
+    """result.json, series.csv and (optionally) the figures in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "result.json").write_text(json.dumps(result, indent=2) + "\n")
+    rows = series_rows(snapshots)
+    with open(out / "series.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(SERIES_COLUMNS)
+        writer.writerows(["" if isinstance(v, float) and np.isnan(v) else v for v in row] for row in rows)
+    if figures:
+        from hil.figures import write_figures
+
+        write_figures(out, np.array(rows, dtype=float), result)

@@ -1,0 +1,81 @@
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from emulators.simulation import Simulation
+from hil.cli import main
+from hil.config import DEG
+from tests.conftest import PAPER_ERRORS, make_config
+
+
+def write_config(path, **kwargs):
+    cfg = make_config(**kwargs)
+    import yaml
+
+    path.write_text(yaml.safe_dump(cfg.model_dump(mode="json", exclude_none=True)))
+    return cfg
+
+
+def test_simulate_writes_result_series_and_figures(tmp_path):
+    write_config(tmp_path / "c.yaml", duration=60, errors=PAPER_ERRORS)
+    assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "out")]) == 0
+    result = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert result["trial"]["samples"] == 6000
+    assert result["estimate"]["observable"] is True
+    assert result["estimate"]["gram_rank"] == 12
+    assert result["truth"]["accel_bias_ug"] == [60.0, 150.0, 260.0]
+    assert set(result["alignment_deg"]) == {"method1", "method2", "theoretical"}
+    for name in ("series.csv", "bias.png", "alignment.png", "observability.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+
+
+def test_estimate_on_exported_csv_matches_simulate(tmp_path):
+    cfg = write_config(tmp_path / "c.yaml", duration=60, errors=PAPER_ERRORS)
+    sim = Simulation.from_config(cfg)
+    with open(tmp_path / "data.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_x_mps", "dv_y_mps", "dv_z_mps",
+                    "outer_deg", "middle_deg", "inner_deg", "ignored"])  # fmt: skip
+        for b in sim.batches():
+            for k in range(len(b)):
+                values = [b.t[k], *b.dtheta[k], *b.dv[k], *(b.angles[k] / DEG)]
+                w.writerow([repr(float(v)) for v in values] + ["x"])
+    assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "sim"), "--no-figures"]) == 0
+    assert main(["estimate", str(tmp_path / "data.csv"), "--config", str(tmp_path / "c.yaml"),
+                 "--out", str(tmp_path / "est"), "--no-figures"]) == 0  # fmt: skip
+    a = json.loads((tmp_path / "sim" / "result.json").read_text())["estimate"]
+    b = json.loads((tmp_path / "est" / "result.json").read_text())["estimate"]
+    np.testing.assert_allclose(a["accel_bias_ug"], b["accel_bias_ug"], atol=1e-6)
+
+
+def _run(*args):
+    return subprocess.run([sys.executable, "-m", "hil.cli", *args], capture_output=True, text=True)
+
+
+def test_bad_config_is_one_clear_line_and_exit_2(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("trial: {duration_s: 10}\nsite: {latitude_deg: 32}\nimu: {errors: {accel_bias_ug: [1, 2]}}\n")
+    proc = _run("simulate", str(path), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2
+    assert "imu.errors.accel_bias_ug: expected 3 numbers, got 2" in proc.stderr
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "content, reason",
+    [
+        ("t_s,dtheta_x_rad\n1,2\n", "lacks required column"),
+        ("t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps\n1,0,0,0,0,0,0\n0.5,0,0,0,0,0,0\n", ":3: t_s"),
+        ("t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps\n1,0,0,zero,0,0,0\n", ":2: expected numbers"),
+    ],
+)
+def test_bad_csv_is_one_clear_line_and_exit_2(tmp_path, content, reason):
+    write_config(tmp_path / "c.yaml")
+    (tmp_path / "d.csv").write_text(content)
+    proc = _run("estimate", str(tmp_path / "d.csv"), "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2
+    assert reason in proc.stderr and "Traceback" not in proc.stderr
