@@ -110,6 +110,10 @@ class XsensCodec(ByteCodec[MtData2Frame]):
                 data = layout.unpack_from(frame, pos)
                 values[name] = data[0] if name in _SCALARS else data
             pos += size
+        q = values.get("delta_q")
+        if q is not None and not abs(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0) < 1e-5:
+            # The 8-bit checksum misses some multi-bit damage; a DeltaQ is always normalised.
+            raise DecodeError("xsens-mtdata2: DeltaQ is not a unit quaternion")
         return MtData2Frame(**values)
 
     def encode(self, record: MtData2Frame) -> bytes:

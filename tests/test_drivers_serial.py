@@ -1,0 +1,193 @@
+"""Serial sessions and the turntable command client over real pseudo-terminals (no mocks)."""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+import tty
+from pathlib import Path
+
+import pytest
+
+from drivers.acl import AclCodec, AclReply
+from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
+from drivers.session import DeviceSession
+from drivers.table_client import InterlockError, LimitError, TableCommandClient
+from drivers.tap import RawListener, SampleListener
+from drivers.transport import SerialTransport
+from hil.config import LimitsConfig
+from hil.samples import ImuSample
+
+
+class Pty:
+    """A pseudo-terminal whose slave is reached through a stable symlink, like a udev name."""
+
+    def __init__(self, link: Path) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        tmp = link.with_suffix(".new")
+        tmp.symlink_to(os.ttyname(self.slave))
+        os.replace(tmp, link)
+
+    def unplug(self) -> None:
+        os.close(self.master)
+        os.close(self.slave)
+
+
+class Collect(RawListener, SampleListener):
+    def __init__(self) -> None:
+        self.raw: list = []
+        self.samples: list = []
+        self.stopped = False
+
+    def on_raw(self, chunk) -> None:
+        self.raw.append(chunk)
+
+    def on_sample(self, sample) -> None:
+        self.samples.append(sample)
+
+    def stop(self) -> None:
+        self.stopped = True
+
+
+def wait_for(condition, timeout=5.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
+def kvh_bytes(codec: Kvh1750Codec, indices) -> bytes:
+    return b"".join(codec.encode(codec.from_sample(ImuSample(i, (1e-6 * i, 0.0, 0.0), (0.0, 0.0, 0.049),
+                                                             status=STATUS_ALL_VALID))) for i in indices)
+
+
+@pytest.fixture
+def link(tmp_path):
+    return tmp_path / "ttyIMU"
+
+
+def test_session_taps_every_byte_and_decodes_frames_over_a_pty(link):
+    pty = Pty(link)
+    codec = Kvh1750Codec(rate_hz=200)
+    sink = Collect()
+    stream = b"\x00garbage" + kvh_bytes(codec, range(10)) + b"\xfe\x81"
+    with DeviceSession(SerialTransport(str(link), 921600, "imu"), codec, [sink], [sink]) as session:
+        os.write(pty.master, stream)
+        wait_for(lambda: len(sink.samples) == 10 and sum(len(c.data) for c in sink.raw) == len(stream))
+        assert b"".join(c.data for c in sink.raw) == stream
+        assert all(c.stream == "imu" and c.host_time > 0 for c in sink.raw)
+        assert [s.sync_index for s in sink.samples] == list(range(10))
+        assert sink.samples[3].dtheta[0] == pytest.approx(3e-6)
+        assert session.counters.skipped_bytes == 8
+    assert sink.stopped
+    pty.unplug()
+
+
+def test_session_survives_unplug_and_replug_and_counts_the_gap(link):
+    pty = Pty(link)
+    codec = Kvh1750Codec(rate_hz=200)
+    sink = Collect()
+    session = DeviceSession(SerialTransport(str(link), 921600, "imu"), codec, [sink], [sink],
+                            backoff_s=(0.02, 0.1)).start()
+    try:
+        os.write(pty.master, kvh_bytes(codec, range(0, 40)))
+        wait_for(lambda: len(sink.samples) == 40)
+        pty.unplug()
+        wait_for(lambda: session.outages == 1)
+        time.sleep(0.15)  # a few failed reopen attempts while the device is away
+        pty = Pty(link)
+        assert session.wait_connected(5.0)
+        os.write(pty.master, kvh_bytes(codec, range(70, 100)))
+        wait_for(lambda: len(sink.samples) == 70)
+    finally:
+        session.stop()
+        pty.unplug()
+    indices = [s.sync_index for s in sink.samples]
+    assert indices == list(range(40)) + list(range(70, 100))
+    assert session.outages == 1
+    assert (session.counters.gaps, session.counters.missing) == (1, 30)
+    assert "imu" in session.last_error
+
+
+class FakeTable:
+    """The far end of the command port: answers every line and records what it received."""
+
+    def __init__(self, link: Path, interlocks: str = "Closed") -> None:
+        self.pty = Pty(link)
+        self.interlocks = interlocks
+        self.lines: list[str] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        codec, framer = AclCodec(), AclCodec().line_framer()
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.pty.master], [], [], 0.02)
+            if not ready:
+                continue
+            for line in framer.feed(os.read(self.pty.master, 4096)):
+                command = codec.parse_command(line)
+                self.lines.append(line.decode())
+                text = {"*IDN?": "Emulated table", ":Interlock?": self.interlocks}.get(command.header, "OK")
+                os.write(self.pty.master, codec.format_reply(AclReply(text)))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.pty.unplug()
+
+
+@pytest.fixture
+def table(tmp_path):
+    fake = FakeTable(tmp_path / "ttyTABLE")
+    yield fake
+    fake.close()
+
+
+LIMITS = LimitsConfig(position_min_deg=(-170, -60, -170), position_max_deg=(170, 60, 170),
+                      rate_dps=(30, 20, 40), accel_dps2=(50, 50, 50))
+
+
+def test_demand_beyond_a_limit_raises_and_nothing_is_written(table):
+    client = TableCommandClient(table_link(table), LIMITS).open()
+    with pytest.raises(LimitError, match=r"position 95 deg on the middle axis is outside .*\[-60, 60\]"):
+        client.demand_position("middle", 95.0)
+    with pytest.raises(LimitError, match="rate 25 deg/s on the middle axis exceeds the configured limit 20"):
+        client.demand_rate("middle", -25.0)
+    client.demand_position("inner", 10.0)
+    with pytest.raises(LimitError, match="peak acceleration"):
+        client.demand_oscillator("inner", 5.0, 1.0, 0.0)  # 5 deg at 1 Hz: 197 deg/s^2
+    time.sleep(0.1)
+    assert table.lines == [":Demand:Position 1,10"]
+    client.close()
+    assert table.lines[-1] == ":Mode ALL,Off"
+
+
+def table_link(table: FakeTable) -> str:
+    return os.ttyname(table.pty.slave)
+
+
+def test_motion_needs_closed_interlocks(tmp_path):
+    table = FakeTable(tmp_path / "ttyTABLE", interlocks="Open")
+    try:
+        with TableCommandClient(table_link(table), LIMITS) as client:
+            with pytest.raises(InterlockError, match="interlocks of the outer axis are open"):
+                client.set_mode("outer", "Position")
+        assert table.lines == [":Interlock? 3", ":Mode ALL,Off"]
+    finally:
+        table.close()
+
+
+def test_ctrl_c_inside_a_session_still_switches_the_table_off(table):
+    with pytest.raises(KeyboardInterrupt):
+        with TableCommandClient(table_link(table), LIMITS) as client:
+            assert client.identify() == "Emulated table"
+            client.apply_limits()
+            client.set_mode("inner", "Synthesis")
+            raise KeyboardInterrupt
+    assert table.lines[0] == "*IDN?" and ":Limit:Rate 2,20" in table.lines
+    assert table.lines[-2:] == [":Mode 1,Synthesis", ":Mode ALL,Off"]
