@@ -16,6 +16,7 @@ import cantools
 
 from drivers.codec import Codec, Decoded, Framer, RawChunk
 from drivers.framing import SequenceUnwrapper
+from hil.config import CanSignals
 from hil.samples import ImuSample
 
 G0 = 9.80665
@@ -32,6 +33,14 @@ _INCREMENT = {"gyro": "angle", "accel": "velocity"}
 _RATE = {"gyro": "angular rate", "accel": "acceleration"}
 
 Vec3 = tuple[float, float, float]
+
+# Signal mappings of the shipped DBCs: configs/imu_lab_highres.dbc (the config default) and imu_j1939.dbc.
+KNOWN_MAPPINGS: list[dict[str, Any]] = [
+    CanSignals().model_dump(),
+    {"gyro": ("ARI.PitchRate", "ARI.RollRate", "ARI.YawRate"),
+     "accel": ("ACCS.LateralAcceleration", "ACCS.LongitudinalAcceleration", "ACCS.VerticalAcceleration"),
+     "sync": None, "status": None},
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +80,20 @@ class CanDbcCodec(Codec[CanImuFrame]):
     def from_config(cls, imu: Any, rate_hz: float) -> CanDbcCodec:
         c = imu.can
         return cls(c.dbc, rate_hz, c.signals.gyro, c.signals.accel, c.signals.sync, c.signals.status)
+
+    @classmethod
+    def for_dbc(cls, dbc: str | Path, rate_hz: float, **signals: Any) -> CanDbcCodec:
+        """The codec for a DBC with the given signal mapping, or the first shipped mapping that fits it."""
+        if signals:
+            return cls(dbc, rate_hz, **signals)
+        errors = []
+        for mapping in KNOWN_MAPPINGS:
+            try:
+                return cls(dbc, rate_hz, **mapping)
+            except ValueError as exc:
+                errors.append(str(exc))
+        raise ValueError(f"{dbc}: none of the shipped signal mappings fits ({'; '.join(errors)}); "
+                         "give gyro, accel, sync and status signals explicitly")
 
     def _signal(self, name: str) -> tuple[Any, Any]:
         message_name, _, signal_name = name.partition(".")
