@@ -78,6 +78,18 @@ def euler_angles(rotation: Rotation) -> np.ndarray:
     return rotation.as_euler(EULER_SEQ)
 
 
+def euler_from_matrix(c: np.ndarray) -> np.ndarray:
+    """(yaw, pitch, roll) of one C_b^n matrix in closed form (pitch within +-90 deg); cheap per call.
+
+    From ``Rz(y) Rx(p) Ry(r)``: C32 = sin p, C31 = -cos p sin r, C33 = cos p cos r, C12 = -sin y cos p, C22 = cos y cos p.
+    """
+    return np.array([
+        math.atan2(-c[0, 1], c[1, 1]),
+        math.asin(max(-1.0, min(1.0, c[2, 1]))),
+        math.atan2(-c[2, 0], c[2, 2]),
+    ])  # fmt: skip
+
+
 @dataclass(frozen=True)
 class TableGeometry:
     """How the turntable sits on the site and how the IMU sits on the inner gimbal."""

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_angles, euler_rotation, normal_gravity
+from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_angles, euler_from_matrix, euler_rotation, normal_gravity
 
 
 def rx(a):
@@ -61,6 +61,8 @@ def test_table_azimuth_tilt_and_mounting_compose_in_documented_order():
 def test_euler_angles_round_trip():
     ypr = np.array([[0.1, 0.2, -0.3], [2.0, -0.5, 1.0]])
     np.testing.assert_allclose(euler_angles(euler_rotation(ypr)), ypr, atol=1e-14)
+    for row in ypr:
+        np.testing.assert_allclose(euler_from_matrix(rz(row[0]) @ rx(row[1]) @ ry(row[2])), row, atol=1e-14)
 
 
 def test_body_rate_matches_finite_difference_of_attitude():

@@ -11,10 +11,9 @@ gravity part is free of the accelerometer bias (2019 Sec. IV).
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
 
-from hil.frames import Earth, euler_angles
+from hil.frames import Earth, euler_from_matrix
 
 
 def dual_vector(v1_b: np.ndarray, v2_b: np.ndarray, v1_n: np.ndarray, v2_n: np.ndarray) -> np.ndarray:
@@ -25,7 +24,8 @@ def dual_vector(v1_b: np.ndarray, v2_b: np.ndarray, v1_n: np.ndarray, v2_n: np.n
         return np.vstack((v1, c, np.cross(c, v1)))
 
     c = np.linalg.solve(triad(v1_b, v2_b), triad(v1_n, v2_n)).T
-    return polar(c)[0]  # C (C^T C)^(-1/2)
+    u, _, vt = np.linalg.svd(c)
+    return u @ vt  # the orthogonal polar factor, C (C^T C)^(-1/2)
 
 
 def alignment_matrix(apparent_gravity_0: np.ndarray, apparent_gravity_t: np.ndarray, t: float, earth: Earth) -> np.ndarray:
@@ -41,8 +41,7 @@ def body_attitude(c_ib0_n0: np.ndarray, c_b_ib0: np.ndarray, t: float, earth: Ea
 
 def attitude_error(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """(pitch, roll, yaw) of the estimate minus the reference, rad, wrapped to (-pi, pi]."""
-    ypr = euler_angles(Rotation.from_matrix(np.stack((estimate, reference))))
-    diff = ypr[0] - ypr[1]
+    diff = euler_from_matrix(estimate) - euler_from_matrix(reference)
     diff = (diff + np.pi) % (2 * np.pi) - np.pi
     return np.array([diff[1], diff[2], diff[0]])
 

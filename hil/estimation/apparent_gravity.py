@@ -7,7 +7,7 @@ i_b0 over its interval, against the interval means of the regressors.
 
 The recursion is kept in information form: the normal matrix ``W = sum H^T H`` (the observability
 Gram matrix of 2019 eq. 19 in discrete form) and ``sum H^T z`` are accumulated per sample and solved
-when a solution is asked for. This equals batch least squares exactly and stays sound over a
+when a solution is asked for (the display rate). This equals batch least squares exactly and stays sound over a
 24-hour trial, where covariance-form RLS with a large P0 does not. Two numerical choices:
 
 - the gravity basis is held as ``[1 - cos wt, sin wt, 1]`` (about ``t^2/2, t, 1`` early in a trial),
@@ -18,11 +18,13 @@ when a solution is asked for. This equals batch least squares exactly and stays 
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
+from hil.estimation.normal_equations import NormalEquations
 from hil.frames import EARTH_RATE
 
 N_GRAVITY = 9  # A11..A33
@@ -85,60 +87,58 @@ class Solution:
         return basis @ self.a_internal.T
 
 
+def measurement_matrix(t_start: np.ndarray, t_end: np.ndarray, c_mean: np.ndarray, omega: float = EARTH_RATE) -> np.ndarray:
+    """H (N, 3, 12) of 2019 eq. 14 over each interval: row r is ``[e_r (x) w^T, C[r, :]]``."""
+    w = gravity_basis(t_start, t_end, omega)
+    h = np.zeros((len(w), 3, N_FULL))
+    for r in range(3):
+        h[:, r, 3 * r : 3 * r + 3] = w
+    h[:, :, N_GRAVITY:] = c_mean
+    return h
+
+
 class ApparentGravityEstimator:
-    """Accumulates the normal equations of the 12-state model; the 9-state model is its leading block."""
+    """Normal equations of the 12-state model; the 9-state model is their leading block."""
 
     def __init__(self, rank_tolerance: float = 1e-6, omega: float = EARTH_RATE) -> None:
         self.rank_tolerance = rank_tolerance
         self.omega = omega
-        self.info = np.zeros((N_FULL, N_FULL))
-        self.rhs = np.zeros(N_FULL)
-        self.zz = 0.0
-        self.samples = 0
+        self.normal = NormalEquations(N_FULL)
         self.t = 0.0
 
-    def update_many(self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray) -> None:
-        """Add N measurements: mean specific force in i_b0 (N, 3) and the mean of C_b^ib0 over each interval (N, 3, 3).
+    @property
+    def samples(self) -> int:
+        return self.normal.samples
 
-        Row r of one sample's H is ``[e_r (x) w^T, C[r, :]]`` (2019 eq. 14), so the Gram blocks are
-        ``I (x) sum w w^T``, ``sum w (x) C[r, :]`` and ``sum C^T C``.
-        """
-        w = gravity_basis(t_start, t_end, self.omega)
-        ww = w.T @ w
-        wc = np.einsum("ni,nrj->rij", w, c_mean)  # (row r, basis i, bias j)
-        info = self.info
-        for r in range(3):
-            block = slice(3 * r, 3 * r + 3)
-            info[block, block] += ww
-            info[block, N_GRAVITY:] += wc[r]
-            info[N_GRAVITY:, block] += wc[r].T
-            self.rhs[block] += w.T @ f_ib0[:, r]
-        info[N_GRAVITY:, N_GRAVITY:] += np.einsum("nri,nrj->ij", c_mean, c_mean)
-        self.rhs[N_GRAVITY:] += np.einsum("nri,nr->i", c_mean, f_ib0)
-        self.zz += float(np.einsum("ni,ni->", f_ib0, f_ib0))
-        self.samples += len(t_end)
-        self.t = float(t_end[-1])
+    def update_many(self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray) -> None:
+        """Add N measurements: mean specific force in i_b0 (N, 3) and the mean of C_b^ib0 over each interval (N, 3, 3)."""
+        for _ in self.update_segments(t_start, t_end, f_ib0, c_mean, [len(t_end)]):
+            pass
+
+    def update_segments(
+        self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray, stops: Sequence[int]
+    ) -> Iterator[int]:
+        """As :meth:`update_many`, yielding after the samples up to each stop are in (to solve there)."""
+        h = measurement_matrix(t_start, t_end, c_mean, self.omega)
+        for stop in self.normal.add_segments(h, f_ib0, stops):
+            self.t = float(t_end[stop - 1])
+            yield stop
 
     def observability(self, n: int = N_FULL) -> Observability:
         """Rank and condition number of the diagonally scaled Gram matrix of the first n states."""
-        scaled, _ = self._scaled(n)
+        scaled, _ = self.normal.scaled(n)
         eig = eigh(scaled, eigvals_only=True)
         top = max(float(eig[-1]), np.finfo(float).tiny)
         rank = int(np.sum(eig > self.rank_tolerance * top))
         condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
         return Observability(rank, condition, eig)
 
-    def _scaled(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        diag = np.diag(self.info)[:n]
-        scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
-        return self.info[:n, :n] * np.outer(scale, scale), scale
-
     def solve(self, with_bias: bool = True) -> Solution:
         """The least-squares solution now: 12-state (with bias) or 9-state ("method 1")."""
         n = N_FULL if with_bias else N_GRAVITY
         obs = self.observability(n)
-        scaled, scale = self._scaled(n)
-        rhs = self.rhs[:n] * scale
+        scaled, scale = self.normal.scaled(n)
+        rhs = self.normal.rhs[:n] * scale
         observable = obs.full(n)
         if observable:
             factor = cho_factor(scaled)
@@ -149,7 +149,7 @@ class ApparentGravityEstimator:
             cov_scaled_diag = np.full(n, np.nan)
         x = y * scale
         dof = max(3 * self.samples - n, 1)
-        rss = max(self.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
+        rss = max(self.normal.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
         noise_var = rss / dof
         bias = bias_sigma = None
         if with_bias and observable:

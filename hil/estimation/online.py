@@ -67,19 +67,32 @@ class OnlineEstimator:
         return self.snapshots[-1] if len(self.snapshots) > before else None
 
     def update_many(self, batch: AlignedBatch) -> None:
-        """Add consecutive samples, solving at every solve instant they pass."""
-        start = 0
-        while start < len(batch):
-            stop = int(np.searchsorted(batch.t, self._next_solve, side="right"))
-            if stop <= start:
-                stop = len(batch)
-            chunk = batch.slice(start, stop)
-            self._accumulate(chunk)
-            if chunk.t[-1] >= self._next_solve:
+        """Add consecutive samples, solving at every solve instant they pass.
+
+        The whole batch goes through the strapdown and the measurement model at once; the normal
+        equations are summed segment by segment between solve instants.
+        """
+        n_solves = max(0, math.floor((batch.t[-1] - self._next_solve) / self.solve_period) + 1)
+        solve_times = self._next_solve + self.solve_period * np.arange(n_solves)
+        solve_stops = set(np.searchsorted(batch.t, solve_times, side="right").tolist())
+        stops = sorted(solve_stops | {len(batch)})
+        self._next_solve += n_solves * self.solve_period
+
+        t_end = batch.t - self.t0
+        t_start = np.concatenate(([self._t_last - self.t0], t_end[:-1]))
+        dt = t_end - t_start
+        step = self.strapdown.update_many(batch.dtheta, batch.dv, dt)
+        table = None
+        if batch.angles is not None:
+            table = self.table.update_segments(batch.dv / dt[:, None], self._mean_table_attitude(batch.angles), stops)
+        for stop in self.gravity.update_segments(t_start, t_end, step.dv_ib0 / dt[:, None], step.c_mean, stops):
+            if table is not None:
+                next(table)
+                self._angles = batch.angles[stop - 1]
+            self._attitude = step.c_end[stop - 1]
+            self._t_last = float(batch.t[stop - 1])
+            if stop in solve_stops:
                 self.snapshots.append(self._snapshot())
-                periods = math.floor((chunk.t[-1] - self._next_solve) / self.solve_period) + 1
-                self._next_solve += periods * self.solve_period
-            start = stop
 
     def solution(self) -> Snapshot:
         """The solution with everything received so far."""
@@ -89,18 +102,6 @@ class OnlineEstimator:
 
     def table_referenced(self) -> TableReferencedBias:
         return self.table.solve()
-
-    def _accumulate(self, chunk: AlignedBatch) -> None:
-        t_end = chunk.t - self.t0
-        t_start = np.concatenate(([self._t_last - self.t0], t_end[:-1]))
-        dt = (t_end - t_start)[:, None]
-        step = self.strapdown.update_many(chunk.dtheta, chunk.dv, dt[:, 0])
-        self.gravity.update_many(t_start, t_end, step.dv_ib0 / dt, step.c_mean)
-        if chunk.angles is not None:
-            self.table.update_many(chunk.dv / dt, self._mean_table_attitude(chunk.angles))
-            self._angles = chunk.angles[-1]
-        self._attitude = step.c_end[-1]
-        self._t_last = float(chunk.t[-1])
 
     def _mean_table_attitude(self, angles: np.ndarray) -> np.ndarray:
         """Mean of C_b^n over each interval by Simpson's rule; the mid-interval angles come from the

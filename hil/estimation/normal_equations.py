@@ -1,0 +1,47 @@
+"""Least squares in information form: sums of H^T H, H^T z and z^T z, added batch by batch."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+
+
+class NormalEquations:
+    """Accumulates the normal equations of ``z = H x + noise``; the sums equal those of one batch solve."""
+
+    def __init__(self, n: int) -> None:
+        self.info = np.zeros((n, n))
+        self.rhs = np.zeros(n)
+        self.zz = 0.0
+        self.samples = 0
+
+    def add(self, h: np.ndarray, z: np.ndarray) -> None:
+        """Add N measurements: H (N, m, n) and z (N, m)."""
+        for _ in self.add_segments(h, z, [len(z)]):
+            pass
+
+    def add_segments(self, h: np.ndarray, z: np.ndarray, stops: Sequence[int]) -> Iterator[int]:
+        """Add the measurements up to each index in ``stops`` (increasing, the last = N), yielding after each.
+
+        The per-sample products are formed once for the whole batch and summed per segment.
+        """
+        ht = np.swapaxes(h, 1, 2)
+        info = ht @ h
+        rhs = (ht @ z[..., None])[..., 0]
+        zz = np.einsum("ni,ni->n", z, z)
+        start = 0
+        for stop in stops:
+            if stop > start:
+                self.info += info[start:stop].sum(axis=0)
+                self.rhs += rhs[start:stop].sum(axis=0)
+                self.zz += float(zz[start:stop].sum())
+                self.samples += stop - start
+            start = stop
+            yield stop
+
+    def scaled(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The leading n x n block scaled to unit diagonal, and the scale factors."""
+        diag = np.diag(self.info)[:n]
+        scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+        return self.info[:n, :n] * np.outer(scale, scale), scale
