@@ -58,7 +58,7 @@ class OnlineEstimator:
         self._angle_history: np.ndarray | None = None  # last two latched angles (2, 3)
         self._next_solve = t0 + solve_period
         self._attitude = np.eye(3)
-        self._angles: np.ndarray | None = None
+        self._reference: np.ndarray | None = None  # table attitude C_b^n at the last sample
 
     def update(self, sample: AlignedSample) -> Snapshot | None:
         """Add one sample; returns a new snapshot when a solve instant was passed."""
@@ -85,10 +85,11 @@ class OnlineEstimator:
         table = None
         if batch.angles is not None:
             table = self.table.update_segments(batch.dv / dt[:, None], self._mean_table_attitude(batch.angles), stops)
-        for stop in self.gravity.update_segments(t_start, t_end, step.dv_ib0 / dt[:, None], step.c_mean, stops):
+            references = self.geometry.attitude_matrix(batch.angles[np.array(stops) - 1])[0]
+        for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, step.dv_ib0 / dt[:, None], step.c_mean, stops)):
             if table is not None:
                 next(table)
-                self._angles = batch.angles[stop - 1]
+                self._reference = references[k]
             self._attitude = step.c_end[stop - 1]
             self._t_last = float(batch.t[stop - 1])
             if stop in solve_stops:
@@ -119,8 +120,8 @@ class OnlineEstimator:
         gravity_only = self.gravity.solve(with_bias=False)
         t = self._t_last - self.t0
         errors: list[np.ndarray | None] = [None, None, None]
-        if self._angles is not None and t > 0:
-            reference = self.geometry.attitude_matrix(self._angles)[0][0]
+        reference = self._reference
+        if reference is not None and t > 0:
             for k, solution in enumerate((gravity_only, full)):
                 vectors = solution.apparent_gravity(np.array([0.0, t]))
                 c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], t, self.earth)
