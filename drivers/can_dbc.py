@@ -35,12 +35,12 @@ _RATE = {"gyro": "angular rate", "accel": "acceleration"}
 Vec3 = tuple[float, float, float]
 
 # Signal mappings of the shipped DBCs: configs/imu_lab_highres.dbc (the config default) and imu_j1939.dbc.
-KNOWN_MAPPINGS: list[dict[str, Any]] = [
+KNOWN_MAPPINGS: tuple[dict[str, Any], ...] = (
     CanSignals().model_dump(),
     {"gyro": ("ARI.PitchRate", "ARI.RollRate", "ARI.YawRate"),
      "accel": ("ACCS.LateralAcceleration", "ACCS.LongitudinalAcceleration", "ACCS.VerticalAcceleration"),
      "sync": None, "status": None},
-]
+)
 
 
 @dataclass(frozen=True, slots=True)
