@@ -188,3 +188,14 @@ def test_registry_finds_every_protocol_by_name():
     assert make_codec("kvh1750", rate_hz=100).rate_hz == 100
     with pytest.raises(KeyError, match="known protocols"):
         codec_class("nmea")
+
+
+def test_imu_codec_follows_the_config():
+    from drivers.registry import imu_codec
+    from hil.config import parse_config
+
+    base = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
+    kvh = imu_codec(parse_config({**base, "imu": {"kvh1750": {"gyro_unit": "deg", "gyro_output": "rate"}}}).imu, 400)
+    assert (kvh.name, kvh.gyro_unit, kvh.gyro_output, kvh.rate_hz) == ("kvh1750", "deg", "rate", 400)
+    can_cfg = parse_config({**base, "imu": {"source": "can", "protocol": "can-dbc", "can": {}}}).imu
+    assert imu_codec(can_cfg, 200).sync_modulus == 1 << 24
