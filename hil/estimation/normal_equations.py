@@ -22,20 +22,14 @@ class NormalEquations:
             pass
 
     def add_segments(self, h: np.ndarray, z: np.ndarray, stops: Sequence[int]) -> Iterator[int]:
-        """Add the measurements up to each index in ``stops`` (increasing, the last = N), yielding after each.
-
-        The per-sample products are formed once for the whole batch and summed per segment.
-        """
-        ht = np.swapaxes(h, 1, 2)
-        info = ht @ h
-        rhs = (ht @ z[..., None])[..., 0]
-        zz = np.einsum("ni,ni->n", z, z)
+        """Add the measurements up to each index in ``stops`` (increasing, the last = N), yielding after each."""
         start = 0
         for stop in stops:
             if stop > start:
-                self.info += info[start:stop].sum(axis=0)
-                self.rhs += rhs[start:stop].sum(axis=0)
-                self.zz += float(zz[start:stop].sum())
+                hs, zs = h[start:stop], z[start:stop]
+                self.info += np.einsum("nri,nrj->ij", hs, hs)
+                self.rhs += np.einsum("nri,nr->i", hs, zs)
+                self.zz += float(np.einsum("ni,ni->", zs, zs))
                 self.samples += stop - start
             start = stop
             yield stop

@@ -1,0 +1,90 @@
+"""Speed of `hil simulate` on the 2019 paper's scenario and per-sample estimator cost beside filterpy.
+
+    .venv/bin/python benchmarks/simulate_speed.py            (filterpy is compared when installed:
+                                                              pip install -e '.[bench]')
+Prints: emulation and estimation time for the 400 000 samples, samples/s, the whole command's wall
+time including start-up and figures, and the per-sample cost of the 12-state update.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from emulators.simulation import Simulation
+from hil.config import load_config
+from hil.estimation.apparent_gravity import ApparentGravityEstimator
+from hil.estimation.online import OnlineEstimator
+
+CONFIG = "configs/liu2019_sim.yaml"
+
+
+def emulation_and_estimation() -> None:
+    cfg = load_config(CONFIG)
+    sim = Simulation.from_config(cfg)
+    t0 = time.perf_counter()
+    batches = list(sim.batches())
+    t1 = time.perf_counter()
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0 / cfg.estimator.solve_rate_hz)
+    for batch in batches:
+        est.update_many(batch)
+    est.solution()
+    t2 = time.perf_counter()
+    n = sim.samples
+    print(f"samples                         {n}")
+    print(f"emulation (truth + errors)      {t1 - t0:.3f} s   {n / (t1 - t0):,.0f} samples/s")
+    print(f"estimation ({len(est.snapshots)} solves)          {t2 - t1:.3f} s   {n / (t2 - t1):,.0f} samples/s")
+    print(f"emulation + estimation          {t2 - t0:.3f} s   {n / (t2 - t0):,.0f} samples/s")
+
+
+def whole_command() -> None:
+    with tempfile.TemporaryDirectory() as out:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "hil.cli", "simulate", CONFIG, "--out", out], check=True, capture_output=True)
+        print(f"hil simulate (start-up, figures) {time.perf_counter() - t0:.3f} s")
+
+
+def per_sample_cost() -> None:
+    rng = np.random.default_rng(0)
+    n = 200_000
+    t_end = np.arange(1, n + 1) * 0.005
+    c = np.tile(np.eye(3), (n, 1, 1))
+    z = rng.normal(size=(n, 3))
+    est = ApparentGravityEstimator()
+    t0 = time.perf_counter()
+    for k in range(0, n, 200):  # one second of 200 Hz data per call, as the live pipeline hands it over
+        est.update_many(t_end[k : k + 200] - 0.005, t_end[k : k + 200], z[k : k + 200], c[k : k + 200])
+    ours = (time.perf_counter() - t0) / n * 1e6
+    t0 = time.perf_counter()
+    for _ in range(200):
+        est.solve()
+    solve = (time.perf_counter() - t0) / 200 * 1e6
+    print(f"12-state update, per sample      {ours:.2f} us (batches of 200); solve {solve:.0f} us per display update")
+    try:
+        from filterpy.kalman import KalmanFilter
+    except ImportError:
+        print("filterpy not installed: pip install -e '.[bench]' to compare")
+        return
+    kf = KalmanFilter(dim_x=12, dim_z=3)
+    kf.P *= 1e6
+    kf.R = np.eye(3)
+    kf.Q = np.zeros((12, 12))
+    h = np.zeros((3, 12))
+    m = 20_000
+    t0 = time.perf_counter()
+    for k in range(m):
+        h[:, :3] = h[:, 3:6] = h[:, 6:9] = 0.0
+        kf.H = h
+        kf.update(z[k])
+    theirs = (time.perf_counter() - t0) / m * 1e6
+    print(f"filterpy KalmanFilter.update     {theirs:.2f} us per sample   ratio {theirs / ours:.1f}x")
+
+
+if __name__ == "__main__":
+    emulation_and_estimation()
+    whole_command()
+    per_sample_cost()
