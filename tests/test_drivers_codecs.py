@@ -13,9 +13,10 @@ from drivers.acl import AclCodec, AclCommand, AclError, AclReply
 from drivers.codec import Decoded, DecodeError
 from drivers.crc import crc16_xmodem, crc32_mpeg2
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec, KvhFrame
-from drivers.registry import codec_class, make_codec
+from drivers.registry import codec_class, imu_codec, make_codec
 from drivers.tts1 import Tts1Codec, Tts1Frame, wrap_udeg
 from drivers.xsens import XsensCodec
+from hil.config import parse_config
 from hil.samples import ImuSample, TableSample
 
 KVH_PUBLISHED = bytes.fromhex("FE81FF55 37A96A6E 38586C1F B75BF862 BF803E78 BB650D28 3B0A37AC 77 3D 0028 4BFA34D8")
@@ -191,9 +192,6 @@ def test_registry_finds_every_protocol_by_name():
 
 
 def test_imu_codec_follows_the_config():
-    from drivers.registry import imu_codec
-    from hil.config import parse_config
-
     base = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
     kvh = imu_codec(parse_config({**base, "imu": {"kvh1750": {"gyro_unit": "deg", "gyro_output": "rate"}}}).imu, 400)
     assert (kvh.name, kvh.gyro_unit, kvh.gyro_output, kvh.rate_hz) == ("kvh1750", "deg", "rate", 400)
