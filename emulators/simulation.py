@@ -10,7 +10,7 @@ import numpy as np
 from emulators.motion import motion_from_config
 from emulators.sensor_errors import SensorErrorModel
 from emulators.truth import Truth
-from hil.config import UG, Config
+from hil.config import Config, ConfigError
 from hil.frames import Earth, TableGeometry
 from hil.samples import AlignedBatch
 
@@ -26,6 +26,8 @@ class Simulation:
 
     @classmethod
     def from_config(cls, cfg: Config) -> Simulation:
+        if cfg.trial.duration_s is None:
+            raise ConfigError("trial.duration_s: required key is missing (an emulated trial needs a duration)")
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion))
         errors = SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, gravity=earth.g)
@@ -45,10 +47,3 @@ class Simulation:
             dtheta, dv = self.truth.increments(t0, t)
             dtheta, dv = self.errors.apply(t, dtheta, dv)
             yield AlignedBatch(t, dtheta, dv, self.truth.angles(t), t0)
-
-    def true_bias_ug(self, cfg: Config) -> list[float]:
-        """The configured constant accelerometer bias, ug (what a trial's estimate is compared with)."""
-        return list(cfg.imu.errors.accel_bias_ug)
-
-
-__all__ = ["Simulation", "UG"]

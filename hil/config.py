@@ -54,7 +54,7 @@ class _Model(BaseModel):
 
 class TrialConfig(_Model):
     name: str = "trial"
-    duration_s: float = Field(gt=0)
+    duration_s: float | None = Field(None, gt=0)  # required for emulated trials; data files set their own
     rate_hz: float = Field(200.0, gt=0, le=10000)
     seed: int = 0
 
