@@ -79,3 +79,14 @@ def test_bad_csv_is_one_clear_line_and_exit_2(tmp_path, content, reason):
     proc = _run("estimate", str(tmp_path / "d.csv"), "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "o"))
     assert proc.returncode == 2
     assert reason in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_decode_prints_counters_as_json_on_the_last_line(tmp_path, capsys):
+    published = bytes.fromhex("FE81FF55 37A96A6E 38586C1F B75BF862 BF803E78 BB650D28 3B0A37AC 77 3D 0028 4BFA34D8")
+    (tmp_path / "cap.bin").write_bytes(b"\x00\x13garbage" + published + published[:20])
+    assert main(["decode", "kvh1750", str(tmp_path / "cap.bin"), "--out", str(tmp_path / "out.csv")]) == 0
+    counters = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert counters["frames"] == 1
+    assert counters["skipped_bytes"] >= 9
+    rows = list(csv.reader(open(tmp_path / "out.csv")))
+    assert rows[0][0] == "sync_index" and len(rows) == 2
