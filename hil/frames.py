@@ -151,10 +151,15 @@ class TableGeometry:
 
 
 def _axis_matrices(angle: np.ndarray, axis: int) -> np.ndarray:
-    """Elementary rotations about one coordinate axis, (N, 3, 3)."""
-    rotvec = np.zeros((len(angle), 3))
-    rotvec[:, axis] = angle
-    return Rotation.from_rotvec(rotvec).as_matrix()
+    """Elementary rotations about one coordinate axis (0 = x, 1 = y, 2 = z), (N, 3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    m = np.zeros((len(angle), 3, 3))
+    m[:, axis, axis] = 1.0
+    m[:, i, i] = m[:, j, j] = c
+    m[:, j, i] = s
+    m[:, i, j] = -s
+    return m
 
 
 def skew(v: np.ndarray) -> np.ndarray:
