@@ -138,3 +138,19 @@ def test_sample_by_sample_updates_equal_batch_updates():
     np.testing.assert_allclose(a.full.a_internal, b.full.a_internal, rtol=1e-7)
     np.testing.assert_allclose(a.attitude, b.attitude, atol=1e-12)
     np.testing.assert_allclose(a.error_method2, b.error_method2, atol=1e-8)
+
+
+def test_a_solve_instant_inside_a_data_gap_is_served_by_the_next_sample():
+    from emulators.simulation import Simulation
+    from hil.estimation.online import OnlineEstimator
+
+    cfg = make_config(duration=30, rate=100, errors=PAPER_ERRORS)
+    batches = list(Simulation.from_config(cfg).batches(chunk=1000))  # 0-10 s, 10-20 s, 20-30 s
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=7.0)
+    est.update_many(batches[0])
+    gap = batches[1].slice(500, 1000)  # 15-20 s; the solve at 14 s falls in the gap
+    est.update_many(gap)
+    times = [s.t for s in est.snapshots]
+    assert times == [7.0, pytest.approx(15.01)]
+    assert est.snapshots[-1].samples == 1001

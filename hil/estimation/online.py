@@ -74,7 +74,8 @@ class OnlineEstimator:
         """
         n_solves = max(0, math.floor((batch.t[-1] - self._next_solve) / self.solve_period) + 1)
         solve_times = self._next_solve + self.solve_period * np.arange(n_solves)
-        solve_stops = set(np.searchsorted(batch.t, solve_times, side="right").tolist())
+        # a solve instant that falls in a gap before this batch is served at the batch's first stop
+        solve_stops = {max(int(i), 1) for i in np.searchsorted(batch.t, solve_times, side="right")}
         stops = sorted(solve_stops | {len(batch)})
         self._next_solve += n_solves * self.solve_period
 
@@ -129,7 +130,6 @@ class OnlineEstimator:
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
         return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors)
-
 
 
 def convergence_time(snapshots: list[Snapshot]) -> float | None:
