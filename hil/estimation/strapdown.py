@@ -91,10 +91,10 @@ class Strapdown:
         s = NODES[None, :, None]
         alpha = a_th[:, None] * s + b_th[:, None] * s**2 / 2.0 + c_th[:, None] * s**3 / 3.0  # (N, 3 nodes, 3)
         force = a_v[:, None] + b_v[:, None] * s + c_v[:, None] * s**2
-        rot = Rotation.from_rotvec(alpha.reshape(-1, 3))
         n = len(dtheta)
-        dv_body = (rot.apply(force.reshape(-1, 3)).reshape(n, 3, 3) * WEIGHTS[None, :, None]).sum(axis=1)
-        r_mean = np.einsum("nkij,k->nij", rot.as_matrix().reshape(n, 3, 3, 3), WEIGHTS)
+        rot = Rotation.from_rotvec(alpha.reshape(-1, 3)).as_matrix().reshape(n, 3, 3, 3)  # (N, node, 3, 3)
+        dv_body = np.einsum("nkij,nkj,k->ni", rot, force, WEIGHTS)
+        r_mean = np.einsum("nkij,k->nij", rot, WEIGHTS)
 
         # Re-orthonormalise the carried attitude so rounding cannot build up over a long trial.
         self.attitude = Rotation.from_matrix(c_end[-1]).as_matrix()
