@@ -1,0 +1,152 @@
+"""The emulated devices on ptys, read like hardware: pyserial, a frame checker written from DESIGN.md, the framers."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import struct
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+import yaml
+from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
+
+from drivers.kvh1750 import Kvh1750Codec
+from drivers.tts1 import Tts1Codec
+from emulators.emulate import spawn_emulator
+from emulators.simulation import Simulation
+from hil.config import load_config
+
+RATE = 200.0
+LATCH_US = 50
+CONFIG = {
+    "trial": {"name": "emulated", "duration_s": 3.0, "rate_hz": RATE, "seed": 3},
+    "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+    "turntable": {"latch_delay_us": LATCH_US, "motion": {"kind": "swing", "axes": {
+        "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
+        "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
+        "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 179.9999}}}},
+}
+
+
+def check_kvh(frame: bytes) -> tuple[tuple[float, ...], int]:
+    """Format A from the protocol text: header, 6 big-endian float32, status, sequence, int16, CRC-32/MPEG-2."""
+    assert len(frame) == 36 and frame[:4] == bytes.fromhex("FE81FF55")
+    assert struct.unpack(">I", frame[32:])[0] == Crc32Mpeg2.calc(frame[:32])
+    values = struct.unpack(">6f", frame[4:28])
+    assert frame[28] == 0x77 and frame[29] < 128
+    return values, frame[29]
+
+
+def check_tts1(frame: bytes) -> tuple[int, tuple[int, int, int], int]:
+    """tts1 from the protocol text: 'TS', version 1, LE counter and angles, CRC-16/XMODEM over 2..21, BE."""
+    assert len(frame) == 24 and frame[:3] == b"TS\x01"
+    assert struct.unpack(">H", frame[22:])[0] == Crc16Xmodem.calc(frame[2:22])
+    counter, o, m, i, delay = struct.unpack("<I3iH", frame[4:22])
+    assert all(-180_000_000 <= a < 180_000_000 for a in (o, m, i))
+    return counter, (o, m, i), delay
+
+
+def read_all(path: str, out: dict[str, bytes], key: str) -> None:
+    """Everything the port delivers until the emulator closes it."""
+    data = bytearray()
+    with serial.Serial(path, timeout=0.05) as port:
+        while True:
+            try:
+                data += port.read(65536)
+            except serial.SerialException:
+                break  # master closed: end of stream
+    out[key] = bytes(data)
+
+
+def run(tmp_path: Path, errors: dict | None = None, speed: str = "max") -> tuple[dict[str, bytes], object]:
+    cfg = dict(CONFIG, imu={"errors": errors or {}})
+    config = tmp_path / "emulated.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed)
+    out: dict[str, bytes] = {}
+    threads = [threading.Thread(target=read_all, args=(ports[k], out, k)) for k in ("imu", "turntable_data")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(20)
+    assert proc.wait(10) == 0
+    return out, load_config(config)
+
+
+@pytest.fixture(scope="module")
+def zero_error_run(tmp_path_factory):
+    return run(tmp_path_factory.mktemp("emu"))
+
+
+def test_frames_pass_an_independent_checker_and_match_truth(zero_error_run):
+    out, cfg = zero_error_run
+    n = int(RATE * 3)
+    imu, table = out["imu"], out["turntable_data"]
+    assert len(imu) == 36 * n and len(table) == 24 * n
+    sim = Simulation.from_config(cfg)
+    t = np.arange(1, n + 1) / RATE
+    truth = np.degrees(sim.truth.angles(t + LATCH_US * 1e-6)) * 1e6
+    truth = (truth + 180e6) % 360e6 - 180e6
+    for k in range(1, n + 1):
+        _, sequence = check_kvh(imu[36 * (k - 1):36 * k])
+        assert sequence == k % 128
+        counter, angles, delay = check_tts1(table[24 * (k - 1):24 * k])
+        assert counter == k and delay == LATCH_US
+        diff = (np.array(angles) - truth[k - 1] + 180e6) % 360e6 - 180e6
+        assert np.all(np.abs(diff) <= 0.5 + 1e-6), (k, diff)
+
+
+def test_zero_error_increments_equal_simulation_to_float32(zero_error_run):
+    out, cfg = zero_error_run
+    codec = Kvh1750Codec(RATE)
+    decoded = codec.framer().feed(out["imu"])
+    assert codec.framer().counters.corrupt == 0
+    samples = [codec.to_sample(d) for d in decoded]
+    batch = next(Simulation.from_config(cfg).batches())
+    assert len(samples) == len(batch)
+    dtheta = np.array([s.dtheta for s in samples])
+    dv = np.array([s.dv for s in samples])
+    np.testing.assert_allclose(dtheta, batch.dtheta, rtol=1.5e-7, atol=0)
+    np.testing.assert_allclose(dv, batch.dv, rtol=1.5e-7, atol=0)
+    table = Tts1Codec().framer().feed(out["turntable_data"])
+    assert [d.record.sync_counter for d in table] == list(range(1, len(batch) + 1))
+
+
+def children_of(pid: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def test_sigterm_closes_the_ptys_and_leaves_no_process(tmp_path):
+    config = tmp_path / "emulated.yaml"
+    config.write_text(yaml.safe_dump(dict(CONFIG, trial=dict(CONFIG["trial"], duration_s=600.0))))
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", "1")
+    with serial.Serial(ports["imu"], timeout=0.05) as imu, serial.Serial(ports["turntable_data"], timeout=0.05) as tt:
+        deadline = time.monotonic() + 5
+        got = b""
+        while len(got) < 24 * 20 and time.monotonic() < deadline:
+            got += tt.read(4096)
+            imu.read(4096)
+        assert len(got) >= 24 * 20  # paced frames flow at real time
+        assert children_of(proc.pid) == []
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(5) == 0
+        with pytest.raises(serial.SerialException):
+            for _ in range(100):
+                tt.read(4096)
+    assert not any(os.path.exists(p) for p in ports.values())
+    assert not (tmp_path / "ports.json").exists()
