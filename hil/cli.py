@@ -1,4 +1,4 @@
-"""The ``hil`` command line: run, simulate, estimate, decode."""
+"""The ``hil`` command line: simulate, estimate, emulate, decode."""
 
 from __future__ import annotations
 
@@ -100,6 +100,17 @@ def cmd_decode(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_emulate(args: argparse.Namespace) -> int:
+    from emulators.emulate import parse_speed, run_emulator
+
+    try:
+        speed = parse_speed(args.speed)
+    except ValueError as exc:
+        raise UsageError(f"--speed: {exc}") from None
+    run_emulator(load_config(args.config), args.ports_file, speed, args.duration, wait_readers=not args.no_wait)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -116,6 +127,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out")
     p.add_argument("--no-figures", action="store_true")
     p.set_defaults(func=cmd_estimate)
+
+    p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
+    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
+    p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
+    p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
+    p.add_argument("--no-wait", action="store_true", help="start the pulse train without waiting for readers")
+    p.set_defaults(func=cmd_emulate)
 
     p = sub.add_parser("decode", help="decode a raw capture to CSV; counters as JSON on the last line")
     p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc")

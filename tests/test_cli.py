@@ -90,3 +90,29 @@ def test_decode_prints_counters_as_json_on_the_last_line(tmp_path, capsys):
     assert counters["skipped_bytes"] >= 9
     rows = list(csv.reader(open(tmp_path / "out.csv")))
     assert rows[0][0] == "sync_index" and len(rows) == 2
+
+
+def test_emulate_writes_ports_and_exits_cleanly_on_sigterm(tmp_path):
+    import signal
+    import time
+
+    write_config(tmp_path / "c.yaml", duration=600)
+    ports = tmp_path / "ports.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli", "emulate", str(tmp_path / "c.yaml"), "--ports-file", str(ports), "--no-wait"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 20
+    while not ports.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    names = json.loads(ports.read_text())
+    assert names["imu"].startswith("/dev/pts/") and names["turntable_data"].startswith("/dev/pts/")
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=10) == 0
+    assert not ports.exists()
+
+
+def test_emulate_rejects_a_bad_speed(tmp_path):
+    write_config(tmp_path / "c.yaml")
+    proc = _run("emulate", str(tmp_path / "c.yaml"), "--speed", "fast")
+    assert proc.returncode == 2 and "--speed" in proc.stderr
