@@ -165,3 +165,21 @@ def test_udp_multicast_bus_never_leaves_the_host():
         assert bus._multicast._socket.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
     finally:
         bus.shutdown()
+
+
+def test_cantools_decode_command_reads_our_frames():
+    """The third-party `cantools decode` command, fed candump lines of what our encoder sends."""
+    import subprocess
+    import sys
+
+    codec = CanDbcCodec.for_dbc(HIGHRES, 200.0)
+    lines = [
+        f"  vcan0  {m.arbitration_id:03X}   [{m.dlc}]  {' '.join(f'{b:02X}' for b in m.data)}"
+        for m in codec.encode(codec.from_sample(sample(5)))
+    ]
+    proc = subprocess.run(
+        [sys.executable, "-m", "cantools", "decode", HIGHRES], input="\n".join(lines) + "\n",
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert "DThetaX: 5e-06 rad" in proc.stdout
+    assert proc.stdout.count("SyncCounter: 5") == len(lines)
