@@ -1,7 +1,5 @@
-import numpy as np
-import pytest
 
-from hil.config import Config, ImuErrors, parse_config
+from hil.config import Config, parse_config
 from hil.estimation.online import OnlineEstimator
 from emulators.simulation import Simulation
 
@@ -38,8 +36,3 @@ def run_estimator(cfg: Config, solve_period=10.0, geometry=None) -> OnlineEstima
         est.update_many(batch)
     est.solution()
     return est
-
-
-@pytest.fixture
-def config_factory():
-    return make_config
