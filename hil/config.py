@@ -119,6 +119,28 @@ class LimitsConfig(_Model):
     accel_dps2: Vec3 = (100.0, 100.0, 100.0)
 
 
+class DeviceTiming(_Model):
+    """How a device latches on the sync pulse and keeps its own time (emulated devices)."""
+
+    latch_jitter_us: float = Field(0.0, ge=0)  # 1-sigma jitter of the latch instant about pulse + delay
+    clock_drift_ppm: float = 0.0  # rate error of the device's own clock (its timestamps)
+    free_running: bool = False  # no sync input: the device latches on its own (drifting) clock
+
+
+class FaultConfig(_Model):
+    """Faults injected into one emulated device's output; all off by default. Rates are per frame."""
+
+    drop_rate: float = Field(0.0, ge=0, le=1)  # probability that a drop burst starts at a frame
+    drop_burst: int = Field(1, ge=1)  # frames lost per drop event
+    corrupt_byte_rate: float = Field(0.0, ge=0, le=1)  # probability per byte of a flipped bit
+    truncate_rate: float = Field(0.0, ge=0, le=1)  # frames cut short
+    duplicate_rate: float = Field(0.0, ge=0, le=1)  # frames sent twice
+    reorder_rate: float = Field(0.0, ge=0, le=1)  # frames swapped with the next one
+    jitter_ms: float = Field(0.0, ge=0)  # extra write latency, uniform in [0, jitter_ms]
+    unplug_at_s: float | None = Field(None, ge=0)  # trial time of an unplug (pty closed / CAN silent)
+    unplug_s: float = Field(0.0, ge=0)  # how long the device stays unplugged
+
+
 class TurntableConfig(_Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
@@ -130,6 +152,9 @@ class TurntableConfig(_Model):
     mounting_deg: Vec3 = ZERO3  # IMU mounting on the inner gimbal, yaw/pitch/roll (z, x, y)
     latch_delay_us: float = Field(0.0, ge=0)
     limits: LimitsConfig = LimitsConfig()
+    timing: DeviceTiming = DeviceTiming()
+    faults: FaultConfig = FaultConfig()
+    interlock_trip_at_s: float | None = Field(None, ge=0)  # emulator: an interlock opens at this time
 
     @model_validator(mode="after")
     def _serial_has_port(self) -> TurntableConfig:
@@ -195,7 +220,10 @@ class ImuConfig(_Model):
     can: CanConfig | None = None
     kvh1750: Kvh1750Format = Kvh1750Format()
     rate_hz: float | None = Field(None, gt=0)  # defaults to trial.rate_hz
+    latch_delay_us: float = Field(0.0, ge=0)  # from the pulse edge to the end of the increment interval
+    timing: DeviceTiming = DeviceTiming()
     errors: ImuErrors = ImuErrors()
+    faults: FaultConfig = FaultConfig()
 
     @model_validator(mode="after")
     def _transport_given(self) -> ImuConfig:
@@ -211,9 +239,21 @@ class EstimatorConfig(_Model):
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
 
 
+class ReportLimits(_Model):
+    """Pass/fail limits of the trial report; a limit left out is not judged."""
+
+    bias_sigma_ug_max: float | None = Field(None, gt=0)  # final 1-sigma of every bias axis
+    bias_error_ug_max: float | None = Field(None, gt=0)  # |estimate - truth| per axis (emulated trials)
+    converged_by_s: float | None = Field(None, gt=0)  # the bias must converge before this time
+    method2_error_deg_max: float | None = Field(None, gt=0)  # |pitch|, |roll| of the method-2 alignment
+    dropped_max: int | None = Field(None, ge=0)  # frames lost in the streams
+    corrupt_max: int | None = Field(None, ge=0)  # corrupt frames in the streams
+
+
 class OutputConfig(_Model):
     dir: str | None = None
     figures: bool = True
+    limits: ReportLimits = ReportLimits()
 
 
 class Config(_Model):

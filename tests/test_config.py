@@ -46,3 +46,17 @@ def test_yaml_tags_are_not_executed(tmp_path):
 def test_shipped_configs_validate(name):
     cfg = load_config(f"configs/{name}")
     assert cfg.turntable.motion.kind == "swing"
+
+
+def test_faults_and_timing_are_off_by_default():
+    cfg = parse_config(MINIMAL)
+    for device in (cfg.imu, cfg.turntable):
+        assert device.faults.drop_rate == 0 and device.faults.unplug_at_s is None
+        assert device.timing.latch_jitter_us == 0 and not device.timing.free_running
+    assert cfg.output.limits.bias_sigma_ug_max is None
+
+
+def test_fault_rate_out_of_range_names_the_key_path():
+    data = {**MINIMAL, "imu": {"faults": {"drop_rate": 1.5}}}
+    with pytest.raises(ConfigError, match=r"imu\.faults\.drop_rate: Input should be less than or equal to 1"):
+        parse_config(data)
