@@ -62,7 +62,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     n = sim.samples
     result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
     out = _out_dir(args, cfg.trial.name, cfg.output.dir)
-    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures)
+    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures,
+                  config=Path(args.config))
     print(_summary(result, out))
     return 0
 
@@ -87,7 +88,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     n = len(batch)
     result = build_result(cfg.trial.name, est, StreamCounts(n, n if batch.angles is not None else 0, n))
     out = _out_dir(args, cfg.trial.name, cfg.output.dir)
-    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures)
+    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures,
+                  config=Path(args.config))
     print(_summary(result, out))
     return 0
 

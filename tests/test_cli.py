@@ -29,7 +29,7 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
     assert result["estimate"]["gram_rank"] == 12
     assert result["truth"]["accel_bias_ug"] == [60.0, 150.0, 260.0]
     assert set(result["alignment_deg"]) == {"method1", "method2", "theoretical"}
-    for name in ("series.csv", "bias.png", "alignment.png", "observability.png"):
+    for name in ("series.csv", "config.yaml", "bias.png", "alignment.png", "observability.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
 
 
