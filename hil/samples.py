@@ -48,6 +48,17 @@ class AlignedSample:
     angles: tuple[float, float, float] | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class ImuGap:
+    """IMU samples lost over (t_start, t_end]: the estimator carries its attitude across with the table
+    angles at both ends (None where the table had none) and takes no measurement from the gap."""
+
+    t_start: float
+    t_end: float
+    angles_start: tuple[float, float, float] | None
+    angles_end: tuple[float, float, float] | None
+
+
 @dataclass(frozen=True)
 class AlignedBatch:
     """Struct-of-arrays form of consecutive aligned samples (simulation, replay, CSV import).

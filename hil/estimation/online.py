@@ -18,7 +18,7 @@ from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
 from hil.frames import Earth, TableGeometry
-from hil.samples import AlignedBatch, AlignedSample
+from hil.samples import AlignedBatch, AlignedSample, ImuGap
 
 
 @dataclass(frozen=True)
@@ -95,6 +95,23 @@ class OnlineEstimator:
             self._t_last = float(batch.t[stop - 1])
             if stop in solve_stops:
                 self.snapshots.append(self._snapshot())
+
+    def bridge(self, gap: ImuGap) -> bool:
+        """Carry the attitude across lost IMU samples with the table: the body rotation over the gap is
+        ``C_n^b(t1) C_n(t2)^n(t1) C_b^n(t2)`` (gimbal angles at both ends plus the earth's turn). No
+        measurement is taken from the gap. False when the table angles are missing at either end: the
+        attitude is then held, and the estimate degrades by the rotation the gap hid."""
+        known = gap.angles_start is not None and gap.angles_end is not None
+        if known:
+            c_bn = self.geometry.attitude_matrix(np.array([gap.angles_start, gap.angles_end]))[0]
+            earth_turn = self.earth.n_to_n0(gap.t_end - gap.t_start).as_matrix()[0]
+            self.strapdown.carry(c_bn[0].T @ earth_turn @ c_bn[1])
+        else:
+            self.strapdown.carry(np.eye(3))
+        self._attitude = self.strapdown.attitude
+        self._angle_history = None
+        self._t_last = gap.t_end
+        return known
 
     def solution(self) -> Snapshot:
         """The solution with everything received so far."""

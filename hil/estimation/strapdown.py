@@ -70,6 +70,12 @@ class Strapdown:
         self.attitude = np.eye(3)
         self._history: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # last 2 (dtheta, dv, dt)
 
+    def carry(self, rotation: np.ndarray) -> None:
+        """Jump the attitude by a known body rotation ``C_b(end)^b(start)`` over a gap in the increments;
+        the rate history restarts after it."""
+        self.attitude = Rotation.from_matrix(self.attitude @ rotation).as_matrix()
+        self._history = None
+
     def update_many(self, dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray) -> StrapdownStep:
         """Advance over N consecutive increments (N, 3) with interval lengths dt (N,)."""
         if self._history is None:  # no history: constant rate over the first intervals

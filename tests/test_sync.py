@@ -1,0 +1,149 @@
+"""The sync aligner against the emulator's truth: interpolation, faults, gaps and the estimator bridge."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from conftest import make_config
+from emulators.simulation import Simulation
+from hil.config import DEG
+from hil.estimation.online import OnlineEstimator
+from hil.samples import AlignedBatch, AlignedSample, ImuGap, ImuSample, TableSample
+from hil.sync import Aligner, cumulative_cubic, lagrange_weights
+
+RATE = 200.0
+DELAY = 50e-6
+
+
+def test_lagrange_weights_reproduce_a_cubic_on_uneven_knots():
+    knots = [0.0, 0.7, 1.1, 2.5]
+    cubic = lambda x: 2 - x + 0.5 * x**2 - 0.3 * x**3  # noqa: E731
+    for x in (0.2, 1.0, 2.49, 2.5):
+        assert np.dot(lagrange_weights(x, knots), [cubic(k) for k in knots]) == pytest.approx(cubic(x), abs=1e-12)
+
+
+def test_cumulative_cubic_recovers_the_increments_hidden_by_a_gap():
+    curve = lambda x: np.array([1 + 0.2 * x - 0.01 * x**2 + 0.003 * x**3] * 3)  # noqa: E731
+    known = (3.0, 4.0, 5.0)  # cumulative values are only known relative to the first: shift by curve(3)
+    y = [curve(x) - curve(3.0) for x in known]
+    resume = 9.0
+    fit = cumulative_cubic(known, y, resume, [curve(resume) - curve(resume - 1), curve(resume + 1) - curve(resume)])
+    for k in range(6, 9):
+        np.testing.assert_allclose(fit(k) - fit(k - 1), curve(k) - curve(k - 1), atol=1e-12)
+
+
+def _streams(duration=20.0, seed=3, drop=0.0, jitter=0.0, swaps=0, duplicates=0):
+    """IMU and table samples of the default swing: table latched at pulse + DELAY + jitter, with faults."""
+    cfg = make_config(duration=duration, rate=RATE)
+    sim = Simulation.from_config(cfg)
+    batch = next(sim.batches(chunk=10**9))
+    rng = np.random.default_rng(seed)
+    n = len(batch)
+    k = np.arange(1, n + 1)
+    latch = k / RATE + DELAY + rng.normal(0.0, jitter, n)
+    angles = sim.truth.angles(latch)
+    imu = [ImuSample(int(i), tuple(a), tuple(b)) for i, a, b in zip(k, batch.dtheta.tolist(), batch.dv.tolist())]
+    table = [TableSample(int(i), tuple(a), latch_delay=DELAY) for i, a in zip(k, angles.tolist())]
+    if drop:
+        imu = [s for s in imu if rng.random() >= drop]
+        table = [s for s in table if rng.random() >= drop]
+    for stream in (imu, table):
+        for i in rng.choice(len(stream) - 1, swaps, replace=False):
+            stream[i], stream[i + 1] = stream[i + 1], stream[i]
+        for i in sorted(rng.choice(len(stream), duplicates, replace=False), reverse=True):
+            stream.insert(i, stream[i])
+    return sim, batch, imu, table
+
+
+def _run(aligner, imu, table):
+    """Feed both streams interleaved as they would arrive (table frame k-1 before IMU frame k)."""
+    out = []
+    j = 0
+    for s in imu:
+        while j < len(table) and table[j].sync_index < s.sync_index:
+            out += aligner.add_table(table[j])
+            j += 1
+        out += aligner.add_imu(s)
+    for s in table[j:]:
+        out += aligner.add_table(s)
+    return out + aligner.flush()
+
+
+def _attitude_error_deg(sim, samples):
+    t = np.array([s.t for s in samples])
+    est = sim.truth.geometry.attitude(np.array([s.angles for s in samples]))
+    ref = sim.truth.geometry.attitude(sim.truth.angles(t))
+    return np.linalg.norm((est.inv() * ref).as_rotvec(), axis=1) / DEG
+
+
+def test_interpolated_reference_attitude_matches_truth_under_jitter_and_drops():
+    sim, _, imu, table = _streams(drop=0.01, jitter=2e-6, swaps=5, duplicates=5)
+    aligner = Aligner(RATE, RATE)
+    out = _run(aligner, imu, table)
+    samples = [s for s in out if isinstance(s, AlignedSample)]
+    assert all(s.angles is not None for s in samples)
+    error = _attitude_error_deg(sim, samples)
+    assert np.sqrt(np.mean(error**2)) < 1e-4
+    c = aligner.counters
+    assert c.imu_duplicates == 5 and c.table_duplicates == 5
+    assert c.imu_filled > 0 and c.imu_bridged == 0 and c.imu_late == 0
+    assert [s.t for s in samples] == sorted(s.t for s in samples)
+    assert len(samples) == 4000
+
+
+def test_without_jitter_the_interpolation_error_is_at_rounding_level():
+    sim, _, imu, table = _streams(duration=10.0)
+    samples = _run(Aligner(RATE, RATE), imu, table)
+    assert np.max(_attitude_error_deg(sim, samples)) < 1e-9
+
+
+def test_short_imu_gap_is_filled_close_to_the_true_increments():
+    sim, batch, imu, table = _streams(duration=10.0)
+    lost = range(1000, 1004)  # counts 1001..1004
+    imu = [s for i, s in enumerate(imu) if i not in lost]
+    aligner = Aligner(RATE, RATE)
+    samples = _run(aligner, imu, table)
+    assert aligner.counters.imu_filled == 4 and aligner.counters.imu_gaps == 1
+    filled = np.array([samples[i].dtheta for i in lost])
+    np.testing.assert_allclose(filled, batch.dtheta[1000:1004], atol=1e-9)  # 1e-6 of the increment
+    filled_dv = np.array([samples[i].dv for i in lost])
+    np.testing.assert_allclose(filled_dv, batch.dv[1000:1004], atol=5e-9)  # 1e-7 of the increment
+
+
+def test_long_imu_gap_is_bridged_by_the_table_attitude():
+    sim, batch, imu, table = _streams(duration=30.0)
+    imu = [s for s in imu if not 1001 <= s.sync_index <= 1400]  # a 2 s unplug
+    aligner = Aligner(RATE, RATE)
+    out = _run(aligner, imu, table)
+    gaps = [s for s in out if isinstance(s, ImuGap)]
+    assert len(gaps) == 1 and aligner.counters.imu_bridged == 400
+    assert gaps[0].t_start == pytest.approx(5.0) and gaps[0].t_end == pytest.approx(7.0)
+
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=100.0)
+    for item in out:
+        if isinstance(item, ImuGap):
+            assert est.bridge(item)
+        else:
+            est.update_many(AlignedBatch.from_samples([item], est._t_last))
+    true_attitude = sim.truth.attitude_ib0(np.array([30.0]))
+    error = np.linalg.norm((Rotation.from_matrix(est.strapdown.attitude).inv() * true_attitude).as_rotvec())
+    assert error < 1e-9
+
+
+def test_imu_without_table_goes_out_after_the_wait():
+    _, _, imu, _ = _streams(duration=5.0)
+    aligner = Aligner(RATE, RATE, table_wait_s=0.5)
+    out = []
+    for s in imu:
+        out += aligner.add_imu(s)
+    assert len(out) == len(imu) - 100  # the last 0.5 s waits for a table that never comes
+    assert all(s.angles is None for s in out)
+    assert len(out + aligner.flush()) == len(imu)
+
+
+def test_table_counting_slower_than_the_imu():
+    sim, _, imu, table = _streams(duration=5.0)
+    imu_fast = Aligner(RATE, RATE / 5)
+    slow_table = [TableSample(s.sync_index // 5, s.angles, latch_delay=DELAY) for s in table if s.sync_index % 5 == 0]
+    samples = _run(imu_fast, imu, slow_table)
+    assert np.sqrt(np.mean(_attitude_error_deg(sim, samples[10:]) ** 2)) < 1e-4
