@@ -42,6 +42,16 @@ class RawChunk:
     is_extended_id: bool = False
 
 
+@dataclass(frozen=True, slots=True)
+class StreamEvent:
+    """Something that happened to a stream's transport; a framer drops its partial frame on it."""
+
+    stream: str
+    host_time: float
+    event: str  # "outage" or "reconnected"
+    detail: str = ""
+
+
 class Framer(ABC):
     """Turns raw chunks into decoded frames; never raises on bad input and counts what it dropped."""
 
@@ -65,6 +75,8 @@ class Counters:
     skipped_bytes: int = 0  # bytes that ended up in no valid frame
     gaps: int = 0  # jumps of the sequence counter by more than one
     missing: int = 0  # frames those jumps imply were lost
+    duplicates: int = 0  # valid frames whose counter repeated the previous one (not delivered)
+    out_of_order: int = 0  # valid frames that arrived after a later one (not delivered)
 
     def as_dict(self) -> dict[str, int]:
         """The four headline counters, as ``hil decode`` prints them."""

@@ -7,9 +7,10 @@ exponential back-off until it returns or the session is stopped; each such outag
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Iterable
 
-from drivers.codec import Codec, Counters, DecodeError, Framer, RawChunk
+from drivers.codec import Codec, Counters, DecodeError, Framer, RawChunk, StreamEvent
 from drivers.tap import RawListener, SampleListener
 from drivers.transport import Transport, TransportError
 
@@ -90,9 +91,15 @@ class DeviceSession:
             for listener in self.sample_listeners:
                 listener.on_sample(sample)
 
+    def _event(self, event: str, detail: str = "") -> None:
+        note = StreamEvent(self.transport.stream, time.time(), event, detail)
+        for listener in self.raw_listeners:
+            listener.on_event(note)
+
     def _reconnect(self, error: TransportError) -> None:
         self.outages += 1
         self.last_error = str(error)
+        self._event("outage", str(error))
         self._connected.clear()
         self.transport.close()
         self.framer.reset()
@@ -105,4 +112,5 @@ class DeviceSession:
                 delay = min(2.0 * delay, longest)
             else:
                 self._connected.set()
+                self._event("reconnected")
                 return

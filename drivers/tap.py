@@ -7,7 +7,7 @@ from pathlib import Path
 
 import can
 
-from drivers.codec import RawChunk, Sample
+from drivers.codec import RawChunk, Sample, StreamEvent
 
 
 class RawListener(ABC):
@@ -16,6 +16,9 @@ class RawListener(ABC):
     @abstractmethod
     def on_raw(self, chunk: RawChunk) -> None:
         """Called from the session's reader thread; keep it short."""
+
+    def on_event(self, event: StreamEvent) -> None:
+        """The transport failed or came back (called from the reader thread)."""
 
     def stop(self) -> None:
         """The session has ended; flush and release resources."""
