@@ -82,6 +82,8 @@ class DeviceSession:
     def _handle(self, chunk: RawChunk) -> None:
         for listener in self.raw_listeners:
             listener.on_raw(chunk)
+        if not self.sample_listeners:
+            return  # raw capture only: the consumer frames the chunks itself
         for decoded in self.framer.feed_chunk(chunk):
             try:
                 sample = self.codec.to_sample(decoded)

@@ -1,4 +1,4 @@
-"""The ``hil`` command line: simulate, estimate, emulate, decode."""
+"""The ``hil`` command line: run, replay, simulate, estimate, emulate, decode, report."""
 
 from __future__ import annotations
 
@@ -44,10 +44,89 @@ def _summary(result: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
+def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str) -> None:
+    """Write result.json, series.csv, config.yaml and the figures, and print the summary."""
+    from hil.results import write_outputs
+
+    write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
+    print(_summary(result, out))
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from emulators.emulate import parse_speed, spawn_emulator
+    from hil.live import LiveTrial, TrialAborted
+    from hil.progress import ConsoleProgress
+
+    try:
+        parse_speed(args.speed)
+    except ValueError as exc:
+        raise UsageError(f"--speed: {exc}") from None
+    config_path = Path(args.config)
+    cfg = load_config(config_path)
+    config_text = config_path.read_text()
+    duration = args.duration if args.duration is not None else cfg.trial.duration_s
+    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
+    out.mkdir(parents=True, exist_ok=True)
+    emulated = {cfg.imu.source, cfg.turntable.source} == {"emulator"}
+    if not emulated and "emulator" in {cfg.imu.source, cfg.turntable.source}:
+        raise UsageError("imu.source and turntable.source: emulate both devices or neither")
+    emulator, ports = None, None
+    if emulated:
+        if duration is None:
+            raise UsageError("an emulated trial needs trial.duration_s or --duration")
+        emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration)
+    failure = None
+    try:
+        with ConsoleProgress(duration, quiet=args.quiet) as progress:
+            trial = LiveTrial(cfg, config_text, out, duration, ports, on_progress=progress.update,
+                              source_done=(lambda: emulator.poll() is not None) if emulator else None)
+            try:
+                trial.run()
+            except TrialAborted as exc:
+                failure = str(exc)
+    finally:
+        if emulator is not None:
+            _stop(emulator)
+    processor = trial.processor
+    if processor.estimator is None:
+        raise UsageError(failure or "no IMU data was received")
+    _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, config_text)
+    if failure:
+        print(f"hil: trial ended early: {failure}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _stop(process) -> None:
+    """End a child process: SIGTERM, then SIGKILL if it has not gone within 5 s."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(5.0)
+        except Exception:  # noqa: BLE001 - any failure to stop politely ends in a kill
+            process.kill()
+            process.wait()
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from hil.replay import recording_path, replay
+
+    processor, recording, cfg = replay(args.source)
+    if processor.estimator is None:
+        raise UsageError(f"{args.source}: the recording holds no IMU data")
+    source_dir = recording_path(args.source).parent
+    out = Path(args.out) if args.out else source_dir / "replay"
+    if recording.truncated:
+        print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
+              file=sys.stderr)
+    _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, recording.metadata["config"])
+    return 0
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from emulators.simulation import Simulation
     from hil.estimation.online import OnlineEstimator
-    from hil.results import StreamCounts, build_result, write_outputs
+    from hil.results import StreamCounts, build_result
 
     cfg = load_config(args.config)
     sim = Simulation.from_config(cfg)
@@ -61,10 +140,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         est.update_many(batch)
     n = sim.samples
     result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
-    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
-    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures,
-                  config=Path(args.config))
-    print(_summary(result, out))
+    _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
+            Path(args.config).read_text())
     return 0
 
 
@@ -72,7 +149,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from hil.csv_input import read_increments_csv
     from hil.estimation.online import OnlineEstimator
     from hil.frames import Earth, TableGeometry
-    from hil.results import StreamCounts, build_result, write_outputs
+    from hil.results import StreamCounts, build_result
 
     cfg = load_config(args.config)
     batch = read_increments_csv(args.data)
@@ -87,10 +164,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     est.update_many(batch)
     n = len(batch)
     result = build_result(cfg.trial.name, est, StreamCounts(n, n if batch.angles is not None else 0, n))
-    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
-    write_outputs(out, result, est.snapshots, figures=cfg.output.figures and not args.no_figures,
-                  config=Path(args.config))
-    print(_summary(result, out))
+    _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
+            Path(args.config).read_text())
     return 0
 
 
@@ -116,6 +191,21 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.")
     sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
+    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
+    p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
+    p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
+    p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")
+    p.add_argument("--out", help="output directory (default: RUN_DIR/replay)")
+    p.add_argument("--no-figures", action="store_true")
+    p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
     p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)

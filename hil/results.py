@@ -111,11 +111,11 @@ def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
 
 
 def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: bool = True,
-                  config: Path | None = None) -> None:
-    """result.json, series.csv, a copy of the trial ``config`` as config.yaml and (optionally) the figures."""
+                  config_text: str | None = None) -> None:
+    """result.json, series.csv, the trial config as config.yaml and (optionally) the figures."""
     out.mkdir(parents=True, exist_ok=True)
-    if config is not None:
-        (out / "config.yaml").write_bytes(Path(config).read_bytes())
+    if config_text is not None:
+        (out / "config.yaml").write_text(config_text)
     (out / "result.json").write_text(json.dumps(result, indent=2) + "\n")
     rows = series_rows(snapshots)
     with open(out / "series.csv", "w", newline="") as fh:

@@ -125,7 +125,7 @@ class Aligner:
 
     def __init__(self, imu_rate_hz: float, table_rate_hz: float, imu_delay_s: float = 0.0, *,
                  with_table: bool = True, max_fill: int = 10, reorder_window: int = 4,
-                 max_angle_gap_s: float = 0.1, table_wait_s: float = 1.0) -> None:
+                 max_angle_gap_s: float = 0.1, table_wait_s: float = 5.0) -> None:
         self.imu_period = 1.0 / imu_rate_hz
         self.table_period = 1.0 / table_rate_hz
         self.imu_delay = imu_delay_s

@@ -8,7 +8,7 @@ from conftest import make_config
 from emulators.simulation import Simulation
 from hil.config import DEG
 from hil.estimation.online import OnlineEstimator
-from hil.samples import AlignedBatch, AlignedSample, ImuGap, ImuSample, TableSample
+from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner, cumulative_cubic, lagrange_weights
 
 RATE = 200.0
@@ -124,7 +124,7 @@ def test_long_imu_gap_is_bridged_by_the_table_attitude():
         if isinstance(item, ImuGap):
             assert est.bridge(item)
         else:
-            est.update_many(AlignedBatch.from_samples([item], est._t_last))
+            est.update(item)
     true_attitude = sim.truth.attitude_ib0(np.array([30.0]))
     error = np.linalg.norm((Rotation.from_matrix(est.strapdown.attitude).inv() * true_attitude).as_rotvec())
     assert error < 1e-9

@@ -60,11 +60,20 @@ class OnlineEstimator:
         self._attitude = np.eye(3)
         self._reference: np.ndarray | None = None  # table attitude C_b^n at the last sample
 
+    @property
+    def time(self) -> float:
+        """Trial time (s since t0) at the end of the last sample taken."""
+        return self._t_last - self.t0
+
     def update(self, sample: AlignedSample) -> Snapshot | None:
         """Add one sample; returns a new snapshot when a solve instant was passed."""
         before = len(self.snapshots)
-        self.update_many(AlignedBatch.from_samples([sample], self._t_last))
+        self.update_samples([sample])
         return self.snapshots[-1] if len(self.snapshots) > before else None
+
+    def update_samples(self, samples: list[AlignedSample]) -> None:
+        """Add consecutive single samples (the live path) as one batch."""
+        self.update_many(AlignedBatch.from_samples(samples, self._t_last))
 
     def update_many(self, batch: AlignedBatch) -> None:
         """Add consecutive samples, solving at every solve instant they pass.

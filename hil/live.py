@@ -1,0 +1,203 @@
+"""A live trial: device readers, the recorder, and the processing loop with its sinks.
+
+Threads: one reader per device (:class:`drivers.session.DeviceSession`) hands every raw chunk to a
+:class:`Fanout`, which stamps it with the host time rounded to the recording's nanoseconds and puts
+it, in one global order, into the recorder's queue (unbounded: the recording never drops) and into
+the bounded processing queue. The caller's thread runs the :class:`~hil.processing.TrialProcessor`
+on that queue and the sinks (console progress, viewer) at display rate, so neither the viewer nor
+the disk can hold up acquisition. A full processing queue makes the readers wait (the serial
+driver's buffers hold the bytes): nothing is lost, and the live result stays equal to the replay's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from drivers.codec import RawChunk, StreamEvent
+from drivers.session import DeviceSession
+from drivers.tap import RawListener
+from drivers.transport import CanTransport, SerialTransport, Transport
+from hil.config import Config
+from hil.estimation.online import Snapshot
+from hil.processing import IMU, TABLE, TrialProcessor
+from hil.recording import Recorder, to_ns
+from hil.samples import AlignedSample
+
+QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
+WATCHDOG_S = 1.0  # no data from any device for this long ends the trial
+START_TIMEOUT_S = 15.0  # the first data must arrive within this
+SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks arrive within this
+
+
+class TrialAborted(RuntimeError):
+    """The trial could not go on (no data, the devices went away); outputs hold what was received."""
+
+
+class Viewer(Protocol):
+    """What the live trial needs of a viewer (see :mod:`hil.viz`)."""
+
+    def log_snapshot(self, snap: Snapshot) -> None: ...
+    def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
+    def log_health(self, t: float, health: dict[str, dict[str, float]]) -> None: ...
+    def close(self) -> None: ...
+
+
+class Fanout(RawListener):
+    """Orders chunks from all readers once, for the recorder and for processing."""
+
+    def __init__(self, recorder: Recorder, hand_off: queue.Queue) -> None:
+        self._recorder = recorder
+        self._queue = hand_off
+        self._lock = threading.Lock()
+        self.last_arrival = 0.0  # monotonic time of the last chunk with data
+
+    def on_raw(self, chunk: RawChunk) -> None:
+        self._put(dataclasses.replace(chunk, host_time=to_ns(chunk.host_time) / 1e9))
+        self.last_arrival = time.monotonic()
+
+    def on_event(self, event: StreamEvent) -> None:
+        self._put(dataclasses.replace(event, host_time=to_ns(event.host_time) / 1e9))
+
+    def _put(self, item: RawChunk | StreamEvent) -> None:
+        with self._lock:
+            self._recorder.write(item)
+            self._queue.put(item)
+
+
+@dataclass
+class LatencyStats:
+    """Chunk arrival (host time) to estimator updated, over the last samples."""
+
+    values: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
+
+    def add(self, arrival: float) -> None:
+        self.values.append(time.time() - arrival)
+
+    def percentiles_ms(self) -> dict[str, float]:
+        if not self.values:
+            return {}
+        p50, p99, worst = np.percentile(np.fromiter(self.values, float), [50, 99, 100]) * 1e3
+        return {"latency_p50_ms": float(p50), "latency_p99_ms": float(p99), "latency_max_ms": float(worst)}
+
+
+def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
+    """The IMU and table transports, from the config or from the emulator's ports."""
+    imu_port = (ports or {}).get("imu", cfg.imu.port)
+    table_port = (ports or {}).get("turntable_data", cfg.turntable.data_port)
+    if isinstance(imu_port, dict):
+        imu: Transport = CanTransport(imu_port["interface"], imu_port["channel"], IMU)
+    elif cfg.imu.source == "can" and cfg.imu.can is not None:
+        imu = CanTransport(cfg.imu.can.interface, cfg.imu.can.channel, IMU, cfg.imu.can.bitrate)
+    elif imu_port:
+        imu = SerialTransport(imu_port, cfg.imu.baudrate, IMU)
+    else:
+        raise TrialAborted("imu: no port (set imu.port, or imu.source: emulator)")
+    if not table_port:
+        raise TrialAborted("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
+    return {IMU: imu, TABLE: SerialTransport(table_port, cfg.turntable.baudrate, TABLE)}
+
+
+class LiveTrial:
+    """Acquire, record and estimate until the duration is reached, the devices stop, or Ctrl-C.
+
+    ``until_done`` (optional) is polled: when it returns True and the data has stopped, the trial ends
+    (the emulator process has exited). ``on_progress`` gets the processor about twice a second.
+    """
+
+    def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
+                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None,
+                 on_progress: Callable[[TrialProcessor, dict], None] | None = None,
+                 source_done: Callable[[], bool] | None = None) -> None:
+        self.cfg = cfg
+        self.out = out
+        self.duration = duration
+        self.viewer = viewer
+        self.on_progress = on_progress
+        self.source_done = source_done or (lambda: False)
+        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration)
+        self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
+        self.fanout = Fanout(self.recorder, self.queue)
+        self.processor = TrialProcessor(cfg, duration, on_snapshot=self._on_snapshot, on_aligned=self._on_aligned)
+        self.latency = LatencyStats()
+        codecs = {name: d.codec for name, d in self.processor.decoders.items()}
+        self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
+                         for name, t in transports(cfg, ports).items()]
+
+    def run(self) -> None:
+        """Run to the end; raises :class:`TrialAborted` (after closing everything) if the data stopped."""
+        try:
+            for session in self.sessions:
+                session.start()
+            self._loop()
+        finally:
+            for session in self.sessions:
+                session.stop()
+            while not self.queue.empty():  # what the readers handed over last: the replay sees it too
+                self.processor.feed(self.queue.get_nowait())
+            self.recorder.close()
+            self.processor.finish()
+            if self.viewer is not None:
+                self.viewer.close()
+
+    def health(self) -> dict[str, dict[str, float]]:
+        counts = self.processor.counts()
+        imu, table = (self.processor.decoders[s].framer.counters for s in (IMU, TABLE))
+        return {
+            IMU: {"frames": imu.frames, "corrupt": imu.corrupt, "missing": imu.missing,
+                  "outages": counts.extra["imu_outages"]},
+            TABLE: {"frames": table.frames, "corrupt": table.corrupt, "missing": table.missing,
+                    "outages": counts.extra["table_outages"]},
+            "aligner": {"aligned": counts.aligned, "queue": self.queue.qsize(), **self.latency.percentiles_ms()},
+        }
+
+    def _loop(self) -> None:
+        started = time.monotonic()
+        next_progress = started
+        while not self.processor.complete:
+            try:
+                item = self.queue.get(timeout=0.05)
+            except queue.Empty:
+                item = None
+            if item is not None:
+                self.processor.feed(item)
+                if isinstance(item, RawChunk):
+                    self.latency.add(item.host_time)
+            now = time.monotonic()
+            if now >= next_progress:
+                next_progress = now + 0.5
+                health = self.health()
+                if self.on_progress is not None:
+                    self.on_progress(self.processor, health)
+            if item is None and self.queue.empty():
+                self._check_alive(now, started)
+
+    def _check_alive(self, now: float, started: float) -> None:
+        last = self.fanout.last_arrival
+        if self.source_done() and now - last > SETTLE_S:
+            raise TrialAborted("the emulated devices stopped before the trial's end")
+        if last == 0.0 and now - started > START_TIMEOUT_S:
+            raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
+        if last and now - last > WATCHDOG_S:
+            raise TrialAborted(f"watchdog: no data from any device for {WATCHDOG_S:.0f} s")
+
+    def _on_snapshot(self, snap: Snapshot) -> None:
+        if self.viewer is not None:
+            self.viewer.log_snapshot(snap)
+            self.viewer.log_health(snap.t, self.health())
+
+    def _on_aligned(self, samples: list[AlignedSample]) -> None:
+        with_angles = [s for s in samples if s.angles is not None]
+        if self.viewer is not None and with_angles:
+            t0 = self.processor.estimator.t0
+            self.viewer.log_table(np.array([s.t - t0 for s in with_angles]),
+                                  np.array([s.angles for s in with_angles], dtype=float))

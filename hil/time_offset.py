@@ -1,0 +1,84 @@
+"""Time offset between the IMU and the table streams, from the gyro against the table's angular rate.
+
+A check on the sync alignment: if both streams are placed correctly in time, the body rate the gyros
+measure and the body rate the interpolated gimbal angles imply line up. The offset is found by
+cross-correlation (whole samples) and refined by Gauss-Newton on the cubic spline of the table's
+rate, ``omega_gyro(t) = omega_table(t + d)``.
+A positive offset means the table's angles lag the IMU (they show an instant that much earlier than
+the one they are placed at: a latch delay configured too short by it). The earth rate is added to
+the table's body rate; the gyro biases are estimated alongside as constants.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from hil.frames import Earth, TableGeometry
+from hil.samples import AlignedSample
+
+WINDOW_S = 60.0  # the estimate uses the last minute of continuous data
+MAX_LAG = 20  # samples searched either side by the cross-correlation
+NEWTON_STEPS = 4
+
+
+class TimeOffsetEstimator:
+    """Keeps the last ``WINDOW_S`` of gyro increments and table angles; :meth:`estimate` gives the offset (s)."""
+
+    def __init__(self, earth: Earth, geometry: TableGeometry, rate_hz: float) -> None:
+        self.earth = earth
+        self.geometry = geometry
+        self.rate_hz = rate_hz
+        size = int(WINDOW_S * rate_hz)
+        self._t: deque[float] = deque(maxlen=size)
+        self._dtheta: deque[tuple[float, float, float]] = deque(maxlen=size)
+        self._angles: deque[tuple[float, float, float]] = deque(maxlen=size)
+
+    def add(self, samples: list[AlignedSample]) -> None:
+        for s in samples:
+            if s.angles is None:
+                self.restart()
+                continue
+            self._t.append(s.t)
+            self._dtheta.append(s.dtheta)
+            self._angles.append(s.angles)
+
+    def restart(self) -> None:
+        """A discontinuity (gap): start a new window."""
+        self._t.clear()
+        self._dtheta.clear()
+        self._angles.clear()
+
+    def estimate(self) -> float | None:
+        """The lag of the table behind the IMU (s), or None without 10 s of continuous moving data."""
+        n = len(self._t)
+        if n < 10 * self.rate_hz:
+            return None
+        t = np.array(self._t)
+        dt = np.diff(t)
+        gyro = np.array(self._dtheta)[1:] / dt[:, None]  # mean rate over each interval
+        angles = np.unwrap(np.array(self._angles), axis=0)
+        # the table's body rate over the same intervals (angle chord) plus the earth rate seen in the body
+        mid = 0.5 * (angles[1:] + angles[:-1])
+        c_bn, middle_inner, inner = self.geometry.attitude_matrix(mid)
+        table = self.geometry.body_rate_from(middle_inner, inner, np.diff(angles, axis=0) / dt[:, None])
+        table += np.einsum("nji,j->ni", c_bn, self.earth.omega_n)
+        if np.sum((table - table.mean(axis=0)) ** 2) < 1e-12:
+            return None  # the table is not moving
+        lags = np.arange(-MAX_LAG, MAX_LAG + 1)
+        m = len(gyro) - 2 * MAX_LAG
+        g = gyro[MAX_LAG : MAX_LAG + m]
+        centred = table - table.mean(axis=0)
+        score = [np.sum((g - g.mean(axis=0)) * centred[MAX_LAG + k : MAX_LAG + k + m]) for k in lags]
+        shift = float(lags[int(np.argmax(score))])
+        spline = CubicSpline(np.arange(len(table)), table)
+        at = np.arange(MAX_LAG, MAX_LAG + m, dtype=float)
+        offsets = np.tile(np.eye(3), (m, 1))  # a constant per axis: the gyro biases
+        for _ in range(NEWTON_STEPS):  # Gauss-Newton on the sub-sample shift and the constant offsets
+            r, r_dot = spline(at + shift), spline(at + shift, 1)
+            design = np.column_stack((r_dot.ravel(), offsets))
+            step, *_ = np.linalg.lstsq(design, (g - r).ravel(), rcond=None)
+            shift += step[0]
+        return shift / self.rate_hz

@@ -1,0 +1,38 @@
+"""The IMU/table time-offset diagnostic recovers a known lag of the table angles."""
+
+import numpy as np
+import pytest
+
+from conftest import make_config
+from emulators.simulation import Simulation
+from hil.samples import AlignedSample
+from hil.time_offset import TimeOffsetEstimator
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.002, -0.0007, 0.013])
+def test_offset_of_lagging_table_angles(lag):
+    sim = Simulation.from_config(make_config(duration=30, rate=200.0))
+    batch = next(sim.batches(10**9))
+    angles = sim.truth.angles(batch.t - lag)  # the table shows the angles of `lag` earlier
+    est = TimeOffsetEstimator(sim.truth.earth, sim.truth.geometry, 200.0)
+    est.add([AlignedSample(t, tuple(a), tuple(b), tuple(c))
+             for t, a, b, c in zip(batch.t, batch.dtheta.tolist(), batch.dv.tolist(), angles.tolist())])
+    assert est.estimate() == pytest.approx(lag, abs=2e-6)
+
+
+def test_static_table_gives_no_offset():
+    sim = Simulation.from_config(make_config(duration=20, rate=100.0, kind="static"))
+    batch = next(sim.batches(10**9))
+    est = TimeOffsetEstimator(sim.truth.earth, sim.truth.geometry, 100.0)
+    est.add([AlignedSample(t, tuple(a), tuple(b), tuple(c))
+             for t, a, b, c in zip(batch.t, batch.dtheta.tolist(), batch.dv.tolist(), batch.angles.tolist())])
+    assert est.estimate() is None
+
+
+def test_gyro_bias_does_not_move_the_offset():
+    sim = Simulation.from_config(make_config(duration=30, rate=200.0, errors={"gyro_bias_dph": [50, -80, 30]}))
+    batch = next(sim.batches(10**9))
+    est = TimeOffsetEstimator(sim.truth.earth, sim.truth.geometry, 200.0)
+    est.add([AlignedSample(t, tuple(a), tuple(b), tuple(c))
+             for t, a, b, c in zip(batch.t, batch.dtheta.tolist(), batch.dv.tolist(), batch.angles.tolist())])
+    assert est.estimate() == pytest.approx(0.0, abs=2e-6)
