@@ -195,9 +195,9 @@ class CanFramer(Framer):
         self._pending_bytes += len(chunk.data)
         if len(self._pending) < len(codec.messages):
             return []
-        return [self._complete(chunk.host_time)]
+        return self._complete(chunk.host_time)
 
-    def _complete(self, host_time: float) -> Decoded:
+    def _complete(self, host_time: float) -> list[Decoded]:
         codec, pending = self.codec, self._pending
         numbers = [float(pending[m.name][s.name]) for m, s in codec.quantities]
         status = 0
@@ -206,13 +206,12 @@ class CanFramer(Framer):
                 status |= int(values[codec.status])
         record = CanImuFrame(tuple(numbers[:3]), tuple(numbers[3:]), self._counter, status)
         index, missing = self.unwrapper.next(self._counter, host_time)
-        if missing:
-            self.counters.gaps += 1
-            self.counters.missing += missing
-        self.counters.frames += 1
+        delivered = self.unwrapper.count(self.counters, index, missing)
+        if not delivered:
+            self.counters.skipped_bytes += self._pending_bytes
         decoded = Decoded(record, index, host_time, self._pending_bytes)
         self._pending, self._pending_bytes = {}, 0
-        return decoded
+        return [decoded] if delivered else []
 
     def _drop_pending(self) -> None:
         self.counters.corrupt += 1

@@ -11,16 +11,21 @@ import math
 from abc import abstractmethod
 from typing import ClassVar
 
-from drivers.codec import Codec, Decoded, DecodeError, Framer, R, RawChunk
+from drivers.codec import Codec, Counters, Decoded, DecodeError, Framer, R, RawChunk
 
 
 class SequenceUnwrapper:
     """Unwraps a device counter that counts modulo ``modulus`` into a monotonic index.
 
-    A counter that did not move is taken as one full wrap (devices never repeat a number). With the
-    device rate known, the host receive times resolve wraps lost in an outage longer than the counter
-    period (a 7-bit counter at 1 kHz wraps every 128 ms).
+    A counter that did not move is a repeated frame, and one that stepped back by at most
+    ``REORDER_WINDOW`` is a late (out-of-order) frame: neither moves the index, and :meth:`next`
+    marks them with a missing count of -1. Devices never repeat a number, so when the host receive
+    times say that about a counter period or more has passed, the same readings are taken as wraps.
+    With the device rate known, the host receive times also resolve wraps lost in an outage longer
+    than the counter period (a 7-bit counter at 1 kHz wraps every 128 ms).
     """
+
+    REORDER_WINDOW = 8  # counts; a backward step larger than this is taken as a wrap
 
     def __init__(self, modulus: int | None, rate_hz: float | None = None) -> None:
         self.modulus = modulus
@@ -30,22 +35,43 @@ class SequenceUnwrapper:
         self._time = math.nan
 
     def next(self, sequence: int | None, host_time: float) -> tuple[int, int]:
-        """(index of this frame, frames missing since the previous one)."""
+        """(index of this frame, frames missing since the previous one); missing is -1 for a repeated
+        or late frame, whose index is then the earlier one it carries."""
         if self._index is None:
             step = 0
             self._index = sequence if sequence is not None else 0
         elif sequence is None or self.modulus is None:
             step = 1
         else:
-            step = (sequence - self._sequence) % self.modulus or self.modulus
+            step = (sequence - self._sequence) % self.modulus
             elapsed = host_time - self._time
-            if self.rate_hz and math.isfinite(elapsed):
+            timed = bool(self.rate_hz) and math.isfinite(elapsed)
+            back = (self.modulus - step) % self.modulus
+            if back <= min(self.REORDER_WINDOW, self.modulus // 4) and not (
+                    timed and elapsed * self.rate_hz > self.modulus / 2):
+                return self._index - back, -1
+            step = step or self.modulus
+            if timed:
                 wraps = round((elapsed * self.rate_hz - step) / self.modulus)
                 step += self.modulus * max(wraps, 0)
         self._index += step
         self._sequence = sequence if sequence is not None else 0
         self._time = host_time
         return self._index, max(step - 1, 0)
+
+    def count(self, counters: Counters, index: int, missing: int) -> bool:
+        """Add a :meth:`next` outcome to ``counters``; False for a repeated or late frame (not to be delivered)."""
+        if missing < 0:
+            if index == self._index:
+                counters.duplicates += 1
+            else:
+                counters.out_of_order += 1
+            return False
+        if missing:
+            counters.gaps += 1
+            counters.missing += missing
+        counters.frames += 1
+        return True
 
 
 class ByteCodec(Codec[R]):
@@ -123,11 +149,10 @@ class ByteFramer(Framer):
                 pos += 1
                 continue
             index, missing = self.unwrapper.next(codec.sequence(record), host_time)
-            if missing:
-                counters.gaps += 1
-                counters.missing += missing
-            counters.frames += 1
-            out.append(Decoded(record, index, host_time, length))
+            if self.unwrapper.count(counters, index, missing):
+                out.append(Decoded(record, index, host_time, length))
+            else:
+                counters.skipped_bytes += length
             pos = start + length
         del buf[:pos]
         return out

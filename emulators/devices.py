@@ -1,47 +1,67 @@
-"""Emulated devices on pseudo-terminals: a sync pulse train, the KVH 1750 IMU and the ``tts1`` table output.
+"""Emulated devices: frame sources on device clocks, and writers that put the frames on ptys or a CAN bus.
 
-Each sync pulse k (k = 1, 2, ...) latches both devices: the IMU reports the increments over
-((k - 1) / rate, k / rate], the table the gimbal angles at k / rate plus its latch delay; both carry k
-as their counter. Frames are encoded by the drivers' codecs, so the emulator speaks exactly what the
-drivers read.
+Each device ticks on its :class:`emulators.timing.DeviceClock` (the shared sync pulses, or its own
+clock when free-running); tick k of the IMU reports the increments over its latch interval, tick k of
+the table the gimbal angles at its latch instant; both carry k as their counter. Frames are encoded by
+the drivers' codecs, so the emulator speaks exactly what the drivers read. The table's motion is the
+servo's (:mod:`emulators.servo`): a :class:`DeviceStream` computes its frames a chunk ahead and
+recomputes the chunk when the servo's plan changes, from a snapshot of its random state, so a command
+changes the frames from the next pulse and everything stays reproducible.
 """
 
 from __future__ import annotations
 
+import copy
 import fcntl
 import os
+import queue
 import select
 import struct
 import termios
 import threading
 import time
 import tty
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
 
 from drivers.kvh1750 import STATUS_ALL_VALID
-from drivers.registry import imu_codec
-from drivers.tts1 import Mode, Status, Tts1Codec, status_byte
-from emulators.simulation import Simulation
-from hil.config import Config
+from drivers.transport import open_can_bus
+from drivers.tts1 import Status, Tts1Codec
+from emulators.faults import FaultInjector
+from emulators.sensor_errors import SensorErrorModel
+from emulators.servo import Servo
+from emulators.timing import DeviceClock
+from emulators.truth import Truth
 from hil.samples import ImuSample, TableSample
 
 WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
-
-_MODES = {"swing": Mode.SYNTHESIS, "rate": Mode.RATE, "positions": Mode.POSITION, "static": Mode.POSITION}
+DRAIN_S = 5.0  # longest wait for a reader to take the bytes queued before an unplug
+REPLUG_S = 5.0  # longest wait for the unplugged pty's own name to come free again
+LATENCY_BIN_S = 10e-6  # resolution of the write-latency histogram
+LATENCY_BINS = 10_000  # up to 100 ms; later writes land in the last bin
 
 
 class PtyPort:
-    """One pseudo-terminal: the emulator writes the master side; clients open :attr:`path` (the slave)."""
+    """One pseudo-terminal: the emulator writes the master side; clients open :attr:`path` (the slave).
 
-    def __init__(self) -> None:
-        self.master, slave = os.openpty()
+    :meth:`unplug` closes the master, as pulling a USB adapter removes its device: readers get an
+    error and the path disappears. :meth:`replug` brings the same ``/dev/pts/N`` back once the readers
+    have let go of it (devpts hands out the lowest free number, so the numbers below it are held
+    meanwhile); if it stays taken for :data:`REPLUG_S` the port comes back under a new path.
+    """
+
+    def __init__(self, want: str | None = None) -> None:
+        self.master, slave = _open_pty(want)
         tty.setraw(slave)  # no echo, no newline translation: bytes pass unchanged
         self.path = os.ttyname(slave)
         os.close(slave)  # the path stays valid while the master is open
         os.set_blocking(self.master, False)
         self._poll = select.poll()
         self._poll.register(self.master, select.POLLOUT)
+        self.plugged = True
 
     def has_reader(self) -> bool:
         """True while some client holds the slave side open (the master reports no hang-up)."""
@@ -77,18 +97,86 @@ class PtyPort:
         """
         deadline = time.monotonic() + timeout_s
         empty = 0
-        while self.has_reader() and empty < 2:
+        while self.plugged and self.has_reader() and empty < 2:
             empty = empty + 1 if self.unread() == 0 else 0
             if time.monotonic() > deadline or stop.wait(WAIT_S / 5):
                 return False
         return True
 
+    def unplug(self) -> None:
+        self.close()
+
+    def replug(self) -> None:
+        self.__init__(self.path)
+
     def close(self) -> None:
         """Close the master; clients then read end-of-file/EIO and the path disappears."""
-        os.close(self.master)
+        if self.plugged:
+            os.close(self.master)
+            self.plugged = False
 
 
-def wait_for_readers(ports: list[PtyPort], stop: threading.Event, settle_s: float = 0.2) -> bool:
+def _open_pty(want: str | None) -> tuple[int, int]:
+    """A new pty (master, slave), named ``want`` if that comes free within :data:`REPLUG_S`."""
+    deadline = time.monotonic() + REPLUG_S
+    while True:
+        held: list[tuple[int, int]] = []
+        try:
+            while True:
+                master, slave = os.openpty()
+                if want is None or os.ttyname(slave) == want:
+                    return master, slave
+                held.append((master, slave))
+                if _pty_number(os.ttyname(slave)) > _pty_number(want):
+                    break  # ``want`` is still taken
+        finally:
+            for fds in held:
+                os.close(fds[0])
+                os.close(fds[1])
+        if time.monotonic() > deadline:
+            want = None
+        time.sleep(0.02)
+
+
+def _pty_number(path: str) -> int:
+    tail = path.rsplit("/", 1)[-1]
+    return int(tail) if tail.isdigit() else -1
+
+
+class CanPort:
+    """A python-can bus the IMU sends on; "unplugged" it is silent."""
+
+    def __init__(self, interface: str, channel: str) -> None:
+        self.interface, self.channel = interface, channel
+        self.bus = open_can_bus(interface, channel)
+        self.plugged = True
+
+    @property
+    def path(self) -> dict[str, str]:
+        return {"interface": self.interface, "channel": self.channel}
+
+    def has_reader(self) -> bool:
+        return True  # a bus does not know its listeners
+
+    def write(self, messages: list, stop: threading.Event) -> bool:
+        for m in messages:
+            self.bus.send(m)
+        return not stop.is_set()
+
+    def drain(self, stop: threading.Event, timeout_s: float) -> bool:
+        return True
+
+    def unplug(self) -> None:
+        self.plugged = False
+
+    def replug(self) -> None:
+        self.plugged = True
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+def wait_for_readers(ports: list, stop: threading.Event, settle_s: float = 0.2) -> bool:
     """Wait until every port has a reader, then ``settle_s`` more (a client flushes its input while it
     opens the port); False if stopped first."""
     while not all(p.has_reader() for p in ports):
@@ -98,55 +186,198 @@ def wait_for_readers(ports: list[PtyPort], stop: threading.Event, settle_s: floa
 
 
 @dataclass(frozen=True)
-class PulseFrames:
-    """The bytes each device emits for one sync pulse."""
+class Emission:
+    """One device frame: its tick, the trial time it is written, the latest instant it depends on."""
 
-    index: int  # pulse count k
-    imu: bytes
-    table: bytes
-
-
-def table_status(cfg: Config) -> int:
-    """The ``tts1`` status byte of a table performing the configured motion with interlocks closed."""
-    kind = cfg.turntable.motion.kind
-    flags = Status.INTERLOCKS_CLOSED | (Status(0) if kind == "static" else Status.MOVING)
-    return status_byte(flags, _MODES[kind])
+    tick: int
+    t: float
+    latest: float
+    payload: Any
 
 
-def pulse_frames(cfg: Config, duration: float, chunk_s: float = 1.0) -> Iterator[PulseFrames]:
-    """Encoded IMU and table frames for pulses k = 1 .. round(duration * rate), computed chunk by chunk."""
-    trial = cfg.trial.model_copy(update={"duration_s": duration})
-    sim = Simulation.from_config(cfg.model_copy(update={"trial": trial}))
-    imu = imu_codec(cfg.imu, sim.rate_hz)
-    table = Tts1Codec()
-    latch_delay = cfg.turntable.latch_delay_us * 1e-6
-    status = table_status(cfg)
-    chunk = max(1, int(round(chunk_s * sim.rate_hz)))
-    k = 0
-    for batch in sim.batches(chunk):
-        angles = sim.truth.angles(batch.t + latch_delay)
-        for dtheta, dv, a in zip(batch.dtheta.tolist(), batch.dv.tolist(), angles.tolist()):
-            k += 1
-            imu_frame = imu.encode(imu.from_sample(ImuSample(k, tuple(dtheta), tuple(dv), status=STATUS_ALL_VALID)))
-            table_frame = table.encode(table.from_sample(TableSample(k, tuple(a), latch_delay=latch_delay,
-                                                                     status=status)))
-            yield PulseFrames(k, imu_frame, table_frame)
+class FrameSource:
+    """Computes one device's frames for a run of ticks; its random state is copied to replay a chunk."""
+
+    def __init__(self, clock: DeviceClock, seed: int, device: int) -> None:
+        self.clock = clock
+        self.state: dict[str, Any] = {"rng": np.random.Generator(np.random.PCG64(np.random.SeedSequence(
+            [seed, device, 1]))), "last": 0.0}
+
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        raise NotImplementedError
 
 
-class SyncClock:
-    """Paces pulses at ``rate_hz`` times ``speed`` on the monotonic clock; ``speed`` None: no pacing."""
+class ImuSource(FrameSource):
+    """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``."""
 
-    def __init__(self, rate_hz: float, speed: float | None) -> None:
-        if speed is not None and not speed > 0:
-            raise ValueError(f"speed must be positive, got {speed}")
-        self.period = None if speed is None else 1.0 / (rate_hz * speed)
-        self.start = time.monotonic()
+    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
+                 device_time: bool) -> None:
+        super().__init__(clock, seed, 0)
+        self.codec, self.device_time = codec, device_time
+        self.state["errors"] = errors
+        self.status = STATUS_ALL_VALID if codec.name == "kvh1750" else 0
 
-    def wait(self, k: int, stop: threading.Event) -> bool:
-        """Wait until pulse k is due; False if stopped first."""
-        if self.period is None:
-            return not stop.is_set()
-        delay = self.start + k * self.period - time.monotonic()
-        if delay > 0:
-            return not stop.wait(delay)
-        return not stop.is_set()
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        s, codec = self.state, self.codec
+        latch = self.clock.latch_times(k, s["rng"])
+        dtheta, dv = truth.increments(s["last"], latch)
+        dtheta, dv = s["errors"].apply(latch, dtheta, dv)
+        s["last"] = float(latch[-1])
+        dev = self.clock.device_time(latch).tolist() if self.device_time else [None] * len(k)
+        ticks = self.clock.tick_times(k)
+        return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
+                    ImuSample(int(i), tuple(a), tuple(b), device_time=d, status=self.status))))
+                for i, t, end, a, b, d in zip(k, ticks, latch, dtheta.tolist(), dv.tolist(), dev)]
+
+
+class TableSource(FrameSource):
+    """``tts1`` frames: the gimbal angles and the servo's status at each latch instant."""
+
+    def __init__(self, clock: DeviceClock, seed: int) -> None:
+        super().__init__(clock, seed, 1)
+        self.codec = Tts1Codec()
+        self.flags = int(Status.FREE_RUNNING) if clock.timing.free_running else 0
+
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        latch = self.clock.latch_times(k, self.state["rng"])
+        angles = truth.angles(latch)
+        status = servo.motion.status(latch, servo.limits) | self.flags
+        ticks, codec, delay = self.clock.tick_times(k), self.codec, self.clock.latch_delay
+        return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
+                    TableSample(int(i), tuple(a), latch_delay=delay, status=int(st)))))
+                for i, t, end, a, st in zip(k, ticks, latch, angles.tolist(), status)]
+
+
+class DeviceStream:
+    """One device's emissions in tick order, computed ``chunk`` ticks ahead with the servo's current plan.
+
+    Call :meth:`pop` with the servo's lock held: a chunk computed under an older plan revision is
+    recomputed from its starting state, which leaves the frames before the change unchanged.
+    """
+
+    def __init__(self, source: FrameSource, truth: Truth, ticks: int, chunk: int) -> None:
+        self.source, self.truth, self.ticks, self.chunk = source, truth, ticks, chunk
+        self._start = 1  # first tick of the cached chunk
+        self._snapshot = copy.deepcopy(source.state)
+        self._cache: list[Emission] = []
+        self._pos = 0
+        self._revision = -1
+
+    def done(self) -> bool:
+        return self._start + self._pos > self.ticks
+
+    def next_time(self) -> float:
+        """Write time of the next tick (trial time)."""
+        return float(self.source.clock.tick_times(np.array([self._start + self._pos]))[0])
+
+    def pop(self, servo: Servo) -> Emission:
+        if self._pos == len(self._cache):
+            self._start += self._pos
+            self._snapshot = copy.deepcopy(self.source.state)
+            self._cache, self._pos = [], 0
+        if not self._cache or self._revision != servo.revision:
+            self.source.state = copy.deepcopy(self._snapshot)
+            k = np.arange(self._start, min(self._start + self.chunk, self.ticks + 1))
+            self._cache = self.source.compute(k, replace(self.truth, motion=servo.motion), servo)
+            self._revision = servo.revision
+        self._pos += 1
+        return self._cache[self._pos - 1]
+
+
+class LatencyHistogram:
+    """Write latencies (s) in fixed bins: constant memory however long the run."""
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(LATENCY_BINS, dtype=np.int64)
+
+    def add(self, latency: float) -> None:
+        self.counts[min(max(int(latency / LATENCY_BIN_S), 0), LATENCY_BINS - 1)] += 1
+
+    def percentile_ms(self, q: float) -> float | None:
+        total = int(self.counts.sum())
+        if total == 0:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * total))
+        return round((k + 1) * LATENCY_BIN_S * 1e3, 3)
+
+
+class DeviceWriter:
+    """Writes one device's emissions from its own thread: faults, unplug window, wire-time pacing.
+
+    A frame of n bytes at ``baudrate`` (10 bits a byte) is written when its last byte would have
+    arrived: ``wire = 10 n / baudrate`` after the line is free, divided by the speed. The latency
+    from a frame's pulse to the end of its write goes into :attr:`latency`.
+    """
+
+    def __init__(self, name: str, port: Any, faults: FaultInjector, baudrate: int | None, speed: float | None,
+                 stop: threading.Event, wait_readers: bool, on_path: Callable[[], None]) -> None:
+        self.name, self.port, self.faults, self.baudrate, self.speed = name, port, faults, baudrate, speed
+        self.stop, self.wait_readers, self.on_path = stop, wait_readers, on_path
+        self.latency = LatencyHistogram()
+        self.frames = 0
+        self.queue: queue.Queue = queue.Queue(maxsize=0 if speed else 256)
+        self._line_free = 0.0
+        self.thread = threading.Thread(target=self._run, name=f"emulate-{name}", daemon=True)
+        self.thread.start()
+
+    def put(self, emission: Emission | None, due: float | None) -> bool:
+        """Queue a frame due at monotonic time ``due`` (None: unpaced), or None to finish; False if stopped."""
+        while not self.stop.is_set():
+            try:
+                self.queue.put((emission, due), timeout=WAIT_S)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        while True:
+            emission, due = self.queue.get()
+            if emission is None:
+                self._send(self.faults.flush(), due)
+                return
+            if not self._plugged(emission.t):
+                continue
+            if not self._send(self.faults.frames(emission.payload), due):
+                return
+
+    def _plugged(self, t: float) -> bool:
+        """False while the device is unplugged at trial time t (the frame is lost)."""
+        counts, port = self.faults.counts, self.port
+        if self.faults.unplugged(t):
+            if port.plugged:
+                port.drain(self.stop, DRAIN_S)  # what was sent before the unplug reached the host
+                port.unplug()
+                counts["unplugs"] += 1
+            counts["unplugged"] += 1
+            return False
+        if not port.plugged:
+            old = port.path
+            port.replug()
+            if port.path != old:
+                self.on_path()
+            if self.wait_readers:
+                wait_for_readers([port], self.stop)
+        return True
+
+    def _send(self, frames: list, due: float | None) -> bool:
+        for frame in frames:
+            if due is not None:
+                ready = max(due + self.faults.delay(), self._line_free)
+                if self.baudrate:
+                    ready += 10.0 * len(frame) / self.baudrate / self.speed
+                self._line_free = ready
+                delay = ready - time.monotonic()
+                if delay > 0 and self.stop.wait(delay):
+                    return False
+            if not self.port.write(frame, self.stop):
+                return False
+            self.frames += 1
+            if due is not None:
+                self.latency.add(time.monotonic() - due)
+        return True
+
+    def finish(self, timeout_s: float) -> None:
+        """Write what is queued, then return (the thread ends)."""
+        if self.put(None, None):
+            self.thread.join(timeout_s)

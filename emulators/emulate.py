@@ -1,8 +1,15 @@
-"""``hil emulate``: run the emulated devices on pseudo-terminals until stopped, signalled or done.
+"""``hil emulate``: run the emulated devices until stopped, signalled or done.
 
-Run it in its own process (``python -m emulators.emulate CONFIG [--ports-file PATH] [--speed X|max]
-[--duration S]``, or :func:`spawn_emulator`); clients find the ports in the JSON ports file
-(``{"imu": "/dev/pts/N", "turntable_data": "/dev/pts/M"}``) or on stdout.
+Run it in its own process (``python -m emulators.emulate CONFIG [--ports-file PATH] [--stats-file PATH]
+[--speed X|max] [--duration S]``, or :func:`spawn_emulator`); clients find the ports in the JSON ports
+file or on stdout::
+
+    {"imu": "/dev/pts/N" | {"interface": "udp_multicast", "channel": "239.0.0.1"},
+     "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT"}
+
+The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on the python-can bus of
+``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP port. The run's
+statistics (:class:`EmulatorStats`) go to stderr as JSON at exit, and to ``--stats-file``.
 """
 
 from __future__ import annotations
@@ -15,13 +22,34 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from emulators.devices import PtyPort, SyncClock, pulse_frames, wait_for_readers
-from hil.config import Config, ConfigError, load_config
+from drivers.registry import imu_codec
+from emulators.acl_server import AclServer
+from emulators.devices import (CanPort, DeviceStream, DeviceWriter, ImuSource, PtyPort, TableSource,
+                               wait_for_readers)
+from emulators.faults import ByteDamage, CanDamage, FaultInjector
+from emulators.servo import Servo
+from emulators.simulation import Simulation
+from emulators.timing import DeviceClock
+from hil.config import CanConfig, Config, ConfigError, load_config
+from hil.samples import ImuSample
 
 DRAIN_S = 5.0  # longest wait at the end for readers to take the bytes still queued
+CHUNK_S = 0.25  # frames computed ahead, trial seconds
+BITS_PER_BYTE = 10  # 8N1
+PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
+
+
+@dataclass(frozen=True)
+class DeviceStats:
+    """What one emulated device wrote: frames, injected faults per kind, pulse-to-write latency."""
+
+    frames: int
+    faults: dict[str, int]
+    latency_p50_ms: float | None  # None when unpaced (speed max)
+    latency_p99_ms: float | None
 
 
 @dataclass(frozen=True)
@@ -31,27 +59,115 @@ class EmulatorStats:
     pulses: int
     elapsed_s: float
     stopped: bool  # True when stopped by a signal or the stop event before the duration
+    devices: dict[str, DeviceStats] = field(default_factory=dict)  # keys "imu", "turntable_data"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
 
 
-def _write_ports(path: Path, ports: dict[str, str]) -> None:
-    """Write the ports atomically, so a reader never sees a partial file."""
+class SyncClock:
+    """Paces trial time at ``speed`` times real time on the monotonic clock; ``speed`` None: no pacing."""
+
+    def __init__(self, speed: float | None) -> None:
+        if speed is not None and not speed > 0:
+            raise ValueError(f"speed must be positive, got {speed}")
+        self.speed = speed
+        self.start = time.monotonic()
+
+    def due(self, t: float) -> float | None:
+        """The monotonic time at which trial time t is due (None: unpaced)."""
+        return None if self.speed is None else self.start + t / self.speed
+
+    def wait_until(self, t: float, stop: threading.Event) -> bool:
+        """Wait until trial time t is due; False if stopped first."""
+        due = self.due(t)
+        delay = 0.0 if due is None else due - time.monotonic()
+        return not stop.wait(delay) if delay > 0 else not stop.is_set()
+
+
+def _write_json(path: Path, data: dict) -> None:
+    """Write JSON atomically, so a reader never sees a partial file."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(ports) + "\n")
+    tmp.write_text(json.dumps(data) + "\n")
     os.replace(tmp, path)
+
+
+def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
+    """Raise :class:`ConfigError` when frames of ``frame_bytes`` at ``rate_hz`` do not fit the line."""
+    needed = frame_bytes * BITS_PER_BYTE * rate_hz
+    if needed > baudrate:
+        raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "
+                          f"(8N1), more than the configured {baudrate}; raise the baudrate or lower the rate")
+
+
+class _Devices:
+    """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
+
+    def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
+                 wait_readers: bool, on_path) -> None:
+        rate = cfg.imu_rate_hz
+        sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
+            update={"duration_s": duration})}))
+        imu_cfg = cfg.imu
+        if imu_cfg.protocol == "can-dbc" and imu_cfg.can is None:
+            imu_cfg = imu_cfg.model_copy(update={"can": CanConfig()})
+        codec = imu_codec(imu_cfg, rate)
+        imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
+        table_clock = DeviceClock(rate, cfg.turntable.latch_delay_us * 1e-6, cfg.turntable.timing)
+        seed = cfg.trial.seed
+        imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
+        table_source = TableSource(table_clock, seed)
+        self.servo = Servo(cfg.turntable, rate, sim.truth.motion)
+        chunk = max(1, round(CHUNK_S * rate))
+        self.streams = {"imu": DeviceStream(imu_source, sim.truth, imu_clock.ticks(duration), chunk),
+                        "turntable_data": DeviceStream(table_source, sim.truth, table_clock.ticks(duration), chunk)}
+        self.synced = [n for n, c in (("imu", imu_clock), ("turntable_data", table_clock))
+                       if not c.timing.free_running] or ["imu"]
+        self.ports: dict = {}
+        self.writers: dict[str, DeviceWriter] = {}
+        self.server: AclServer | None = None
+        try:
+            if imu_cfg.protocol == "can-dbc":
+                imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
+            else:
+                check_baudrate("imu", len(codec.encode(codec.from_sample(PROBE))), rate, imu_cfg.baudrate)
+                imu_port, imu_damage, imu_baud = PtyPort(), ByteDamage(), imu_cfg.baudrate
+            self.ports["imu"] = imu_port
+            check_baudrate("turntable", 24, rate, cfg.turntable.baudrate)
+            self.ports["turntable_data"] = PtyPort()
+            self.server = AclServer(self.servo)
+            for k, (name, damage, baud, faults) in enumerate((
+                    ("imu", imu_damage, imu_baud, imu_cfg.faults),
+                    ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
+                self.writers[name] = DeviceWriter(name, self.ports[name], FaultInjector(faults, damage, seed, k),
+                                                  baud, speed, stop, wait_readers, on_path)
+        except BaseException:
+            self.close()
+            raise
+
+    def names(self) -> dict:
+        """The ports JSON."""
+        return {"imu": self.ports["imu"].path, "turntable_data": self.ports["turntable_data"].path,
+                "turntable_cmd": self.server.url}
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+        for port in self.ports.values():
+            port.close()
 
 
 def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
                  duration: float | None = None, stop_event: threading.Event | None = None,
                  wait_readers: bool = True) -> EmulatorStats:
-    """Emulate the IMU and the turntable data output on ptys until the duration, a signal or ``stop_event``.
+    """Emulate the IMU and the turntable until the duration, a signal or ``stop_event``.
 
     ``speed`` is the multiple of real time (None: as fast as the readers take the bytes); ``duration``
     (s) defaults to ``trial.duration_s``. With ``wait_readers`` the pulse train starts once a client has
-    opened each port (as a table enables its sync output when the host is ready); otherwise at once. From the main thread, SIGTERM and SIGINT set the stop event.
-    The ptys are closed and the ports file removed on return.
+    opened each pty (as a table enables its sync output when the host is ready), and resumes after an
+    unplug once a client has reopened the port; otherwise at once. From the main thread, SIGTERM and
+    SIGINT set the stop event. Ports, command socket and ports file are released on return.
     """
-    if cfg.imu.protocol != "kvh1750":
-        raise ConfigError(f"imu.protocol: the emulator supports kvh1750 so far, not {cfg.imu.protocol!r}")
     duration = cfg.trial.duration_s if duration is None else duration
     if duration is None:
         raise ConfigError("trial.duration_s: required key is missing (or give --duration)")
@@ -60,31 +176,63 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
-    imu, table = PtyPort(), PtyPort()
-    pulses = 0
-    try:
-        ports = {"imu": imu.path, "turntable_data": table.path}
-        print(json.dumps(ports), flush=True)
+    devices: _Devices | None = None
+
+    def publish() -> None:
+        names = devices.names()
+        print(json.dumps(names), flush=True)
         if ports_file is not None:
-            _write_ports(ports_file, ports)
-        if wait_readers and not wait_for_readers([imu, table], stop):
-            return EmulatorStats(0, 0.0, True)
-        clock = SyncClock(cfg.imu_rate_hz, speed)
-        for frames in pulse_frames(cfg, duration):
-            if not (clock.wait(frames.index, stop) and imu.write(frames.imu, stop)
-                    and table.write(frames.table, stop)):
-                break
-            pulses = frames.index
-        for port in (imu, table):
+            _write_json(ports_file, names)
+
+    try:
+        devices = _Devices(cfg, duration, speed, stop, wait_readers, publish)
+        publish()
+        ptys = [p for p in devices.ports.values() if isinstance(p, PtyPort)]
+        if wait_readers and not wait_for_readers(ptys, stop):
+            return _stats(devices, 0, 0.0, True)
+        clock = SyncClock(speed)
+        pulses = _pulse_loop(devices, clock, stop)
+        for writer in devices.writers.values():
+            writer.finish(DRAIN_S)
+        for port in devices.ports.values():
             port.drain(stop, DRAIN_S)
-        return EmulatorStats(pulses, time.monotonic() - clock.start, stop.is_set())
+        return _stats(devices, pulses, time.monotonic() - clock.start, stop.is_set())
     finally:
-        imu.close()
-        table.close()
+        if devices is not None:
+            devices.close()
         if ports_file is not None:
             ports_file.unlink(missing_ok=True)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _pulse_loop(devices: _Devices, clock: SyncClock, stop: threading.Event) -> int:
+    """Emit every device's frames in time order until done or stopped; returns the sync pulses emitted."""
+    streams, servo, pulses = devices.streams, devices.servo, 0
+    while not stop.is_set():
+        live = [name for name, s in streams.items() if not s.done()]
+        if not live:
+            break
+        name = min(live, key=lambda n: streams[n].next_time())
+        t = streams[name].next_time()
+        if not clock.wait_until(t, stop):
+            break
+        with servo.lock:
+            servo.advance(t)
+            emission = streams[name].pop(servo)
+            servo.commit(emission.latest)
+            send = name != "turntable_data" or servo.sync_output
+        if send and not devices.writers[name].put(emission, clock.due(t)):
+            break
+        if name in devices.synced:
+            pulses = max(pulses, emission.tick)
+    return pulses
+
+
+def _stats(devices: _Devices, pulses: int, elapsed: float, stopped: bool) -> EmulatorStats:
+    return EmulatorStats(pulses, elapsed, stopped, {
+        name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50), w.latency.percentile_ms(99))
+        for name, w in devices.writers.items()})
 
 
 def parse_speed(text: str) -> float | None:
@@ -98,13 +246,15 @@ def parse_speed(text: str) -> float | None:
 
 
 def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration: float | None = None,
-                   timeout_s: float = 20.0) -> tuple[subprocess.Popen, dict[str, str]]:
+                   timeout_s: float = 20.0, stats_file: Path | None = None) -> tuple[subprocess.Popen, dict]:
     """Start ``python -m emulators.emulate`` in its own process; returns it and its ports once open."""
     ports_file.unlink(missing_ok=True)
     cmd = [sys.executable, "-m", "emulators.emulate", str(config), "--ports-file", str(ports_file),
            "--speed", speed]
     if duration is not None:
         cmd += ["--duration", str(duration)]
+    if stats_file is not None:
+        cmd += ["--stats-file", str(stats_file)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
     deadline = time.monotonic() + timeout_s
     while not ports_file.exists():
@@ -123,11 +273,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--speed", type=parse_speed, default=1.0, help="multiple of real time, or max")
     parser.add_argument("--duration", type=float, help="s; default trial.duration_s")
     parser.add_argument("--no-wait", action="store_true", help="start the pulse train without waiting for readers")
+    parser.add_argument("--stats-file", type=Path, help="write the run's statistics here as JSON at exit")
     args = parser.parse_args(argv)
     stats = run_emulator(load_config(args.config), args.ports_file, args.speed, args.duration,
                          wait_readers=not args.no_wait)
-    print(json.dumps({"pulses": stats.pulses, "elapsed_s": round(stats.elapsed_s, 3), "stopped": stats.stopped}),
-          file=sys.stderr)
+    text = json.dumps(stats.as_dict())
+    print(text, file=sys.stderr)
+    if args.stats_file is not None:
+        _write_json(args.stats_file, stats.as_dict())
     return 0
 
 

@@ -2,7 +2,9 @@
 
 Every profile maps times t (N,) in s to ``(angles, rates)``, both (N, 3) in rad and rad/s, ordered
 (outer, middle, inner). Profiles are exact analytic functions so the truth model can integrate
-the motion as finely as it likes.
+the motion as finely as it likes. A profile whose rates have kinks (a trapezoidal move, a servo
+switching pieces) also offers ``breaks(t0, t1)``: the kink times inside (t0, t1), at which the truth
+model splits its quadrature intervals.
 """
 
 from __future__ import annotations
@@ -19,6 +21,12 @@ from hil.samples import GIMBAL_AXES
 
 class MotionProfile(Protocol):
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def motion_breaks(motion: MotionProfile, t0: float, t1: float) -> np.ndarray:
+    """Sorted kink times of ``motion`` inside (t0, t1); none for a smooth profile."""
+    breaks = getattr(motion, "breaks", None)
+    return np.empty(0) if breaks is None else breaks(t0, t1)
 
 
 @dataclass(frozen=True)
@@ -45,6 +53,19 @@ class ConstantRate:
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(t, dtype=float)
         return self.center + np.outer(t, self.rate), np.broadcast_to(self.rate, (len(t), 3)).copy()
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """angle = start + rate t + accel t^2 / 2 per axis: a constant-acceleration piece of a servo move."""
+
+    start: np.ndarray
+    rate: np.ndarray
+    accel: np.ndarray
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = np.asarray(t, dtype=float)[:, None]
+        return self.start + self.rate * t + 0.5 * self.accel * t * t, self.rate + self.accel * t
 
 
 @dataclass(frozen=True)
@@ -81,6 +102,12 @@ class Positions:
             out.append((start, t_acc, t_move, distance, self.targets[k - 1], self.targets[k]))
             start += t_move + float(self.dwell[k])
         return out
+
+    def breaks(self, t0: float, t1: float) -> np.ndarray:
+        """Starts and ends of the acceleration, cruise and deceleration phases inside (t0, t1)."""
+        times = np.array([start + tau for start, t_acc, t_move, *_ in self.segments()
+                          for tau in (0.0, t_acc, t_move - t_acc, t_move)])
+        return np.unique(times[(times > t0) & (times < t1)])
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(t, dtype=float)

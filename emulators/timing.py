@@ -1,0 +1,50 @@
+"""When an emulated device latches, and what its own clock reads.
+
+A synchronised device ticks on the shared sync pulses, t = k / rate. A free-running one ticks on its
+own clock, which runs fast by ``clock_drift_ppm`` (delta = ppm * 1e-6): tick k of its period T falls
+at true time k T / (1 + delta). Either way it latches ``latch_delay`` after its tick, plus a Gaussian
+jitter of ``latch_jitter_us`` (1 sigma), and its clock reads t (1 + delta) at true time t.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.config import PPM, DeviceTiming
+
+
+@dataclass(frozen=True)
+class DeviceClock:
+    """Tick and latch instants (trial time, s) of one device, and its own time."""
+
+    rate_hz: float
+    latch_delay: float  # s
+    timing: DeviceTiming
+
+    @property
+    def drift(self) -> float:
+        return self.timing.clock_drift_ppm * PPM
+
+    @property
+    def period(self) -> float:
+        """True time between ticks."""
+        return 1.0 / (self.rate_hz * (1.0 + self.drift)) if self.timing.free_running else 1.0 / self.rate_hz
+
+    def ticks(self, duration: float) -> int:
+        """Ticks within a trial of ``duration`` s (the last one at or before its end)."""
+        return int(np.floor(duration / self.period + 1e-9))
+
+    def tick_times(self, k: np.ndarray) -> np.ndarray:
+        return np.asarray(k, dtype=float) * self.period
+
+    def latch_times(self, k: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Latch instants of ticks k; draws one jitter value per tick from ``rng`` when jitter is on."""
+        t = self.tick_times(k) + self.latch_delay
+        sigma = self.timing.latch_jitter_us * 1e-6
+        return t + sigma * rng.standard_normal(len(t)) if sigma > 0 else t
+
+    def device_time(self, t: np.ndarray) -> np.ndarray:
+        """The device clock's reading at true times t."""
+        return np.asarray(t, dtype=float) * (1.0 + self.drift)

@@ -1,0 +1,226 @@
+"""Fault injection: each kind, switched on alone, shows in the driver's counters with the injected count."""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+import serial
+import yaml
+
+from drivers.framing import SequenceUnwrapper
+from drivers.kvh1750 import Kvh1750Codec, KvhFrame
+from drivers.session import DeviceSession
+from drivers.tap import SampleListener
+from drivers.transport import SerialTransport
+from drivers.tts1 import Tts1Codec
+from emulators.emulate import spawn_emulator
+from emulators.faults import ByteDamage, CanDamage, FaultInjector
+from emulators.harness import EmulatorThread
+from emulators.timing import DeviceClock
+from hil.config import DeviceTiming, FaultConfig, parse_config
+
+RATE = 200.0
+DURATION = 2.0
+N = int(RATE * DURATION)
+SWING = {"outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
+         "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
+         "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6}}
+
+
+def trial(duration=DURATION, imu=None, turntable=None, seed=5) -> dict:
+    return {"trial": {"name": "faults", "duration_s": duration, "rate_hz": RATE, "seed": seed},
+            "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+            "turntable": {"latch_delay_us": 50, "motion": {"kind": "swing", "axes": SWING}, **(turntable or {})},
+            "imu": imu or {}}
+
+
+def read_until_closed(path: str, out: dict, key: str) -> None:
+    data = bytearray()
+    with serial.Serial(path, timeout=0.05) as port:
+        while True:
+            try:
+                data += port.read(65536)
+            except serial.SerialException:
+                break
+    out[key] = bytes(data)
+
+
+def capture(cfg: dict, speed: float | None = None):
+    """Run the emulator to its end; its stats and the bytes each pty delivered."""
+    with EmulatorThread(parse_config(cfg), speed) as emu:
+        out: dict[str, bytes] = {}
+        readers = [threading.Thread(target=read_until_closed, args=(emu.ports[k], out, k))
+                   for k in ("imu", "turntable_data")]
+        for r in readers:
+            r.start()
+        stats = emu.join()
+        for r in readers:
+            r.join(10)
+    return stats, out
+
+
+def framed(codec, data: bytes):
+    framer = codec.framer()
+    decoded = framer.feed(data, math.nan)
+    return framer.counters, decoded
+
+
+def imu_counters(fault: dict):
+    stats, out = capture(trial(imu={"faults": fault}))
+    counters, decoded = framed(Kvh1750Codec(RATE), out["imu"])
+    ends = decoded[0].sync_index - 1 + N - decoded[-1].sync_index  # losses at either end leave no gap
+    return stats.devices["imu"].faults, counters, ends
+
+
+def test_dropped_frames_are_the_missing_frames():
+    injected, counters, ends = imu_counters({"drop_rate": 0.02, "drop_burst": 3})
+    assert injected["dropped"] > 10
+    assert counters.missing + ends == injected["dropped"] and counters.frames == N - injected["dropped"]
+    assert counters.corrupt == 0 and counters.skipped_bytes == 0
+
+
+def test_corrupted_frames_fail_their_crc_and_are_skipped_whole():
+    injected, counters, ends = imu_counters({"corrupt_byte_rate": 0.002})
+    damaged = injected["corrupted"]
+    assert damaged > 5
+    assert counters.frames == N - damaged and counters.missing + ends == damaged
+    assert counters.skipped_bytes == 36 * damaged
+    assert 0 < counters.corrupt <= damaged  # a flip in the header hides the frame rather than failing its CRC
+
+
+def test_truncated_frames_are_lost_and_their_bytes_skipped():
+    injected, counters, ends = imu_counters({"truncate_rate": 0.03})
+    cut = injected["truncated"]
+    assert cut > 5
+    assert counters.frames == N - cut and counters.missing + ends == cut
+    assert 0 < counters.corrupt <= cut
+
+
+def test_duplicated_frames_are_counted_and_not_delivered_twice():
+    injected, counters, _ = imu_counters({"duplicate_rate": 0.03})
+    assert injected["duplicated"] > 5
+    assert counters.duplicates == injected["duplicated"]
+    assert counters.frames == N and counters.missing == 0
+
+
+def test_reordered_frames_are_counted_out_of_order():
+    injected, counters, _ = imu_counters({"reorder_rate": 0.03})
+    assert injected["reordered"] > 5
+    assert counters.out_of_order == injected["reordered"]
+    assert counters.frames == N - injected["reordered"] and counters.missing == injected["reordered"]
+
+
+def test_table_faults_show_in_the_tts1_counters():
+    stats, out = capture(trial(turntable={"faults": {"drop_rate": 0.01, "duplicate_rate": 0.02}}))
+    injected = stats.devices["turntable_data"].faults
+    counters, decoded = framed(Tts1Codec(), out["turntable_data"])
+    assert counters.missing + decoded[0].sync_index - 1 + N - decoded[-1].sync_index == injected["dropped"] > 0
+    assert counters.duplicates == injected["duplicated"] > 0
+    assert stats.devices["imu"].faults["dropped"] == 0
+
+
+def test_faults_are_reproducible_from_the_seed():
+    fault = FaultConfig(drop_rate=0.1, corrupt_byte_rate=0.01, truncate_rate=0.1, duplicate_rate=0.1, reorder_rate=0.1)
+    frames = [bytes([k]) * 36 for k in range(200)]
+
+    def run(seed):
+        inj = FaultInjector(fault, ByteDamage(), seed, 0)
+        return [inj.frames(f) for f in frames], dict(inj.counts)
+
+    assert run(3) == run(3) and run(3) != run(4)
+
+
+def test_can_damage_loses_or_shortens_one_message():
+    import can
+
+    messages = [can.Message(arbitration_id=0x100 + i, data=bytes(8), is_extended_id=False) for i in range(6)]
+    rng = np.random.Generator(np.random.PCG64(1))
+    assert CanDamage().corrupt(messages, 0.0, rng) is None
+    assert len(CanDamage().corrupt(messages, 1.0, rng)) == 0
+    cut = CanDamage().truncate(messages, rng)
+    assert len(cut) == 6 and sum(len(m.data) for m in cut) < 48
+
+
+class Samples(SampleListener):
+    def __init__(self) -> None:
+        self.samples: list = []
+
+    def on_sample(self, sample) -> None:
+        self.samples.append(sample)
+
+
+def test_unplug_closes_the_pty_and_the_session_reconnects_to_the_same_path():
+    cfg = parse_config(trial(duration=1.5, imu={"faults": {"unplug_at_s": 0.5, "unplug_s": 0.25}}))
+    codec = Tts1Codec()
+    with EmulatorThread(cfg) as emu:
+        imu = DeviceSession(SerialTransport(emu.ports["imu"], 921600, "imu"), Kvh1750Codec(RATE),
+                            sample_listeners=[Samples()], backoff_s=(0.02, 0.1)).start()
+        table = DeviceSession(SerialTransport(emu.ports["turntable_data"], 115200, "table"), codec,
+                              sample_listeners=[Samples()]).start()
+        try:
+            deadline = time.monotonic() + 10
+            while imu.counters.frames + imu.counters.missing < 300 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            outages = (imu.outages, table.outages)  # before the end of the run closes the ports
+            stats = emu.join()
+        finally:
+            imu.stop()
+            table.stop()
+    injected = stats.devices["imu"].faults
+    assert injected["unplugs"] == 1 and injected["unplugged"] == 50
+    assert outages == (1, 0) and (imu.counters.gaps, imu.counters.missing) == (1, 50)
+    assert imu.counters.frames == 300 - 50
+    assert table.counters.frames == 300 and table.counters.missing == 0
+
+
+def test_stats_go_to_stderr_and_the_stats_file(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump(trial(duration=0.5, imu={"faults": {"drop_rate": 0.1}})))
+    stats_file = tmp_path / "stats.json"
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", stats_file=stats_file)
+    out: dict = {}
+    readers = [threading.Thread(target=read_until_closed, args=(ports[k], out, k)) for k in ("imu", "turntable_data")]
+    for r in readers:
+        r.start()
+    assert proc.wait(20) == 0
+    for r in readers:
+        r.join(5)
+    stats = json.loads(stats_file.read_text())
+    assert stats["pulses"] == 100 and not stats["stopped"]
+    imu = stats["devices"]["imu"]
+    assert imu["frames"] + imu["faults"]["dropped"] == 100 and imu["faults"]["dropped"] > 0
+    assert set(imu) == {"frames", "faults", "latency_p50_ms", "latency_p99_ms"}
+
+
+def test_unwrapper_tells_repeats_and_late_frames_from_wraps():
+    unwrapper = SequenceUnwrapper(128, rate_hz=200.0)
+    assert unwrapper.next(5, 0.0) == (5, 0)
+    assert unwrapper.next(7, 0.01) == (7, 1)
+    assert unwrapper.next(6, 0.01) == (6, -1)  # late
+    assert unwrapper.next(7, 0.01) == (7, -1)  # repeated
+    assert unwrapper.next(7, 0.01 + 128 / 200.0) == (135, 127)  # a whole period later: a wrap
+    codec = Kvh1750Codec(RATE)
+    frames = [codec.encode(KvhFrame((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0x77, i, 25)) for i in (1, 2, 2, 4, 3, 5)]
+    counters, decoded = framed(codec, b"".join(frames))
+    assert [d.sync_index for d in decoded] == [1, 2, 4, 5]
+    assert (counters.duplicates, counters.out_of_order, counters.missing) == (1, 1, 1)
+    assert counters.skipped_bytes == 72
+
+
+def test_device_clock_jitter_drift_and_free_running():
+    rng = np.random.Generator(np.random.PCG64(0))
+    k = np.arange(1, 20001)
+    jittery = DeviceClock(RATE, 50e-6, DeviceTiming(latch_jitter_us=20.0))
+    offsets = jittery.latch_times(k, rng) - (k / RATE + 50e-6)
+    assert np.std(offsets) == pytest.approx(20e-6, rel=0.03) and abs(np.mean(offsets)) < 1e-6
+    free = DeviceClock(RATE, 0.0, DeviceTiming(clock_drift_ppm=100.0, free_running=True))
+    # 100 ppm fast: its 200 Hz ticks come every 5 ms / 1.0001 of true time; 60 s hold 12001 ticks.
+    assert free.ticks(60.0) == 12001 and free.tick_times(np.array([12001]))[0] == pytest.approx(60.005 / 1.0001)
+    assert free.device_time(np.array([100.0]))[0] == pytest.approx(100.01)
+    synced = DeviceClock(RATE, 0.0, DeviceTiming(clock_drift_ppm=100.0))
+    assert synced.ticks(60.0) == 12000 and synced.device_time(np.array([1.0]))[0] == pytest.approx(1.0001)
