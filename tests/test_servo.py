@@ -1,0 +1,218 @@
+"""The emulated table's servo and its acl port, driven by the turntable command client over TCP."""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from drivers.acl import AclCommand
+from drivers.kvh1750 import Kvh1750Codec
+from drivers.table_client import InterlockError, LimitError, TableCommandClient, TableError
+from drivers.tts1 import Mode, Status, Tts1Codec
+from emulators.harness import EmulatorThread
+from emulators.motion import motion_from_config
+from emulators.servo import Servo
+from emulators.truth import Truth
+from hil.config import LimitsConfig, parse_config
+from hil.frames import Earth, TableGeometry
+
+RATE = 200.0
+DEG = math.pi / 180.0
+LIMITS = {"position_min_deg": [-180, -60, -180], "position_max_deg": [180, 60, 180],
+          "rate_dps": [30, 20, 40], "accel_dps2": [50, 50, 50]}
+CENTERS = {"outer": 5.0, "middle": 2.0, "inner": 10.0}
+
+
+def static_config(duration=4.0, **turntable):
+    axes = {axis: {"center_deg": c} for axis, c in CENTERS.items()}
+    return parse_config({
+        "trial": {"name": "servo", "duration_s": duration, "rate_hz": RATE, "seed": 2},
+        "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+        "turntable": {"latch_delay_us": 50, "limits": LIMITS, "motion": {"kind": "static", "axes": axes},
+                      **turntable},
+    })
+
+
+def servo_at_rest() -> Servo:
+    cfg = static_config()
+    return Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
+
+
+def at(servo: Servo, t: float, column: int) -> tuple[float, float]:
+    angles, rates = servo.motion(np.array([t]))
+    return angles[0, column] / DEG, rates[0, column] / DEG
+
+
+def test_position_move_is_a_trapezoid_at_the_limits():
+    servo = servo_at_rest()
+    servo.commit(1.0)  # frames up to t = 1 s are out: the change starts at the next pulse
+    assert servo.handle(AclCommand(":Demand:Position", ("2", 30.0))).ok
+    t0 = 1.0 + 1 / RATE
+    # middle: 2 -> 30 deg at 20 deg/s and 50 deg/s^2: 0.4 s ramps cover 4 deg each, 20 deg cruise take 1 s.
+    assert at(servo, t0 - 1e-9, 1) == pytest.approx((2.0, 0.0))
+    assert at(servo, t0 + 0.4, 1) == pytest.approx((6.0, 20.0))
+    assert at(servo, t0 + 1.4, 1) == pytest.approx((26.0, 20.0))
+    assert at(servo, t0 + 1.8, 1) == pytest.approx((30.0, 0.0), abs=1e-9)
+    assert at(servo, t0 + 5.0, 1) == pytest.approx((30.0, 0.0), abs=1e-9)
+    assert at(servo, t0 + 0.7, 0) == pytest.approx((5.0, 0.0))  # the other axes hold
+
+
+def test_rate_mode_halts_exactly_at_a_position_limit():
+    servo = servo_at_rest()
+    for command in (AclCommand(":Demand:Rate", ("2", 20.0)), AclCommand(":Mode", ("2", "Rate"))):
+        assert servo.handle(command).ok
+    # From 2 deg at rest: 4 deg ramping up, 4 deg braking, so 50 deg cruising at 20 deg/s; halts at 60.
+    assert at(servo, 0.4, 1) == pytest.approx((6.0, 20.0))
+    assert at(servo, 2.9, 1) == pytest.approx((56.0, 20.0))
+    assert at(servo, 3.3, 1) == pytest.approx((60.0, 0.0), abs=1e-9)
+    assert at(servo, 10.0, 1) == pytest.approx((60.0, 0.0), abs=1e-9)
+    status = int(servo.motion.status(np.array([10.0]), servo.limits)[0])
+    assert status & Status.LIMIT_REACHED and not status & Status.MOVING and status >> 5 == Mode.RATE
+
+
+def test_commands_outside_the_limits_or_with_open_interlocks_are_refused():
+    servo = servo_at_rest()
+    refused = servo.handle(AclCommand(":Demand:Position", ("2", 95.0)))
+    assert refused.error == 200 and "outside the middle limits" in refused.text
+    assert servo.handle(AclCommand(":Demand:Rate", ("1", -41.0))).error == 200
+    assert servo.handle(AclCommand(":Demand:Oscillator", ("1", 5.0, 1.0, 0.0))).error == 200  # 197 deg/s^2
+    assert servo.handle(AclCommand(":Interlock:Open", ("3",))).ok
+    assert servo.handle(AclCommand(":Mode", ("3", "Position"))).error == 201
+    assert servo.handle(AclCommand(":Interlock?", ("ALL",))).text == "Closed,Closed,Open"
+    assert servo.revision == 1  # only the interlock change re-planned the motion
+
+
+def read_frames(path: str, stop: threading.Event, out: bytearray) -> None:
+    with serial.Serial(path, timeout=0.05) as port:
+        while not stop.is_set():
+            try:
+                out += port.read(65536)
+            except serial.SerialException:
+                return
+
+
+class Readers:
+    """Read the IMU and table ptys into byte buffers until the emulator closes them."""
+
+    def __init__(self, ports: dict) -> None:
+        self.stop = threading.Event()
+        self.imu, self.table = bytearray(), bytearray()
+        self.threads = [threading.Thread(target=read_frames, args=(ports[k], self.stop, buf))
+                        for k, buf in (("imu", self.imu), ("turntable_data", self.table))]
+        for t in self.threads:
+            t.start()
+
+    def table_frames(self):
+        return Tts1Codec().framer().feed(bytes(self.table))
+
+    def wait_table_frames(self, n: int) -> None:
+        deadline = time.monotonic() + 10
+        while len(self.table) < 24 * n:
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+
+    def join(self) -> None:
+        for t in self.threads:
+            t.join(10)
+
+
+def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
+    cfg = static_config()
+    with EmulatorThread(cfg, speed=5.0) as emu:
+        readers = Readers(emu.ports)
+        readers.wait_table_frames(100)
+        with TableCommandClient(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
+            assert client.identify().startswith("turntable-hil")
+            client.apply_limits()
+            client.demand_position("inner", 10.0)
+            client.demand_oscillator("inner", 5.0, 0.25, 0.0)
+            client.set_mode("inner", "Synthesis")
+            with pytest.raises(LimitError):
+                client.demand_position("middle", 61.0)
+            with pytest.raises(TableError, match=r"\?200"):  # the table refuses it too
+                client.send(AclCommand(":Demand:Position", ("2", 61.0)))
+            readers.wait_table_frames(700)
+            assert client.send(AclCommand(":Mode?", ("1",))).text == "S"
+        # closing the client switched the table Off: it brakes from the next pulse on
+        emu.join()
+        readers.join()
+    frames = readers.table_frames()
+    modes = [d.record.status >> 5 for d in frames]
+    k_s = frames[modes.index(Mode.SYNTHESIS)].sync_index
+    k_off = frames[modes.index(Mode.OFF)].sync_index
+    assert 100 < k_s < 600 and k_off > 700 and all(m == Mode.POSITION for m in modes[:k_s - 1])
+    frames = frames[:k_off - 1]
+    latch = np.array([d.sync_index for d in frames]) / RATE + 50e-6
+    t_s = k_s / RATE
+    swing = 10.0 + 5.0 * np.sin(2 * math.pi * 0.25 * (latch - t_s))
+    expected_inner = np.where(latch >= t_s, swing, 10.0)
+    inner = np.array([d.record.angles_udeg[2] for d in frames]) * 1e-6
+    assert np.max(np.abs(inner - expected_inner)) <= 0.5e-6
+    assert all(d.record.angles_udeg[:2] == (5_000_000, 2_000_000) for d in frames)
+
+    # The IMU senses that motion: its increments equal the truth of the same piecewise swing.
+    def motion(t):
+        t = np.asarray(t, dtype=float)
+        on = t >= t_s
+        arg = 2 * math.pi * 0.25 * (t - t_s)
+        angles = np.tile([5.0, 2.0, 10.0], (len(t), 1)) * DEG
+        rates = np.zeros((len(t), 3))
+        angles[on, 2] += 5.0 * DEG * np.sin(arg[on])
+        rates[on, 2] = 5.0 * DEG * 2 * math.pi * 0.25 * np.cos(arg[on])
+        return angles, rates
+
+    motion.breaks = lambda t0, t1: np.array([t_s]) if t0 < t_s < t1 else np.empty(0)
+    codec = Kvh1750Codec(RATE)
+    imu = [codec.to_sample(d) for d in codec.framer().feed(bytes(readers.imu))][:k_off - 1]
+    n = len(imu)
+    truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(cfg.turntable), motion)
+    dtheta, _ = truth.increments(0.0, np.arange(1, n + 1) / RATE)
+    np.testing.assert_allclose([s.dtheta for s in imu], dtheta, rtol=2e-7, atol=1e-13)
+
+
+def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
+    cfg = static_config(duration=2.0, interlock_trip_at_s=1.0)
+    with EmulatorThread(cfg, speed=2.0) as emu:
+        readers = Readers(emu.ports)
+        readers.wait_table_frames(260)
+        with TableCommandClient(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
+            assert not client.interlocks_closed("inner")
+            status = int(client.send(AclCommand("*STB?")).text)
+            assert status & Status.FAULT and not status & Status.INTERLOCKS_CLOSED
+            with pytest.raises(InterlockError):
+                client.set_mode("inner", "Position")
+            with pytest.raises(TableError, match=r"\?201"):
+                client.send(AclCommand(":Mode", ("1", "Position")))
+            with pytest.raises(TableError, match=r"\?201 interlock fault latched"):
+                client.send(AclCommand(":Interlock:Close", ("ALL",)))
+            client.send(AclCommand(":Interlock:Reset", ("ALL",)))
+            client.send(AclCommand(":Interlock:Close", ("ALL",)))
+            assert client.interlocks_closed("inner")
+        emu.join()
+        readers.join()
+    status = {d.sync_index: d.record.status for d in readers.table_frames()}
+    assert status[199] == (Status.INTERLOCKS_CLOSED | Mode.POSITION << 5)
+    assert status[200] == (Status.FAULT | Mode.OFF << 5)  # tripped at the pulse of t = 1 s
+    assert status[max(status)] & Status.INTERLOCKS_CLOSED and not status[max(status)] & Status.FAULT
+
+
+def test_the_acl_port_answers_bad_commands_with_errors_and_is_loopback_only():
+    cfg = static_config(duration=1.0)
+    with EmulatorThread(cfg, speed=None, wait_readers=False) as emu:
+        host, port = emu.ports["turntable_cmd"].removeprefix("socket://").split(":")
+        assert host == "127.0.0.1"
+        with socket.create_connection((host, int(port)), timeout=2) as conn:
+            conn.sendall(b":Spin 1\r\n:Mode 4,Position\r\n:Mode? ALL\r\n")
+            replies = b""
+            while replies.count(b"\r\n") < 3:
+                replies += conn.recv(4096)
+        assert replies.split(b"\r\n")[:3] == [b"?100 acl: unknown command ':Spin'",
+                                              b"?101 acl: bad axis argument '4' in ':Mode 4,Position'",
+                                              b"P,P,P"]
+        emu.join()
