@@ -1,0 +1,216 @@
+"""Rerun logging: the saved recording holds the trial's values under the documented entity paths."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import PAPER_ERRORS, make_config
+from rerun.chunk import RrdReader
+
+from emulators.simulation import Simulation
+from hil import viz
+from hil.config import DEG, UG
+from hil.estimation.online import OnlineEstimator
+from hil.viz import TrialViewer, default_viewer_mode
+
+HEALTH = {
+    "imu": {"rate_hz": 199.5, "frames": 12000, "dropped": 2, "corrupt": 1, "latency_ms": 3.25},
+    "table": {"rate_hz": 200.0, "frames": 12000, "dropped": 0, "corrupt": 0, "sync_offset_ms": 0.125},
+    "aligner": {"rate_hz": 199.0, "dropped": 3},
+}
+
+
+@pytest.fixture(scope="module")
+def trial():
+    """A 60 s emulated swing at 100 Hz: snapshots at 1 Hz, table angles of every sample."""
+    cfg = make_config(duration=60.0, rate=100.0, errors=PAPER_ERRORS)
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
+    batches = list(sim.batches(chunk=1000))
+    for batch in batches:
+        est.update_many(batch)
+    return sim, est.snapshots, batches
+
+
+def _series(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every scalar series of a .rrd: entity path -> (trial time s, values), read with the rerun SDK."""
+    rows: dict[str, list] = defaultdict(list)
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        if chunk.is_static or "Scalars:scalars" not in batch.schema.names:
+            continue
+        t = batch.column(viz.TIMELINE).cast("int64").to_numpy() / 1e9
+        values = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
+        rows[chunk.entity_path].extend(zip(t, values))
+    out = {}
+    for entity, pairs in rows.items():
+        pairs.sort()
+        out[entity] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+    return out
+
+
+def _entities(path: Path) -> dict[str, int]:
+    rows: dict[str, int] = defaultdict(int)
+    for chunk in RrdReader(path).stream():
+        rows[chunk.entity_path] += chunk.num_rows
+    return rows
+
+
+@pytest.fixture(scope="module")
+def saved(trial, tmp_path_factory):
+    sim, snapshots, batches = trial
+    out = tmp_path_factory.mktemp("viz")
+    truth = np.array(PAPER_ERRORS["accel_bias_ug"]) * UG
+    viewer = TrialViewer("save", out, geometry=sim.truth.geometry, truth_bias=truth, blocking=True)
+    viewer.log_snapshots(snapshots[:30])
+    for snap in snapshots[30:]:  # the live path, one at a time
+        viewer.log_snapshot(snap)
+    for batch in batches:
+        viewer.log_table(batch.t, batch.angles)
+    for k in range(1, 61):
+        viewer.log_health(float(k), HEALTH)
+    viewer.close()
+    assert viewer.dropped == 0 and viewer.error is None
+    return out / "recording.rrd", snapshots
+
+
+def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
+    path, snapshots = saved
+    series = _series(path)
+    final = snapshots[-1]
+    t_end = final.t
+    for k, axis in enumerate("xyz"):
+        t, bias = series[f"/bias/{axis}/estimate"]
+        assert t[-1] == pytest.approx(t_end)
+        assert bias[-1] == pytest.approx(final.full.bias[k] / UG, rel=1e-12)
+        assert series[f"/sigma/{axis}"][1][-1] == pytest.approx(final.full.bias_sigma[k] / UG, rel=1e-12)
+        upper = series[f"/bias/{axis}/plus_3sigma"][1][-1]
+        assert upper == pytest.approx((final.full.bias[k] + 3 * final.full.bias_sigma[k]) / UG, rel=1e-12)
+        assert series[f"/bias/{axis}/truth"][1] == pytest.approx(PAPER_ERRORS["accel_bias_ug"][k])
+    # bias rows exist only where the bias was observable, one per such snapshot
+    observable = [s for s in snapshots if s.full.bias is not None]
+    assert len(series["/bias/x/estimate"][0]) == len(observable) < len(snapshots)
+
+    t, rank = series["/observability/rank_12"]
+    assert len(t) == len(snapshots) and rank[-1] == 12 and rank[0] < 12
+    assert series["/observability/rank_9"][1][-1] == final.gravity_only.observability.rank
+    cond = series["/observability/log10_condition"][1][-1]
+    assert cond == pytest.approx(np.log10(final.full.observability.condition))
+
+    for k, angle in enumerate(("pitch", "roll", "yaw")):
+        assert series[f"/alignment/{angle}/method1"][1][-1] == pytest.approx(final.error_method1[k] / DEG, rel=1e-12)
+        assert series[f"/alignment/{angle}/method2"][1][-1] == pytest.approx(final.error_method2[k] / DEG, rel=1e-12)
+    assert series["/alignment/roll/theoretical"][1][-1] == pytest.approx(final.error_theoretical[1] / DEG, rel=1e-12)
+    assert "/alignment/yaw/theoretical" not in series
+
+    for stream, metrics in HEALTH.items():
+        for metric, value in metrics.items():
+            t, values = series[f"/health/{metric}/{stream}"]
+            assert len(t) == 60 and t[-1] == 60.0 and values[-1] == value
+
+
+def test_table_angles_are_decimated_for_the_3d_view(saved, trial):
+    path, _ = saved
+    _, _, batches = trial
+    t, outer = _series(path)["/table/outer_deg"]
+    assert len(t) == 60 * viz.TABLE_RATE_HZ + 1  # one per 50 ms tick from 0.01 s to 60 s
+    assert t[0] == pytest.approx(0.01) and np.diff(t)[1:] == pytest.approx(1.0 / viz.TABLE_RATE_HZ)
+    k = np.searchsorted(batches[-1].t, t[-1])
+    assert outer[-1] == pytest.approx(batches[-1].angles[k, 0] / DEG)
+    entities = _entities(path)
+    for gimbal in ("outer", "outer/middle", "outer/middle/inner"):
+        assert entities[f"/world/table/{gimbal}"] == len(t)
+    assert entities["/world/ib0/cone"] >= 6  # redrawn every 10 s of trial time
+    assert {"/world/table/outer/middle/inner/imu/case", "/world/ib0"} <= set(entities)
+
+
+def test_saved_recording_carries_the_blueprint_and_passes_rrd_verify(saved, tmp_path):
+    path, _ = saved
+    reader = RrdReader(path)
+    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+    env = dict(os.environ, CI="1", HOME=str(tmp_path), XDG_CONFIG_HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path))
+    proc = subprocess.run([viz._rerun_executable(), "rrd", "verify", str(path)], check=False, env=env,
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "verified without error" in proc.stdout + proc.stderr
+
+
+def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, monkeypatch):
+    sim, snapshots, _ = trial
+    monkeypatch.setattr(viz, "QUEUE_ITEMS", 4)
+    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry)
+    release = threading.Event()
+    viewer._submit(release.wait)  # the logging thread is stuck in this job
+    start = time.perf_counter()
+    for k in range(50):
+        viewer.log_health(float(k), HEALTH)
+        viewer.log_snapshot(snapshots[-1])
+    elapsed = time.perf_counter() - start
+    release.set()
+    viewer.close()
+    assert elapsed < 0.5
+    assert viewer.dropped >= 100 - 4
+    assert (tmp_path / "recording.rrd").exists()
+
+
+def test_mode_none_writes_nothing_and_unknown_modes_are_refused(trial, tmp_path):
+    sim, snapshots, batches = trial
+    viewer = TrialViewer("none", tmp_path / "none", geometry=sim.truth.geometry)
+    viewer.log_snapshots(snapshots)
+    viewer.log_table(batches[0].t, batches[0].angles)
+    viewer.log_health(1.0, HEALTH)
+    viewer.close()
+    assert not (tmp_path / "none").exists()
+    with pytest.raises(ValueError, match="spawn, serve, save, none"):
+        TrialViewer("web", tmp_path, geometry=sim.truth.geometry)
+
+
+def test_default_mode_spawns_only_with_a_display(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert default_viewer_mode() == "save"
+    monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
+    assert default_viewer_mode() == "spawn"
+
+
+def _listening(port: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp) listening on ``port``."""
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not os.path.exists(table):
+            continue
+        for line in Path(table).read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            address, hex_port = local.split(":")
+            if state == "0A" and int(hex_port, 16) == port:
+                found.add(address)
+    return found
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="needs Linux /proc/net/tcp")
+def test_serve_mode_binds_loopback_prints_the_url_and_keeps_analytics_off(trial, tmp_path, capsys):
+    sim, snapshots, _ = trial
+    viewer = TrialViewer("serve", tmp_path, geometry=sim.truth.geometry)
+    try:
+        viewer.log_snapshots(snapshots[:5])
+        viewer.close()
+        url = viewer.url
+        assert url.startswith("http://127.0.0.1:") and "url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A" in url
+        assert url in capsys.readouterr().err
+        web_port = int(url.split(":")[2].split("/")[0])
+        grpc_port = int(url.split("%3A")[2].split("%2F")[0])
+        for port in (web_port, grpc_port):
+            assert _listening(port) == {"0100007F"}  # 127.0.0.1 only
+        environ = Path(f"/proc/{viewer.viewer_process.pid}/environ").read_bytes().split(b"\0")
+        assert b"CI=1" in environ or any(e.startswith(b"CI=") for e in environ)
+    finally:
+        viewer.stop()
+    assert viewer.viewer_process is None
+    assert (tmp_path / "recording.rrd").stat().st_size > 0
