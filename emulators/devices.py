@@ -201,7 +201,7 @@ class FrameSource:
     def __init__(self, clock: DeviceClock, seed: int, device: int) -> None:
         self.clock = clock
         self.state: dict[str, Any] = {"rng": np.random.Generator(np.random.PCG64(np.random.SeedSequence(
-            [seed, device, 1]))), "last": 0.0}
+            [seed, device, 1]))), "last": clock.latch_delay}  # "last": end of the previous interval
 
     def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
         raise NotImplementedError
