@@ -8,6 +8,7 @@ i.e. scipy's intrinsic ``"ZXY"`` sequence. Gimbal angle arrays are ordered (oute
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,16 +107,24 @@ class TableGeometry:
             tuple(a * DEG for a in table.mounting_deg),
         )
 
-    @property
+    @cached_property
     def table_to_n(self) -> Rotation:
         """C_table^n = R_tilt . Rz(azimuth)."""
         tilt = Rotation.from_rotvec([self.tilt[0], self.tilt[1], 0.0])
         return tilt * Rotation.from_euler("z", self.azimuth)
 
-    @property
+    @cached_property
     def body_to_mount(self) -> Rotation:
         """C_b^mount: the IMU case in the inner gimbal frame."""
         return euler_rotation(np.asarray(self.mounting))
+
+    @cached_property
+    def _table_to_n_matrix(self) -> np.ndarray:
+        return self.table_to_n.as_matrix()
+
+    @cached_property
+    def _body_to_mount_matrix(self) -> np.ndarray:
+        return self.body_to_mount.as_matrix()
 
     def attitude(self, angles: np.ndarray) -> Rotation:
         """C_b^n = C_table^n . Rz(outer) Rx(middle) Ry(inner) . C_b^mount; angles (rad) (3,) or (N, 3)."""
@@ -131,7 +140,7 @@ class TableGeometry:
         rz, rx, ry = (_axis_matrices(angles[:, k], axis) for k, axis in enumerate((2, 0, 1)))
         inner = ry
         middle_inner = rx @ ry
-        c_bn = self.table_to_n.as_matrix() @ rz @ middle_inner @ self.body_to_mount.as_matrix()
+        c_bn = self._table_to_n_matrix @ rz @ middle_inner @ self._body_to_mount_matrix
         return c_bn, middle_inner, inner
 
     def body_rate_from(self, middle_inner: np.ndarray, inner: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
@@ -142,7 +151,7 @@ class TableGeometry:
         rates = np.atleast_2d(angle_rates)
         w_mount = middle_inner[:, 2, :] * rates[:, 0:1] + inner[:, 0, :] * rates[:, 1:2]
         w_mount[:, 1] += rates[:, 2]
-        return w_mount @ self.body_to_mount.as_matrix()
+        return w_mount @ self._body_to_mount_matrix
 
     def body_rate(self, angles: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
         """omega_nb^b (rad/s) from gimbal angles and their rates, both (N, 3) ordered (outer, middle, inner)."""

@@ -154,3 +154,18 @@ def test_a_solve_instant_inside_a_data_gap_is_served_by_the_next_sample():
     times = [s.t for s in est.snapshots]
     assert times == [7.0, pytest.approx(15.01)]
     assert est.snapshots[-1].samples == 1001
+
+
+def test_rodrigues_and_cross_kernels_match_scipy_and_numpy():
+    from scipy.spatial.transform import Rotation
+
+    from hil.estimation.strapdown import cross, orthonormalised, rotation_matrices
+
+    rng = np.random.default_rng(5)
+    for scale in (1e-9, 1e-4, 0.3, 3.0):
+        v = rng.normal(size=(50, 3)) * scale
+        np.testing.assert_allclose(rotation_matrices(v), Rotation.from_rotvec(v).as_matrix(), atol=2e-16 * 8)
+    u, w = rng.normal(size=(2, 20, 3))
+    np.testing.assert_allclose(cross(u, w), np.cross(u, w), atol=1e-15)
+    c = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix() * (1 + 1e-9)
+    np.testing.assert_allclose(orthonormalised(c) @ orthonormalised(c).T, np.eye(3), atol=1e-15)

@@ -94,8 +94,9 @@ class OnlineEstimator:
         step = self.strapdown.update_many(batch.dtheta, batch.dv, dt)
         table = None
         if batch.angles is not None:
-            table = self.table.update_segments(batch.dv / dt[:, None], self._mean_table_attitude(batch.angles), stops)
-            references = self.geometry.attitude_matrix(batch.angles[np.array(stops) - 1])[0]
+            mean_attitude, attitude = self._table_attitudes(batch.angles)
+            table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops)
+            references = attitude[np.array(stops) - 1]
         for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, step.dv_ib0 / dt[:, None], step.c_mean, stops)):
             if table is not None:
                 next(table)
@@ -131,16 +132,20 @@ class OnlineEstimator:
     def table_referenced(self) -> TableReferencedBias:
         return self.table.solve()
 
-    def _mean_table_attitude(self, angles: np.ndarray) -> np.ndarray:
-        """Mean of C_b^n over each interval by Simpson's rule; the mid-interval angles come from the
-        quadratic through the last three latched angles (weights -1/8, 3/4, 3/8)."""
+    def _table_attitudes(self, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """C_b^n over each interval (mean, by Simpson's rule) and at its end, from the latched angles.
+
+        The mid-interval angles come from the quadratic through the last three latched angles
+        (weights -1/8, 3/4, 3/8).
+        """
         history = self._angle_history if self._angle_history is not None else np.vstack((angles[0], angles[0]))
         series = np.unwrap(np.vstack((history, angles)), axis=0)
         mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
-        c_end = self.geometry.attitude_matrix(series[1:])[0]
-        c_mid = self.geometry.attitude_matrix(mid)[0]
+        n = len(series) - 1
+        c = self.geometry.attitude_matrix(np.vstack((series[1:], mid)))[0]
+        c_end, c_mid = c[:n], c[n:]
         self._angle_history = series[-2:]
-        return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0
+        return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0, c_end[1:]
 
     def _snapshot(self) -> Snapshot:
         full = self.gravity.solve(with_bias=True)

@@ -1,0 +1,72 @@
+"""The live harness at real time: CPU share of the harness process, latency, memory.
+
+Runs the default emulated trial (emulated devices in their own process) through the harness in
+this process and prints: CPU time of this process over the trial (share of one core), the
+chunk-arrival -> estimator-updated latency p50/p99/max, and the resident memory every minute.
+
+    .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml]
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from emulators.emulate import spawn_emulator
+from hil.config import load_config
+from hil.live import LiveTrial
+
+
+def rss_mib() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=600.0)
+    parser.add_argument("--config", default="configs/emulated_swing.yaml")
+    args = parser.parse_args()
+    cfg = load_config(args.config)
+    text = Path(args.config).read_text()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp)
+        emulator, ports = spawn_emulator(Path(args.config), out / "ports.json", "1", args.duration)
+        trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None)
+        memory: list[tuple[float, float]] = []
+        stop = threading.Event()
+
+        def sample_memory() -> None:
+            while not stop.wait(60.0):
+                memory.append((trial.processor.trial_time, rss_mib()))
+
+        watcher = threading.Thread(target=sample_memory, daemon=True)
+        watcher.start()
+        memory.append((0.0, rss_mib()))
+        cpu0, wall0 = resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
+        trial.run()
+        cpu1, wall1 = resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
+        stop.set()
+        emulator.wait()
+        memory.append((trial.processor.trial_time, rss_mib()))
+        cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+        wall = wall1 - wall0
+        lat = trial.latency.percentiles_ms()
+        counts = trial.processor.counts()
+        print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
+              f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")
+        print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "
+              f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
+        print("latency chunk arrival -> estimate updated: "
+              + ", ".join(f"{k.removeprefix('latency_')} {v:.2f}" for k, v in lat.items()))
+        print("resident memory (trial s, MiB): " + ", ".join(f"({t:.0f}, {m:.1f})" for t, m in memory))
+
+
+if __name__ == "__main__":
+    main()
