@@ -52,6 +52,39 @@ def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: l
     print(_summary(result, out))
 
 
+def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
+    """The Rerun viewer ``--viewer`` asks for (None for ``none``)."""
+    if args.viewer == "none":
+        return None
+    import numpy as np
+
+    from hil.config import UG
+    from hil.frames import TableGeometry
+    from hil.viz import TrialViewer
+
+    truth = np.array(cfg.imu.errors.accel_bias_ug) * UG if cfg.imu.source == "emulator" else None
+    viewer = TrialViewer(args.viewer, out, geometry=TableGeometry.from_config(cfg.turntable), truth_bias=truth,
+                         bind=args.bind, recording_name=cfg.trial.name, blocking=blocking)
+    if viewer.url:
+        print(f"web viewer: {viewer.url}", file=sys.stderr)
+    return viewer
+
+
+def _close_viewer(viewer) -> None:
+    """Finish the .rrd; a served web viewer stays up until Ctrl-C."""
+    if viewer is None:
+        return
+    viewer.close()
+    if viewer.mode == "serve":
+        print(f"viewer serving at {viewer.url}; Ctrl-C to stop", file=sys.stderr)
+        try:
+            while viewer.viewer_process is not None and viewer.viewer_process.poll() is None:
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass
+        viewer.stop()
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from emulators.emulate import parse_speed, spawn_emulator
     from hil.live import LiveTrial, TrialAborted
@@ -76,9 +109,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UsageError("an emulated trial needs trial.duration_s or --duration")
         emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration)
     failure = None
+    viewer = _viewer(args, cfg, out, blocking=False)
     try:
         with ConsoleProgress(duration, quiet=args.quiet) as progress:
-            trial = LiveTrial(cfg, config_text, out, duration, ports, on_progress=progress.update,
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, on_progress=progress.update,
                               source_done=(lambda: emulator.poll() is not None) if emulator else None)
             try:
                 trial.run()
@@ -91,6 +125,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if processor.estimator is None:
         raise UsageError(failure or "no IMU data was received")
     _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, config_text)
+    _close_viewer(viewer)
     if failure:
         print(f"hil: trial ended early: {failure}", file=sys.stderr)
         return 1
@@ -111,15 +146,19 @@ def _stop(process) -> None:
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.replay import recording_path, replay
 
-    processor, recording, cfg = replay(args.source)
-    if processor.estimator is None:
-        raise UsageError(f"{args.source}: the recording holds no IMU data")
+    from hil.replay import recorded_config_of
+
     source_dir = recording_path(args.source).parent
     out = Path(args.out) if args.out else source_dir / "replay"
+    viewer = _viewer(args, recorded_config_of(args.source), out, blocking=True)
+    processor, recording, cfg = replay(args.source, viewer=viewer)
+    if processor.estimator is None:
+        raise UsageError(f"{args.source}: the recording holds no IMU data")
     if recording.truncated:
         print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
               file=sys.stderr)
     _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, recording.metadata["config"])
+    _close_viewer(viewer)
     return 0
 
 
@@ -136,12 +175,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         solve_period=1.0 / cfg.estimator.solve_rate_hz,
         rank_tolerance=cfg.estimator.rank_tolerance,
     )
+    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
+    viewer = _viewer(args, cfg, out, blocking=True)
     for batch in sim.batches():
         est.update_many(batch)
+        if viewer is not None:
+            viewer.log_table(batch.t, batch.angles)
     n = sim.samples
     result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
-    _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
-            Path(args.config).read_text())
+    _finish(args, cfg, out, result, est.snapshots, Path(args.config).read_text())
+    if viewer is not None:
+        viewer.log_snapshots(est.snapshots)
+    _close_viewer(viewer)
     return 0
 
 
@@ -188,6 +233,15 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> None:
+    from hil.viz import VIEWER_MODES, default_viewer_mode
+
+    default = default or default_viewer_mode()
+    p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
+                   help=f"Rerun viewer: native window, web viewer, .rrd file only, or nothing (default {default})")
+    p.add_argument("--bind", default="127.0.0.1", help="address the web viewer listens on (default 127.0.0.1)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -199,18 +253,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    _viewer_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
     p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")
     p.add_argument("--out", help="output directory (default: RUN_DIR/replay)")
     p.add_argument("--no-figures", action="store_true")
+    _viewer_options(p)
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
     p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    _viewer_options(p, default="none")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")

@@ -19,7 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -28,10 +28,9 @@ from drivers.session import DeviceSession
 from drivers.tap import RawListener
 from drivers.transport import CanTransport, SerialTransport, Transport
 from hil.config import Config
-from hil.estimation.online import Snapshot
 from hil.processing import IMU, TABLE, TrialProcessor
 from hil.recording import Recorder, to_ns
-from hil.samples import AlignedSample
+from hil.sinks import Viewer, ViewerSinks, health
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 1.0  # no data from any device for this long ends the trial
@@ -41,15 +40,6 @@ SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks
 
 class TrialAborted(RuntimeError):
     """The trial could not go on (no data, the devices went away); outputs hold what was received."""
-
-
-class Viewer(Protocol):
-    """What the live trial needs of a viewer (see :mod:`hil.viz`)."""
-
-    def log_snapshot(self, snap: Snapshot) -> None: ...
-    def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
-    def log_health(self, t: float, health: dict[str, dict[str, float]]) -> None: ...
-    def close(self) -> None: ...
 
 
 class Fanout(RawListener):
@@ -127,8 +117,10 @@ class LiveTrial:
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration)
         self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
         self.fanout = Fanout(self.recorder, self.queue)
-        self.processor = TrialProcessor(cfg, duration, on_snapshot=self._on_snapshot, on_aligned=self._on_aligned)
         self.latency = LatencyStats()
+        sinks = ViewerSinks(viewer, self._live_health)
+        self.processor = TrialProcessor(cfg, duration, sinks.on_snapshot, sinks.on_aligned)
+        sinks.processor = self.processor
         codecs = {name: d.codec for name, d in self.processor.decoders.items()}
         self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
                          for name, t in transports(cfg, ports).items()]
@@ -150,15 +142,13 @@ class LiveTrial:
                 self.viewer.close()
 
     def health(self) -> dict[str, dict[str, float]]:
-        counts = self.processor.counts()
-        imu, table = (self.processor.decoders[s].framer.counters for s in (IMU, TABLE))
-        return {
-            IMU: {"frames": imu.frames, "corrupt": imu.corrupt, "missing": imu.missing,
-                  "outages": counts.extra["imu_outages"]},
-            TABLE: {"frames": table.frames, "corrupt": table.corrupt, "missing": table.missing,
-                    "outages": counts.extra["table_outages"]},
-            "aligner": {"aligned": counts.aligned, "queue": self.queue.qsize(), **self.latency.percentiles_ms()},
-        }
+        """Stream counters with the live figures (queue length, latency)."""
+        figures = health(self.processor)
+        figures["aligner"].update(self._live_health()["aligner"])
+        return figures
+
+    def _live_health(self) -> dict[str, dict[str, float]]:
+        return {"aligner": {"queue": self.queue.qsize(), **self.latency.percentiles_ms()}}
 
     def _loop(self) -> None:
         started = time.monotonic()
@@ -189,15 +179,3 @@ class LiveTrial:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
         if last and now - last > WATCHDOG_S:
             raise TrialAborted(f"watchdog: no data from any device for {WATCHDOG_S:.0f} s")
-
-    def _on_snapshot(self, snap: Snapshot) -> None:
-        if self.viewer is not None:
-            self.viewer.log_snapshot(snap)
-            self.viewer.log_health(snap.t, self.health())
-
-    def _on_aligned(self, samples: list[AlignedSample]) -> None:
-        with_angles = [s for s in samples if s.angles is not None]
-        if self.viewer is not None and with_angles:
-            t0 = self.processor.estimator.t0
-            self.viewer.log_table(np.array([s.t - t0 for s in with_angles]),
-                                  np.array([s.angles for s in with_angles], dtype=float))

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 import yaml
 
 from hil.config import Config, ConfigError, parse_config
-from hil.estimation.online import Snapshot
 from hil.processing import TrialProcessor
 from hil.recording import Recording, read_recording
-from hil.samples import AlignedSample
+from hil.sinks import Viewer, ViewerSinks, health
 
 RECORDING_NAME = "recording.mcap"
 
@@ -31,19 +29,32 @@ def recorded_config(recording: Recording, source: str | Path) -> Config:
     return parse_config(data, f"{source} (recorded config)")
 
 
-def replay(source: str | Path, on_snapshot: Callable[[Snapshot], None] | None = None,
-           on_aligned: Callable[[list[AlignedSample]], None] | None = None
-           ) -> tuple[TrialProcessor, Recording, Config]:
-    """Process a recording; returns the finished processor, the recording and its config."""
+def _read(source: str | Path) -> tuple[Path, Recording]:
     path = recording_path(source)
     try:
-        recording = read_recording(path)
+        return path, read_recording(path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def recorded_config_of(source: str | Path) -> Config:
+    """The trial config stored in a run directory's or a file's recording."""
+    path, recording = _read(source)
+    return recorded_config(recording, path)
+
+
+def replay(source: str | Path, viewer: Viewer | None = None) -> tuple[TrialProcessor, Recording, Config]:
+    """Process a recording (and log it to ``viewer``); returns the finished processor, the recording and
+    its config."""
+    path, recording = _read(source)
     cfg = recorded_config(recording, path)
     duration = recording.metadata.get("duration_s")
-    processor = TrialProcessor(cfg, float(duration) if duration else None, on_snapshot, on_aligned)
+    sinks = ViewerSinks(viewer)
+    processor = TrialProcessor(cfg, float(duration) if duration else None, sinks.on_snapshot, sinks.on_aligned)
+    sinks.processor = processor
     for item in recording.items:
         processor.feed(item)
     processor.finish()
+    if viewer is not None and processor.estimator is not None:
+        viewer.log_health(processor.trial_time, health(processor))
     return processor, recording, cfg
