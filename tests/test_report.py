@@ -1,0 +1,117 @@
+"""report.html: self-contained, every figure embedded, measurements judged against the config's limits."""
+
+from __future__ import annotations
+
+import base64
+import re
+import shutil
+
+import pytest
+import yaml
+from conftest import PAPER_ERRORS, make_config, run_estimator
+
+from hil.config import ReportLimits
+from hil.figures import FIGURES
+from hil.report import (
+    FAIL,
+    NOT_JUDGED,
+    PASS,
+    ReportError,
+    measurements,
+    overall,
+    write_report,
+)
+from hil.results import StreamCounts, build_result, write_outputs
+
+
+@pytest.fixture(scope="module")
+def trial_dir(tmp_path_factory):
+    """Outputs of a 60 s emulated swing: result.json, series.csv, the figures, config.yaml."""
+    cfg = make_config(duration=60.0, rate=100.0, errors=PAPER_ERRORS)
+    est = run_estimator(cfg, solve_period=1.0)
+    n = est.solution().samples
+    result = build_result("report-test", est, StreamCounts(n, n, n, dropped=3), PAPER_ERRORS["accel_bias_ug"])
+    out = tmp_path_factory.mktemp("trial")
+    write_outputs(out, result, est.snapshots, figures=True)
+    return out, result
+
+
+def _outcomes(page: str) -> dict[str, str]:
+    """measurement name -> outcome cell text, parsed from the report's table."""
+    rows = re.findall(r"<tr class='row-[^']*'><td><code>([^<]+)</code>.*?<td class='outcome [^']*'>([^<]+)</td></tr>", page)
+    return dict(rows)
+
+
+def test_report_is_self_contained_with_every_figure_embedded(trial_dir):
+    out, _ = trial_dir
+    path = write_report(out, ReportLimits())
+    assert path == out / "report.html"
+    page = path.read_text(encoding="utf-8")
+    assert not re.search(r"https?://", page)
+    assert not re.search(r"<(link|script)\b", page)
+    embedded = [base64.b64decode(b) for b in re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)]
+    assert sorted(embedded) == sorted((out / name).read_bytes() for name in FIGURES)
+    assert all(src.startswith("data:image/png;base64,") for src in re.findall(r"src='([^']*)'", page))
+
+
+def test_limits_that_pass_and_limits_that_fail_are_judged(trial_dir):
+    out, result = trial_dir
+    sigma = max(result["estimate"]["accel_bias_sigma_ug"])
+    page = write_report(out, ReportLimits(bias_sigma_ug_max=2 * sigma, dropped_max=5)).read_text()
+    outcomes = _outcomes(page)
+    assert outcomes["accel_bias_sigma_x"] == outcomes["frames_dropped"] == PASS
+    assert outcomes["converged_at"] == NOT_JUDGED
+    assert "class=\"verdict PASS\"" in page
+
+    page = write_report(out, ReportLimits(bias_sigma_ug_max=2 * sigma, dropped_max=2)).read_text()
+    outcomes = _outcomes(page)
+    assert outcomes["accel_bias_sigma_y"] == PASS and outcomes["frames_dropped"] == FAIL
+    assert "class=\"verdict FAIL\"" in page and "1 failed: frames_dropped" in page
+
+
+def test_limits_come_from_the_config_copy_beside_the_result(trial_dir, tmp_path):
+    out, result = trial_dir
+    shutil.copytree(out, tmp_path / "run")
+    error_x = abs(result["estimate"]["accel_bias_ug"][0] - 60.0)
+    config = make_config(duration=60.0).model_dump(mode="json", exclude_none=True)
+    config["output"] = {"limits": {"bias_error_ug_max": error_x / 2, "method2_error_deg_max": 10.0}}
+    (tmp_path / "run" / "config.yaml").write_text(yaml.safe_dump(config))
+    page = write_report(tmp_path / "run").read_text()
+    outcomes = _outcomes(page)
+    assert outcomes["accel_bias_error_x"] == FAIL
+    assert outcomes["alignment_method2_pitch"] == outcomes["alignment_method2_roll"] == PASS
+    assert outcomes["accel_bias_sigma_x"] == NOT_JUDGED
+
+
+def test_missing_figures_are_drawn_from_the_series(trial_dir, tmp_path):
+    out, _ = trial_dir
+    shutil.copytree(out, tmp_path / "run")
+    for name in FIGURES:
+        (tmp_path / "run" / name).unlink()
+    page = write_report(tmp_path / "run", ReportLimits()).read_text()
+    images = re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
+    assert len(images) == len(FIGURES)
+    assert all(base64.b64decode(b).startswith(b"\x89PNG") for b in images)
+    assert not any((tmp_path / "run" / name).exists() for name in FIGURES)
+
+
+def test_a_judged_measurement_without_a_value_fails():
+    static = {
+        "trial": {"name": "static", "duration_s": 60.0, "samples": 6000},
+        "streams": {"dropped": 0, "corrupt": 0},
+        "estimate": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False, "gram_rank": 9,
+                     "converged_at_s": None},
+        "alignment_deg": {"method1": None, "method2": None, "theoretical": None},
+    }  # fmt: skip
+    judged = measurements(static, ReportLimits(bias_sigma_ug_max=10.0, corrupt_max=0))
+    by_name = {m.name: m for m in judged}
+    assert by_name["accel_bias_sigma_z"].outcome == FAIL and by_name["accel_bias_sigma_z"].value is None
+    assert by_name["frames_corrupt"].outcome == PASS
+    assert by_name["converged_at"].outcome == NOT_JUDGED
+    assert overall(judged) == FAIL
+    assert overall(measurements(static, ReportLimits(corrupt_max=0))) == PASS
+
+
+def test_a_directory_without_result_json_is_refused(tmp_path):
+    with pytest.raises(ReportError, match="result.json: not found"):
+        write_report(tmp_path)
