@@ -55,15 +55,20 @@ CONE_PERIOD_S = 10.0  # the reconstructed cone is redrawn at most this often (tr
 CONE_POINTS = 72
 CONE_LENGTH = 1.5  # scene units (the outer gimbal has radius 1)
 QUEUE_ITEMS = 1024
+SMALL_BATCH = 8  # rows up to this many are logged one by one (merged by the SDK), more as columns
+GIMBALS = (("world/table/outer", 0, 2), ("world/table/outer/middle", 1, 0), ("world/table/outer/middle/inner", 2, 1))
 
 AXES = ("x", "y", "z")
 ANGLES = ("pitch", "roll", "yaw")
-HEALTH_METRICS = ("rate_hz", "frames", "dropped", "corrupt", "latency_ms", "sync_offset_ms")
+HEALTH_VIEWS = (("rate_hz", "frame rate (Hz)"), ("frames", "frames"), ("dropped", "dropped frames"),
+                ("corrupt", "corrupt frames (CRC, framing)"), ("latency_ms", "latency (ms)"),
+                ("sync_offset_ms", "sync offset (ms)"))
 
 _AXIS_COLORS = {"x": (228, 26, 28), "y": (77, 175, 74), "z": (55, 126, 184)}
 _BAND = 0.55  # band lines: the axis colour mixed with grey
 _TRUTH = (255, 170, 0)
 _METHOD_COLORS = {"method1": (230, 85, 13), "method2": (49, 163, 84), "theoretical": (170, 170, 170)}
+_METHOD_NAMES = {"method1": "method 1", "method2": "method 2", "theoretical": "theoretical"}
 _STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (255, 127, 0))
 
 
@@ -86,38 +91,32 @@ def _band_color(axis: str) -> tuple[int, int, int]:
     return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in _AXIS_COLORS[axis])
 
 
-def default_blueprint(*, truth: bool = True) -> rrb.Blueprint:
-    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and health."""
-    del truth  # the truth series simply does not exist without a truth; the layout is the same
+def default_blueprint() -> rrb.Blueprint:
+    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and stream health."""
     bias = [
         rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg)", plot_legend=rrb.PlotLegend(visible=a == "x"))
         for a in AXES
     ]
     bias.append(rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg)"))
+    observability = [
+        rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank", axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
+        rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
+                           plot_legend=rrb.PlotLegend(visible=False)),
+    ]  # fmt: skip
     alignment = [
         rrb.TimeSeriesView(origin=f"/alignment/{angle}", name=f"{angle} error (deg)",
                            plot_legend=rrb.PlotLegend(visible=angle == "pitch"))
         for angle in ANGLES
     ]  # fmt: skip
-    observability = [
-        rrb.TimeSeriesView(origin="/observability", contents=["/observability/rank_12", "/observability/rank_9"],
-                           name="scaled Gram rank", axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
-        rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
-                           plot_legend=rrb.PlotLegend(visible=False)),
-    ]  # fmt: skip
     health = rrb.Grid(
-        rrb.TimeSeriesView(origin="/health/rate_hz", name="frame rate (Hz)"),
-        rrb.TimeSeriesView(origin="/health", contents=["/health/dropped/**", "/health/corrupt/**"],
-                           name="dropped / corrupt frames"),
-        rrb.TimeSeriesView(origin="/health/latency_ms", name="latency (ms)"),
-        rrb.TimeSeriesView(origin="/health/sync_offset_ms", name="sync offset (ms)"),
+        *(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
         grid_columns=2,
         name="stream health",
-    )  # fmt: skip
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(*bias, name="accelerometer bias"),
-            rrb.Vertical(*observability, *alignment, row_shares=[1, 1, 1, 1, 1], name="observability and alignment"),
+            rrb.Vertical(*observability, *alignment, name="observability and alignment"),
             rrb.Vertical(
                 rrb.Spatial3DView(origin="/world", name="turntable and apparent gravity in i_b0"),
                 health,
@@ -209,7 +208,7 @@ class TrialViewer:
         self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         rr.set_log_time_enabled(False, recording=self._rec)
         rr.set_log_tick_enabled(False, recording=self._rec)
-        blueprint = default_blueprint(truth=self.truth_bias is not None)
+        blueprint = default_blueprint()
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
         if mode == "save":
@@ -313,13 +312,23 @@ class TrialViewer:
                     self.error = exc
                     log.warning("Rerun logging error (further errors not reported): %s", exc)
 
-    def _send(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
-        """One scalar series, rows with non-finite values left out."""
-        ok = np.isfinite(values)
-        if ok.any():
-            self._rec.send_columns(
-                path, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])], columns=rr.Scalars.columns(scalars=values[ok])
-            )
+    def _scalars(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
+        """Rows of a multi-series entity: values (N, K), one series per column; all-NaN rows left out.
+
+        A few rows go through ``log`` (the SDK merges them into large chunks), many through
+        ``send_columns``; one Rerun call costs tens of microseconds either way, hence few entities."""
+        values = np.asarray(values, dtype=float).reshape(len(t), -1)
+        rows = ~np.all(np.isnan(values), axis=1)
+        if not rows.any():
+            return
+        t, values = t[rows], values[rows]
+        if len(t) <= SMALL_BATCH:
+            for ti, row in zip(t, values):
+                self._rec.set_time(TIMELINE, duration=float(ti))
+                self._rec.log(path, rr.Scalars(row))
+        else:
+            columns = rr.Scalars.columns(scalars=values).partition([values.shape[1]] * len(t))
+            self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=columns)
 
     def _write_snapshots(self, snaps: list[Snapshot]) -> None:
         n = len(snaps)
@@ -328,22 +337,24 @@ class TrialViewer:
         bias = np.array([s.full.bias if s.full.bias is not None else nan3 for s in snaps]) / UG
         sigma = np.array([s.full.bias_sigma if s.full.bias_sigma is not None else nan3 for s in snaps]) / UG
         for k, a in enumerate(AXES):
-            self._send(f"bias/{a}/estimate", t, bias[:, k])
-            self._send(f"bias/{a}/plus_3sigma", t, bias[:, k] + 3.0 * sigma[:, k])
-            self._send(f"bias/{a}/minus_3sigma", t, bias[:, k] - 3.0 * sigma[:, k])
-            self._send(f"sigma/{a}", t, sigma[:, k])
+            series = [bias[:, k], bias[:, k] - 3.0 * sigma[:, k], bias[:, k] + 3.0 * sigma[:, k]]
             if self.truth_bias is not None:
-                self._send(f"bias/{a}/truth", t, np.full(n, self.truth_bias[k] / UG))
-        self._send("observability/rank_12", t, np.array([s.full.observability.rank for s in snaps], float))
-        self._send("observability/rank_9", t, np.array([s.gravity_only.observability.rank for s in snaps], float))
+                series.append(np.where(np.isnan(bias[:, k]), np.nan, self.truth_bias[k] / UG))
+            self._scalars(f"bias/{a}", t, np.column_stack(series))
+        self._scalars("sigma", t, sigma)
+        ranks = [(s.full.observability.rank, s.gravity_only.observability.rank) for s in snaps]
+        self._scalars("observability/rank", t, np.array(ranks, float))
         with np.errstate(divide="ignore", invalid="ignore"):
-            self._send("observability/log10_condition", t,
-                       np.log10(np.array([s.full.observability.condition for s in snaps], float)))  # fmt: skip
-        for method, attr, names in (("method1", "error_method1", ANGLES), ("method2", "error_method2", ANGLES),
-                                    ("theoretical", "error_theoretical", ANGLES[:2])):  # fmt: skip
-            errors = np.array([getattr(s, attr) if getattr(s, attr) is not None else nan3[: len(names)] for s in snaps])
-            for k, angle in enumerate(names):
-                self._send(f"alignment/{angle}/{method}", t, errors[:, k] / DEG)
+            condition = np.log10(np.array([s.full.observability.condition for s in snaps], float))
+        self._scalars("observability/log10_condition", t, np.where(np.isfinite(condition), condition, np.nan))
+        errors = {}
+        for attr, size in (("error_method1", 3), ("error_method2", 3), ("error_theoretical", 2)):
+            errors[attr] = np.array([getattr(s, attr) if getattr(s, attr) is not None else nan3[:size] for s in snaps])
+        for k, angle in enumerate(ANGLES):
+            columns = [errors["error_method1"][:, k], errors["error_method2"][:, k]]
+            if k < 2:
+                columns.append(errors["error_theoretical"][:, k])
+            self._scalars(f"alignment/{angle}", t, np.column_stack(columns) / DEG)
         self._write_cones(snaps)
 
     def _write_cones(self, snaps: list[Snapshot]) -> None:
@@ -364,52 +375,51 @@ class TrialViewer:
             start = self.geometry.attitude_matrix(angles[:1])[0][0]
             self._rec.log("world/ib0", rr.Transform3D(mat3x3=start), rr.TransformAxes3D(0.3), static=True)
             self._ib0_logged = True
-        index = [rr.TimeColumn(TIMELINE, duration=t)]
-        for path, k, axis in (("world/table/outer", 0, 2), ("world/table/outer/middle", 1, 0),
-                              ("world/table/outer/middle/inner", 2, 1)):  # fmt: skip
-            self._rec.send_columns(path, indexes=index, columns=rr.Transform3D.columns(quaternion=_axis_quaternions(angles[:, k], axis)))
-        for k, name in enumerate(("outer", "middle", "inner")):
-            self._send(f"table/{name}_deg", t, angles[:, k] / DEG)
+        for path, k, axis in GIMBALS:
+            q = _axis_quaternions(angles[:, k], axis)
+            if len(t) <= SMALL_BATCH:
+                for ti, qi in zip(t, q):
+                    self._rec.set_time(TIMELINE, duration=float(ti))
+                    self._rec.log(path, rr.Transform3D(quaternion=qi))
+            else:
+                self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+                                       columns=rr.Transform3D.columns(quaternion=q))  # fmt: skip
+        self._scalars("table/angles_deg", t, angles / DEG)
 
     def _write_health(self, t: float, rows: list[tuple[str, str, float]]) -> None:
-        self._rec.set_time(TIMELINE, duration=t)
+        by_metric: dict[str, dict[str, float]] = {}
         for stream, metric, value in rows:
-            path = f"health/{rr.escape_entity_path_part(metric)}/{rr.escape_entity_path_part(stream)}"
-            if path not in self._health_styled:
-                self._health_styled.add(path)
-                self._rec.log(path, rr.SeriesLines(names=stream, colors=self._stream_color(stream)), static=True)
-            self._rec.log(path, rr.Scalars(value))
-
-    def _stream_color(self, stream: str) -> tuple[int, int, int]:
-        if stream not in self._streams:
-            self._streams.append(stream)
-        return _STREAM_COLORS[self._streams.index(stream) % len(_STREAM_COLORS)]
+            by_metric.setdefault(metric, {})[stream] = value
+        for metric, values in by_metric.items():
+            path = f"health/{rr.escape_entity_path_part(metric)}"
+            streams = self._health_streams.setdefault(path, [])
+            if any(stream not in streams for stream in values):
+                streams.extend(stream for stream in values if stream not in streams)
+                colors = [_STREAM_COLORS[k % len(_STREAM_COLORS)] for k in range(len(streams))]
+                self._rec.log(path, rr.SeriesLines(names=streams, colors=colors), static=True)
+            row = np.array([values.get(stream, np.nan) for stream in streams])
+            self._scalars(path, np.array([t]), row[None, :])
 
     # -- setup --
 
     def _log_static(self) -> None:
         rec = self._rec
-        self._health_styled: set[str] = set()
-        self._streams: list[str] = []
+        self._health_streams: dict[str, list[str]] = {}
         for a in AXES:
-            color, band = _AXIS_COLORS[a], _band_color(a)
-            rec.log(f"bias/{a}/estimate", rr.SeriesLines(names="estimate", colors=color, widths=2.0), static=True)
-            rec.log(f"bias/{a}/plus_3sigma", rr.SeriesLines(names="+3σ", colors=band, widths=1.0), static=True)
-            rec.log(f"bias/{a}/minus_3sigma", rr.SeriesLines(names="−3σ", colors=band, widths=1.0), static=True)
+            names, colors, widths = ["estimate", "−3σ", "+3σ"], [_AXIS_COLORS[a], _band_color(a), _band_color(a)], [2, 1, 1]
             if self.truth_bias is not None:
-                rec.log(f"bias/{a}/truth", rr.SeriesLines(names="truth", colors=_TRUTH, widths=1.5), static=True)
-            rec.log(f"sigma/{a}", rr.SeriesLines(names=a, colors=color), static=True)
-        rec.log("observability/rank_12", rr.SeriesLines(names="12-state (with bias)", colors=(55, 126, 184)), static=True)
-        rec.log("observability/rank_9", rr.SeriesLines(names="9-state (method 1)", colors=(230, 85, 13)), static=True)
+                names, colors, widths = names + ["truth"], colors + [_TRUTH], widths + [1.5]
+            rec.log(f"bias/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+        rec.log("sigma", rr.SeriesLines(names=list(AXES), colors=[_AXIS_COLORS[a] for a in AXES]), static=True)
+        rec.log("observability/rank", rr.SeriesLines(names=["12-state (with bias)", "9-state (method 1)"],
+                                                     colors=[(55, 126, 184), (230, 85, 13)]), static=True)  # fmt: skip
         rec.log("observability/log10_condition", rr.SeriesLines(names="log10 cond", colors=(55, 126, 184)), static=True)
         for angle in ANGLES:
-            for method, label in (("method1", "method 1"), ("method2", "method 2"), ("theoretical", "theoretical")):
-                if method == "theoretical" and angle == "yaw":
-                    continue
-                rec.log(f"alignment/{angle}/{method}", rr.SeriesLines(names=label, colors=_METHOD_COLORS[method]),
-                        static=True)  # fmt: skip
-        for name, color in zip(("outer", "middle", "inner"), ((55, 126, 184), (77, 175, 74), (228, 26, 28))):
-            rec.log(f"table/{name}_deg", rr.SeriesLines(names=name, colors=color), static=True)
+            methods = ("method1", "method2") if angle == "yaw" else ("method1", "method2", "theoretical")
+            rec.log(f"alignment/{angle}", rr.SeriesLines(names=[_METHOD_NAMES[m] for m in methods],
+                                                         colors=[_METHOD_COLORS[m] for m in methods]), static=True)  # fmt: skip
+        rec.log("table/angles_deg", rr.SeriesLines(names=["outer", "middle", "inner"],
+                                                   colors=[(55, 126, 184), (77, 175, 74), (228, 26, 28)]), static=True)  # fmt: skip
 
         # the turntable: base, three gimbal rings with their axles, the IMU case on the inner gimbal
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)

@@ -40,19 +40,19 @@ def trial():
 
 
 def _series(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Every scalar series of a .rrd: entity path -> (trial time s, values), read with the rerun SDK."""
+    """Every scalar entity of a .rrd: path -> (trial time s (N,), values (N, series)), read with the rerun SDK."""
     rows: dict[str, list] = defaultdict(list)
     for chunk in RrdReader(path).stream():
         batch = chunk.to_record_batch()
         if chunk.is_static or "Scalars:scalars" not in batch.schema.names:
             continue
         t = batch.column(viz.TIMELINE).cast("int64").to_numpy() / 1e9
-        values = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
+        values = batch.column("Scalars:scalars").to_pylist()
         rows[chunk.entity_path].extend(zip(t, values))
     out = {}
     for entity, pairs in rows.items():
         pairs.sort()
-        out[entity] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+        out[entity] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs], dtype=float))
     return out
 
 
@@ -85,45 +85,47 @@ def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
     path, snapshots = saved
     series = _series(path)
     final = snapshots[-1]
-    t_end = final.t
+    bias, sigma = final.full.bias / UG, final.full.bias_sigma / UG
     for k, axis in enumerate("xyz"):
-        t, bias = series[f"/bias/{axis}/estimate"]
-        assert t[-1] == pytest.approx(t_end)
-        assert bias[-1] == pytest.approx(final.full.bias[k] / UG, rel=1e-12)
-        assert series[f"/sigma/{axis}"][1][-1] == pytest.approx(final.full.bias_sigma[k] / UG, rel=1e-12)
-        upper = series[f"/bias/{axis}/plus_3sigma"][1][-1]
-        assert upper == pytest.approx((final.full.bias[k] + 3 * final.full.bias_sigma[k]) / UG, rel=1e-12)
-        assert series[f"/bias/{axis}/truth"][1] == pytest.approx(PAPER_ERRORS["accel_bias_ug"][k])
+        t, values = series[f"/bias/{axis}"]  # estimate, -3 sigma, +3 sigma, truth
+        assert t[-1] == pytest.approx(final.t)
+        expected = [bias[k], bias[k] - 3 * sigma[k], bias[k] + 3 * sigma[k], PAPER_ERRORS["accel_bias_ug"][k]]
+        assert values[-1] == pytest.approx(expected, rel=1e-12)
+    assert series["/sigma"][1][-1] == pytest.approx(sigma, rel=1e-12)
     # bias rows exist only where the bias was observable, one per such snapshot
     observable = [s for s in snapshots if s.full.bias is not None]
-    assert len(series["/bias/x/estimate"][0]) == len(observable) < len(snapshots)
+    assert len(series["/bias/x"][0]) == len(observable) < len(snapshots)
 
-    t, rank = series["/observability/rank_12"]
-    assert len(t) == len(snapshots) and rank[-1] == 12 and rank[0] < 12
-    assert series["/observability/rank_9"][1][-1] == final.gravity_only.observability.rank
-    cond = series["/observability/log10_condition"][1][-1]
+    t, rank = series["/observability/rank"]  # 12-state, 9-state
+    assert len(t) == len(snapshots) and rank[0, 0] < 12
+    assert list(rank[-1]) == [12, final.gravity_only.observability.rank]
+    cond = series["/observability/log10_condition"][1][-1, 0]
     assert cond == pytest.approx(np.log10(final.full.observability.condition))
 
     for k, angle in enumerate(("pitch", "roll", "yaw")):
-        assert series[f"/alignment/{angle}/method1"][1][-1] == pytest.approx(final.error_method1[k] / DEG, rel=1e-12)
-        assert series[f"/alignment/{angle}/method2"][1][-1] == pytest.approx(final.error_method2[k] / DEG, rel=1e-12)
-    assert series["/alignment/roll/theoretical"][1][-1] == pytest.approx(final.error_theoretical[1] / DEG, rel=1e-12)
-    assert "/alignment/yaw/theoretical" not in series
+        values = series[f"/alignment/{angle}"][1][-1]  # method 1, method 2[, theoretical]
+        expected = [final.error_method1[k], final.error_method2[k]]
+        if angle != "yaw":
+            expected.append(final.error_theoretical[k])
+        assert values == pytest.approx(np.array(expected) / DEG, rel=1e-12)
 
     for stream, metrics in HEALTH.items():
         for metric, value in metrics.items():
-            t, values = series[f"/health/{metric}/{stream}"]
-            assert len(t) == 60 and t[-1] == 60.0 and values[-1] == value
+            t, values = series[f"/health/{metric}"]  # one series per stream reporting the metric, in order
+            assert len(t) == 60 and t[-1] == 60.0
+            assert values[-1, [s for s in HEALTH if metric in HEALTH[s]].index(stream)] == value
+    assert np.isnan(series["/health/latency_ms"][1][-1]).tolist() == [False]  # only the imu reports latency
+    assert np.isnan(series["/health/dropped"][1][-1]).tolist() == [False, False, False]
 
 
 def test_table_angles_are_decimated_for_the_3d_view(saved, trial):
     path, _ = saved
     _, _, batches = trial
-    t, outer = _series(path)["/table/outer_deg"]
+    t, angles = _series(path)["/table/angles_deg"]
     assert len(t) == 60 * viz.TABLE_RATE_HZ + 1  # one per 50 ms tick from 0.01 s to 60 s
     assert t[0] == pytest.approx(0.01) and np.diff(t)[1:] == pytest.approx(1.0 / viz.TABLE_RATE_HZ)
     k = np.searchsorted(batches[-1].t, t[-1])
-    assert outer[-1] == pytest.approx(batches[-1].angles[k, 0] / DEG)
+    assert angles[-1] == pytest.approx(batches[-1].angles[k] / DEG)
     entities = _entities(path)
     for gimbal in ("outer", "outer/middle", "outer/middle/inner"):
         assert entities[f"/world/table/{gimbal}"] == len(t)
