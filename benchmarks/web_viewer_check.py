@@ -1,0 +1,134 @@
+"""Check that ``--viewer serve`` serves a page that renders the trial in headless Chromium.
+
+    apt-get install chromium                    (Debian's package: /usr/bin/chromium)
+    .venv/bin/pip install -e '.[webcheck]'      (Python Playwright; its own browsers are not needed)
+    .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--out web_viewer.png]
+
+Logs a 60 s emulated swing through ``TrialViewer("serve", ...)``, checks that the web and gRPC
+servers listen on 127.0.0.1 only, opens the printed URL in headless Chromium with software WebGL
+(``--use-gl=angle --use-angle=swiftshader --enable-unsafe-swiftshader``), waits for the viewer's
+WebAssembly to load and draw, and saves a screenshot. ``chromium --headless --screenshot`` alone
+fires before the WebAssembly has loaded, hence Playwright and the wait.
+
+Requests the page makes to hosts other than 127.0.0.1 are blocked (the check needs no network)
+and listed: the Rerun web viewer itself asks for a web font, its release and example lists and
+its own usage analytics; on a machine without internet access these fail without harm.
+Exit status 0 when the page loaded and the screenshot was written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
+
+import numpy as np
+
+from emulators.simulation import Simulation
+from hil.config import UG, parse_config
+from hil.estimation.online import OnlineEstimator
+from hil.viz import TrialViewer
+
+CHROMIUM = "/usr/bin/chromium"
+GL_ARGS = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+
+
+def listening_addresses(port: int) -> set[str]:
+    """Local IPv4/IPv6 addresses listening on ``port`` (Linux /proc/net)."""
+    found = set()
+    for table, width in (("/proc/net/tcp", 8), ("/proc/net/tcp6", 32)):
+        path = Path(table)
+        if not path.exists():
+            continue
+        for line in path.read_text().splitlines()[1:]:
+            fields = line.split()
+            address, hex_port = fields[1].split(":")
+            if fields[3] == "0A" and int(hex_port, 16) == port and len(address) == width:
+                found.add(".".join(str(int(address[i : i + 2], 16)) for i in (6, 4, 2, 0)) if width == 8 else address)
+    return found
+
+
+def log_trial(out: Path) -> TrialViewer:
+    cfg = parse_config({
+        "trial": {"name": "web-check", "duration_s": 60.0, "rate_hz": 200, "seed": 5},
+        "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+        "turntable": {"motion": {"kind": "swing", "axes": {
+            "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
+            "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
+            "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6}}}},
+        "imu": {"errors": {"accel_bias_ug": [60, 150, 260], "accel_noise_ug": [50, 50, 50]}},
+    })  # fmt: skip
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
+    viewer = TrialViewer("serve", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
+                         blocking=True, recording_name="web-check")  # fmt: skip
+    batches = list(sim.batches(chunk=2000))
+    for batch in batches:
+        est.update_many(batch)
+    viewer.log_snapshots(est.snapshots)  # the time series first: the page draws them as they arrive
+    for batch in batches:
+        viewer.log_table(batch.t, batch.angles)
+    for k in range(1, 61):
+        health = {"imu": {"rate_hz": 200.0, "frames": 200 * k, "dropped": k // 20, "corrupt": 0, "latency_ms": 2.0},
+                  "table": {"rate_hz": 200.0, "frames": 200 * k, "sync_offset_ms": 0.05}}  # fmt: skip
+        viewer.log_health(float(k), health)
+    viewer.close()
+    return viewer
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load and draw (default 20)")
+    parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
+    parser.add_argument("--chromium", default=CHROMIUM, help=f"browser executable (default {CHROMIUM})")
+    args = parser.parse_args()
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        print("Python Playwright is missing: .venv/bin/pip install -e '.[webcheck]'", file=sys.stderr)
+        return 2
+    if not Path(args.chromium).exists():
+        print(f"{args.chromium} not found: apt-get install chromium", file=sys.stderr)
+        return 2
+
+    with tempfile.TemporaryDirectory() as tmp:
+        viewer = log_trial(Path(tmp))
+        try:
+            web_port = urlsplit(viewer.url).port
+            grpc_port = urlsplit(parse_qs(urlsplit(viewer.url).query)["url"][0]).port
+            for name, port in (("web viewer", web_port), ("gRPC", grpc_port)):
+                print(f"{name} port {port} listens on {sorted(listening_addresses(port))}")
+            blocked: set[str] = set()
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=args.chromium, headless=True, args=GL_ARGS)
+                page = browser.new_page(viewport={"width": 1600, "height": 1000})
+
+                def route(request_route):
+                    host = urlsplit(request_route.request.url).hostname
+                    if host in ("127.0.0.1", "localhost", "::1"):
+                        request_route.continue_()
+                    else:
+                        blocked.add(f"{urlsplit(request_route.request.url).scheme}://{host}")
+                        request_route.abort()
+
+                page.route("**/*", route)
+                errors: list[str] = []
+                page.on("pageerror", lambda exc: errors.append(str(exc)))
+                page.goto(viewer.url)
+                page.wait_for_timeout(args.wait * 1000)
+                title = page.title()
+                page.screenshot(path=str(args.out))
+                browser.close()
+            print(f"page {viewer.url}\n  title {title!r}, screenshot {args.out}")
+            print(f"  blocked requests to: {', '.join(sorted(blocked)) or 'none'}")
+            if errors:
+                print(f"  page errors: {len(errors)}, first: {errors[0][:200]}")
+        finally:
+            viewer.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
