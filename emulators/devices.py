@@ -40,6 +40,7 @@ from hil.samples import ImuSample, TableSample
 WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
 DRAIN_S = 5.0  # longest wait for a reader to take the bytes queued before an unplug
 REPLUG_S = 5.0  # longest wait for the unplugged pty's own name to come free again
+REOPEN_SETTLE_S = 0.5  # after a replug, a reader's open (which flushes its input) may be slow to finish
 LATENCY_BIN_S = 10e-6  # resolution of the write-latency histogram
 LATENCY_BINS = 10_000  # up to 100 ms; later writes land in the last bin
 
@@ -357,7 +358,7 @@ class DeviceWriter:
             if port.path != old:
                 self.on_path()
             if self.wait_readers:
-                wait_for_readers([port], self.stop)
+                wait_for_readers([port], self.stop, REOPEN_SETTLE_S)
         return True
 
     def _send(self, frames: list, due: float | None) -> bool:

@@ -27,8 +27,15 @@ from pathlib import Path
 
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
-from emulators.devices import (CanPort, DeviceStream, DeviceWriter, ImuSource, PtyPort, TableSource,
-                               wait_for_readers)
+from emulators.devices import (
+    CanPort,
+    DeviceStream,
+    DeviceWriter,
+    ImuSource,
+    PtyPort,
+    TableSource,
+    wait_for_readers,
+)
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.servo import Servo
 from emulators.simulation import Simulation

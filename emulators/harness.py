@@ -11,6 +11,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Self
 
 from emulators.emulate import EmulatorStats, run_emulator
 from hil.config import Config
@@ -41,7 +42,7 @@ class EmulatorThread:
     def _run(self, cfg: Config, speed: float | None, duration: float | None, wait_readers: bool) -> None:
         try:
             self.stats = run_emulator(cfg, self.ports_file, speed, duration, self.stop, wait_readers)
-        except BaseException as exc:  # handed to the caller by join()
+        except Exception as exc:  # noqa: BLE001 - raised again by join()
             self.error = exc
 
     def current_ports(self) -> dict:
@@ -63,7 +64,7 @@ class EmulatorThread:
         self.stop.set()
         return self.join()
 
-    def __enter__(self) -> EmulatorThread:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -29,10 +29,25 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drivers.acl import (AXIS_NUMBER, ERR_BAD_ARGUMENT, ERR_INTERLOCK, ERR_LIMIT, MODES, AclCommand, AclError,
-                         AclReply)
+from drivers.acl import (
+    AXIS_NUMBER,
+    ERR_BAD_ARGUMENT,
+    ERR_INTERLOCK,
+    ERR_LIMIT,
+    MODES,
+    AclCommand,
+    AclError,
+    AclReply,
+)
 from drivers.tts1 import Mode, Status, status_byte
-from emulators.motion import ConstantRate, MotionProfile, Positions, Ramp, Swing, motion_breaks
+from emulators.motion import (
+    ConstantRate,
+    MotionProfile,
+    Positions,
+    Ramp,
+    Swing,
+    motion_breaks,
+)
 from hil.config import DEG, LimitsConfig, MotionConfig, TurntableConfig
 from hil.samples import GIMBAL_AXES
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hil.frames import Earth, TableGeometry
 from emulators.motion import MotionProfile, motion_breaks
+from hil.frames import Earth, TableGeometry
 
 QUADRATURE_NODES = 3  # exact for polynomials of degree 5 over one sample interval
 

@@ -1,4 +1,4 @@
-"""``hil emulate`` in its own process: a third-party terminal reads it, and Ctrl-C leaves nothing behind."""
+"""``hil emulate`` in its own process: a third-party terminal reads it; Ctrl-C or SIGTERM leaves nothing behind."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def emulator(tmp_path: Path):
 
 
 def test_pyserial_miniterm_reads_the_emulated_table_stream(emulator):
-    proc, ports, _ = emulator
+    _, ports, _ = emulator
     console, console_slave = os.openpty()  # miniterm wants a terminal for its console
     tty.setraw(console_slave)
     imu = serial.Serial(ports["imu"], timeout=0.05)  # the pulse train starts once both ports have a reader
@@ -85,7 +85,8 @@ def children_of(pid: int) -> list[int]:
     return found
 
 
-def test_ctrl_c_closes_the_ptys_and_releases_the_command_port(emulator):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_signal_closes_the_ptys_and_releases_the_command_port(emulator, sig):
     proc, ports, ports_file = emulator
     host, port = ports["turntable_cmd"].removeprefix("socket://").split(":")
     with socket.create_connection((host, int(port)), timeout=2) as conn:  # a client still connected
@@ -98,8 +99,11 @@ def test_ctrl_c_closes_the_ptys_and_releases_the_command_port(emulator):
                 got += table.read(4096)
                 imu.read(4096)
             assert len(got) >= 24 * 20 and children_of(proc.pid) == []
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(sig)
             assert proc.wait(5) == 0
+            with pytest.raises(serial.SerialException):
+                for _ in range(100):
+                    table.read(4096)
         assert conn.recv(100) == b""  # the server closed the connection
     assert not any(os.path.exists(p) for p in (ports["imu"], ports["turntable_data"]))
     assert not ports_file.exists()
