@@ -23,9 +23,15 @@ class SequenceUnwrapper:
     times say that about a counter period or more has passed, the same readings are taken as wraps.
     With the device rate known, the host receive times also resolve wraps lost in an outage longer
     than the counter period (a 7-bit counter at 1 kHz wraps every 128 ms).
+
+    A wide counter (16 bits and more) that jumps ahead by more than ``JUMP_LIMIT`` counts, where the
+    host times do not explain the jump, is taken as damage a weak checksum let through: the frame is
+    counted corrupt (missing -2) and the index stays, unless the next frame continues from it (a
+    counter reset), which then moves the index.
     """
 
     REORDER_WINDOW = 8  # counts; a backward step larger than this is taken as a wrap
+    JUMP_LIMIT = 1024  # counts; a wide counter jumping further needs the next frame to confirm it
 
     def __init__(self, modulus: int | None, rate_hz: float | None = None) -> None:
         self.modulus = modulus
@@ -33,10 +39,11 @@ class SequenceUnwrapper:
         self._index: int | None = None
         self._sequence = 0
         self._time = math.nan
+        self._suspect: int | None = None  # counter of an unconfirmed far jump
 
     def next(self, sequence: int | None, host_time: float) -> tuple[int, int]:
         """(index of this frame, frames missing since the previous one); missing is -1 for a repeated
-        or late frame, whose index is then the earlier one it carries."""
+        or late frame, whose index is then the earlier one it carries, and -2 for an implausible jump."""
         if self._index is None:
             step = 0
             self._index = sequence if sequence is not None else 0
@@ -54,13 +61,24 @@ class SequenceUnwrapper:
             if timed:
                 wraps = round((elapsed * self.rate_hz - step) / self.modulus)
                 step += self.modulus * max(wraps, 0)
+            if step > self.JUMP_LIMIT and self.modulus > 4 * self.JUMP_LIMIT and not (
+                    timed and abs(elapsed * self.rate_hz - step) < self.JUMP_LIMIT):
+                confirmed = self._suspect is not None and sequence == (self._suspect + 1) % self.modulus
+                if not confirmed:  # a frame whose damage the checksum missed, or a counter reset
+                    self._suspect = sequence
+                    return self._index, -2
+        self._suspect = None
         self._index += step
         self._sequence = sequence if sequence is not None else 0
         self._time = host_time
         return self._index, max(step - 1, 0)
 
     def count(self, counters: Counters, index: int, missing: int) -> bool:
-        """Add a :meth:`next` outcome to ``counters``; False for a repeated or late frame (not to be delivered)."""
+        """Add a :meth:`next` outcome to ``counters``; False for a repeated, late or implausible frame
+        (not to be delivered)."""
+        if missing == -2:
+            counters.corrupt += 1
+            return False
         if missing < 0:
             if index == self._index:
                 counters.duplicates += 1

@@ -107,12 +107,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     if emulated:
         if duration is None:
             raise UsageError("an emulated trial needs trial.duration_s or --duration")
-        emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration)
+        emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration,
+                                         stats_file=out / "emulator.json")
     failure = None
     viewer = _viewer(args, cfg, out, blocking=False)
     try:
         with ConsoleProgress(duration, quiet=args.quiet) as progress:
-            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, on_progress=progress.update,
+            speed = parse_speed(args.speed) if emulated else 1.0
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=speed or 1.0,
+                              on_progress=progress.update,
                               source_done=(lambda: emulator.poll() is not None) if emulator else None)
             try:
                 trial.run()

@@ -33,9 +33,10 @@ from hil.recording import Recorder, to_ns
 from hil.sinks import Viewer, ViewerSinks, health
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
-WATCHDOG_S = 1.0  # no data from any device for this long ends the trial
+WATCHDOG_S = 10.0  # no data from any device for this long ends the trial (a commanded table stops after 1 s)
 START_TIMEOUT_S = 15.0  # the first data must arrive within this
 SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks arrive within this
+END_TOLERANCE_S = 1.0  # frames lost at the very end: the trial still counts as complete
 
 
 class TrialAborted(RuntimeError):
@@ -100,12 +101,14 @@ def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Tr
 class LiveTrial:
     """Acquire, record and estimate until the duration is reached, the devices stop, or Ctrl-C.
 
-    ``until_done`` (optional) is polled: when it returns True and the data has stopped, the trial ends
-    (the emulator process has exited). ``on_progress`` gets the processor about twice a second.
+    ``source_done`` (optional) is polled: when it returns True (the emulator process has exited) and
+    the data has stopped, the trial ends; it is complete if it reached the duration within
+    ``END_TOLERANCE_S`` (its last frames may have been dropped). ``time_scale`` is the emulator's
+    speed. ``on_progress`` gets the processor about twice a second.
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
-                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None,
+                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float = 1.0,
                  on_progress: Callable[[TrialProcessor, dict], None] | None = None,
                  source_done: Callable[[], bool] | None = None) -> None:
         self.cfg = cfg
@@ -114,12 +117,13 @@ class LiveTrial:
         self.viewer = viewer
         self.on_progress = on_progress
         self.source_done = source_done or (lambda: False)
-        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration)
+        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale)
         self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
+        self.ended_by_source = False
         sinks = ViewerSinks(viewer, self._live_health)
-        self.processor = TrialProcessor(cfg, duration, sinks.on_snapshot, sinks.on_aligned)
+        self.processor = TrialProcessor(cfg, duration, time_scale, sinks.on_snapshot, sinks.on_aligned)
         sinks.processor = self.processor
         codecs = {name: d.codec for name, d in self.processor.decoders.items()}
         self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
@@ -153,7 +157,7 @@ class LiveTrial:
     def _loop(self) -> None:
         started = time.monotonic()
         next_progress = started
-        while not self.processor.complete:
+        while not (self.processor.complete or self.ended_by_source):
             try:
                 item = self.queue.get(timeout=0.05)
             except queue.Empty:
@@ -173,9 +177,12 @@ class LiveTrial:
 
     def _check_alive(self, now: float, started: float) -> None:
         last = self.fanout.last_arrival
-        if self.source_done() and now - last > SETTLE_S:
-            raise TrialAborted("the emulated devices stopped before the trial's end")
+        if self.source_done() and now - last > SETTLE_S:  # the readers handed over the last bytes
+            self.ended_by_source = True  # everything the devices sent has been processed
+            if self.duration is not None and self.processor.trial_time < self.duration - END_TOLERANCE_S:
+                raise TrialAborted(f"the emulated devices stopped at {self.processor.trial_time:.1f} s "
+                                   f"of {self.duration:.1f} s")
         if last == 0.0 and now - started > START_TIMEOUT_S:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
         if last and now - last > WATCHDOG_S:
-            raise TrialAborted(f"watchdog: no data from any device for {WATCHDOG_S:.0f} s")
+            raise TrialAborted(f"no data from any device for {WATCHDOG_S:.0f} s")

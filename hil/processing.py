@@ -10,11 +10,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from drivers.codec import Codec, DecodeError, Framer, RawChunk, StreamEvent
 from drivers.registry import imu_codec, make_codec
-from hil.config import Config
+from hil.config import DEG, Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
+from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility
 from hil.results import StreamCounts, build_result
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner
@@ -25,16 +28,30 @@ IMU, TABLE = "imu", "table"
 
 @dataclass
 class StreamDecoder:
-    """One stream's framer and codec, with its outage count."""
+    """One stream's framer and codec, with its outage count: outages after which the device sent data
+    again (a port closing at the end of a trial, or a reconnection to nothing, is not one).
+
+    ``time_scale`` is how much faster than real time the device runs (an emulator at ``--speed X``):
+    the framer's counter unwrapping, which sizes outages longer than a counter period from the host
+    receive times, then expects that many more frames per host second.
+    """
 
     codec: Codec
+    time_scale: float = 1.0
     framer: Framer = field(init=False)
     outages: int = 0
+    _reconnects: int = 0  # reconnections not yet followed by data
 
     def __post_init__(self) -> None:
         self.framer = self.codec.framer()
+        unwrapper = getattr(self.framer, "unwrapper", None)
+        if unwrapper is not None and unwrapper.rate_hz:
+            unwrapper.rate_hz *= self.time_scale
 
     def feed(self, chunk: RawChunk) -> list[ImuSample | TableSample]:
+        if chunk.data:
+            self.outages += self._reconnects  # the device is back: the outages before count
+            self._reconnects = 0
         samples = []
         for decoded in self.framer.feed_chunk(chunk):
             try:
@@ -44,8 +61,8 @@ class StreamDecoder:
         return samples
 
     def event(self, event: StreamEvent) -> None:
-        if event.event == "outage":
-            self.outages += 1
+        if event.event == "reconnected":
+            self._reconnects += 1
         self.framer.reset()
 
 
@@ -54,19 +71,24 @@ class TrialProcessor:
 
     With a ``duration`` (s) the trial is :attr:`complete` once the estimator has the sample that ends
     it; later chunks (the devices' last bytes, their ports closing) are counted and ignored.
+    ``time_scale`` is the emulator's speed (see :class:`StreamDecoder`).
 
     ``on_snapshot`` is called with each new snapshot and ``on_aligned`` with each batch of aligned
     samples (for the viewers); both run on the caller's thread.
     """
 
-    def __init__(self, cfg: Config, duration: float | None = None, on_snapshot: Callable[[Snapshot], None] | None = None,
+    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float = 1.0, on_snapshot: Callable[[Snapshot], None] | None = None,
                  on_aligned: Callable[[list[AlignedSample]], None] | None = None) -> None:
         self.cfg = cfg
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
-        self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz)),
-                         TABLE: StreamDecoder(make_codec("tts1"))}
+        self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale),
+                         TABLE: StreamDecoder(make_codec("tts1"), time_scale)}
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.trial.rate_hz, cfg.imu.latch_delay_us * 1e-6)
+        max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
+        self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
+        self.gate = GyroTableGate(self.earth, self.geometry)
+        self._previous: AlignedSample | None = None  # the last sample the estimator took
         self.estimator: OnlineEstimator | None = None
         self.time_offset = TimeOffsetEstimator(self.earth, self.geometry, cfg.imu_rate_hz)
         self.duration = duration
@@ -90,7 +112,10 @@ class TrialProcessor:
             return
         ready: list[AlignedSample | ImuGap] = []
         for sample in decoder.feed(item):
-            ready += self.aligner.add_imu(sample) if item.stream == IMU else self.aligner.add_table(sample)
+            if item.stream == TABLE:
+                ready += self.aligner.add_table(sample)
+            elif self.plausibility.ok(sample):
+                ready += self.aligner.add_imu(sample)
         self._estimate(ready)
 
     def finish(self) -> None:
@@ -115,6 +140,9 @@ class TrialProcessor:
             "table_outages": self.decoders[TABLE].outages,
             "skipped_bytes": imu.skipped_bytes + table.skipped_bytes,
             "imu_missing": imu.missing,
+            "imu_implausible": self.plausibility.rejected,
+            "imu_inconsistent_with_table": self.gate.rejected,
+            "imu_force_outliers": 0 if self.estimator is None else self.estimator.outliers,
             "table_missing": table.missing,
             **{f"aligner_{k}": v for k, v in self.aligner.counters.as_dict().items()},
             "bridged_without_table": self.bridged_without_table,
@@ -122,7 +150,7 @@ class TrialProcessor:
             "chunks_unknown_stream": self.unknown_chunks,
         }
         return StreamCounts(imu.frames, table.frames, self.aligner.counters.aligned, imu.missing + table.missing,
-                            imu.corrupt + table.corrupt, extra)
+                            imu.corrupt + table.corrupt + self.plausibility.rejected + self.gate.rejected, extra)
 
     def result(self) -> dict:
         """The result.json document (call after :meth:`finish`)."""
@@ -146,15 +174,44 @@ class TrialProcessor:
             if isinstance(item, AlignedSample):
                 run.append(item)
                 continue
-            if run:
-                self.estimator.update_samples(run)
-                self.time_offset.add(run)
-                if self._on_aligned is not None:
-                    self._on_aligned(run)
-                run = []
+            for chunk in self._gated(run):
+                if isinstance(chunk, ImuGap):
+                    self.estimator.bridge(chunk)
+                    self.time_offset.restart()
+                    continue
+                self.estimator.update_samples(chunk)
+                self.time_offset.add(chunk)
+            if run and self._on_aligned is not None:
+                self._on_aligned(run)
             if isinstance(item, ImuGap):
                 self.bridged_without_table += not self.estimator.bridge(item)
                 self.time_offset.restart()
+                self._previous = None if item.angles_end is None else AlignedSample(item.t_end, (0.0,) * 3,
+                                                                                    (0.0,) * 3, item.angles_end)
+            run = []
         if self._on_snapshot is not None:
             for snap in self.estimator.snapshots[before:]:
                 self._on_snapshot(snap)
+
+    def _gated(self, run: list[AlignedSample]) -> list[list[AlignedSample] | ImuGap]:
+        """The run split where the gyro disagrees with the table: those samples become bridged gaps."""
+        previous = self._previous
+        self._previous = run[-1] if run else previous
+        if not run or previous is None or previous.angles is None or any(s.angles is None for s in run):
+            return [run] if run else []
+        t_end = np.array([s.t for s in run])
+        t_start = np.concatenate(([previous.t], t_end[:-1]))
+        angles = np.array([s.angles for s in run])
+        starts = np.vstack(([previous.angles], angles[:-1]))
+        good = self.gate.consistent(t_start, t_end, starts, angles, np.array([s.dtheta for s in run]))
+        if good.all():
+            return [run]
+        out: list[list[AlignedSample] | ImuGap] = []
+        for k, sample in enumerate(run):
+            if good[k]:
+                if not out or isinstance(out[-1], ImuGap):
+                    out.append([])
+                out[-1].append(sample)
+            else:
+                out.append(ImuGap(t_start[k], t_end[k], tuple(starts[k]), sample.angles))
+        return out

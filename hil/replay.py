@@ -50,7 +50,9 @@ def replay(source: str | Path, viewer: Viewer | None = None) -> tuple[TrialProce
     cfg = recorded_config(recording, path)
     duration = recording.metadata.get("duration_s")
     sinks = ViewerSinks(viewer)
-    processor = TrialProcessor(cfg, float(duration) if duration else None, sinks.on_snapshot, sinks.on_aligned)
+    time_scale = float(recording.metadata.get("time_scale") or 1.0)
+    processor = TrialProcessor(cfg, float(duration) if duration else None, time_scale, sinks.on_snapshot,
+                               sinks.on_aligned)
     sinks.processor = processor
     for item in recording.items:
         processor.feed(item)

@@ -192,15 +192,15 @@ class Aligner:
                 newest, resume = max(self._pending), min(self._pending)
                 if (newest - k < self.reorder_window or newest == resume) and not final:
                     break  # k may still arrive out of order; the fill needs the sample after the resume
+                if self.with_table and not final and not self._table_ready(self.imu_time(resume) - self.imu_period):
+                    break  # the bridge needs the table angles at the gap's end
                 self._close_gap(min(self._pending))
                 continue
             t = self.imu_time(k)
             angles = None
             if self.with_table:
-                if not self._table.ready(t) and not final:
-                    ahead = self.imu_time(max(self._pending)) - max(self._table.last_time(), t)
-                    if ahead < self.table_wait:
-                        break  # the table sample for this instant is still on its way
+                if not final and not self._table_ready(t):
+                    break  # the table sample for this instant is still on its way
                 angles = self._table.at(t, self.max_angle_gap)
                 if angles is None:
                     self.counters.without_angles += 1
@@ -208,6 +208,14 @@ class Aligner:
         if self.with_table and self._next is not None:
             self._table.forget_before(self.imu_time(self._next))
         return self._take() if not final else []
+
+    def _table_ready(self, t: float) -> bool:
+        """The table samples around ``t`` have arrived, or the table is so far behind the IMU (more
+        than ``table_wait``) that the IMU goes on without it."""
+        if self._table.ready(t):
+            return True
+        ahead = self.imu_time(max(self._pending)) - max(self._table.last_time(), t)
+        return ahead >= self.table_wait
 
     def _emit(self, k: int, sample: ImuSample, t: float, angles: Vec3 | None) -> None:
         self._out.append(AlignedSample(t, sample.dtheta, sample.dv, angles))

@@ -19,7 +19,8 @@ from scipy.interpolate import CubicSpline
 from hil.frames import Earth, TableGeometry
 from hil.samples import AlignedSample
 
-WINDOW_S = 60.0  # the estimate uses the last minute of continuous data
+WINDOW_S = 60.0  # a continuous stretch contributes its last minute
+MIN_WINDOW_S = 4.0  # shorter stretches (between IMU gaps) are not used
 MAX_LAG = 20  # samples searched either side by the cross-correlation
 NEWTON_STEPS = 4
 
@@ -35,6 +36,7 @@ class TimeOffsetEstimator:
         self._t: deque[float] = deque(maxlen=size)
         self._dtheta: deque[tuple[float, float, float]] = deque(maxlen=size)
         self._angles: deque[tuple[float, float, float]] = deque(maxlen=size)
+        self._done: list[tuple[float, int]] = []  # (offset, samples) of finished windows
 
     def add(self, samples: list[AlignedSample]) -> None:
         for s in samples:
@@ -46,15 +48,29 @@ class TimeOffsetEstimator:
             self._angles.append(s.angles)
 
     def restart(self) -> None:
-        """A discontinuity (gap): start a new window."""
+        """A discontinuity (gap): keep the estimate of the window so far, and start a new one."""
+        offset = self._window_estimate()
+        if offset is not None:
+            self._done.append((offset, len(self._t)))
         self._t.clear()
         self._dtheta.clear()
         self._angles.clear()
 
     def estimate(self) -> float | None:
-        """The lag of the table behind the IMU (s), or None without 10 s of continuous moving data."""
+        """The lag of the table behind the IMU (s): the sample-weighted mean over the continuous windows
+        of at least ``MIN_WINDOW_S`` of moving data (the last ``WINDOW_S`` of each); None without one."""
+        results = list(self._done)
+        offset = self._window_estimate()
+        if offset is not None:
+            results.append((offset, len(self._t)))
+        if not results:
+            return None
+        values, weights = np.array(results).T
+        return float(np.average(values, weights=weights))
+
+    def _window_estimate(self) -> float | None:
         n = len(self._t)
-        if n < 10 * self.rate_hz:
+        if n < MIN_WINDOW_S * self.rate_hz:
             return None
         t = np.array(self._t)
         dt = np.diff(t)

@@ -175,3 +175,17 @@ def test_can_framer_recovers_every_complete_sample(plan):
     for d in decoded:
         assert codec.to_sample(d).dtheta == pytest.approx((1e-6 * d.sync_index, 2e-6, -3e-6), abs=1e-9)
     assert sum(d.size for d in decoded) + framer.counters.skipped_bytes + framer.buffered == total
+
+
+def test_wide_counter_ignores_a_far_jump_the_next_frame_does_not_confirm():
+    from drivers.codec import Counters
+    from drivers.framing import SequenceUnwrapper
+
+    unwrapper, counters = SequenceUnwrapper(1 << 16), Counters()
+    delivered = []
+    for seq in (100, 101, 40000, 102, 103, 5000, 5001, 5002):  # a damaged counter, then a counter reset
+        index, missing = unwrapper.next(seq, 0.0)
+        if unwrapper.count(counters, index, missing):
+            delivered.append(index)
+    assert delivered == [100, 101, 102, 103, 5001, 5002]
+    assert counters.corrupt == 2 and counters.missing == 5001 - 103 - 1

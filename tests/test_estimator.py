@@ -169,3 +169,24 @@ def test_rodrigues_and_cross_kernels_match_scipy_and_numpy():
     np.testing.assert_allclose(cross(u, w), np.cross(u, w), atol=1e-15)
     c = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix() * (1 + 1e-9)
     np.testing.assert_allclose(orthonormalised(c) @ orthonormalised(c).T, np.eye(3), atol=1e-15)
+
+
+def test_a_damaged_specific_force_is_left_out():
+    import dataclasses
+
+    from emulators.simulation import Simulation
+    from hil.estimation.online import OnlineEstimator
+
+    cfg = make_config(duration=60, rate=100, errors=PAPER_ERRORS)
+    sim = Simulation.from_config(cfg)
+    batch = next(sim.batches(chunk=10**9))
+    damaged = batch.dv.copy()
+    damaged[3000, 2] *= 1.01  # a flipped mantissa bit the checksum missed: ~10 mg for one sample
+    results = []
+    for dv in (batch.dv, damaged):
+        est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=60.0)
+        est.update_many(dataclasses.replace(batch, dv=dv))
+        results.append((est.solution().full.bias, est.outliers))
+    (clean, clean_outliers), (bias, outliers) = results
+    assert clean_outliers == 0 and outliers == 1
+    np.testing.assert_allclose(bias, clean, atol=0.05 * 9.80665e-6)  # 0.05 ug: one sample of 6000 fewer

@@ -72,3 +72,44 @@ def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):
     # everything the devices sent up to 1 s before the kill is there and replays
     assert processor.trial_time >= killed_at - first - 1.0 - 0.1
     assert processor.decoders["imu"].framer.counters.corrupt == 0
+
+
+def _run_config(tmp_path, name, **imu_and_table):
+    import yaml
+
+    cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
+    cfg["imu"]["protocol"] = "xsens-mtdata2"  # a 16-bit packet counter: a 2 s outage is sized at any speed
+    for section, faults in imu_and_table.items():
+        cfg[section]["faults"] = faults
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / name
+    assert main(["run", str(path), "--speed", "max", "--quiet", "--no-figures", "--viewer", "none",
+                 "--out", str(out)]) == 0
+    return json.loads((out / "result.json").read_text()), out
+
+
+@pytest.mark.slow
+def test_fault_run_completes_counts_every_fault_and_keeps_the_bias(tmp_path):
+    faults = {"drop_rate": 0.01, "corrupt_byte_rate": 0.001, "jitter_ms": 2.0}
+    clean, _ = _run_config(tmp_path, "clean")
+    faulty, out = _run_config(tmp_path, "faulty", imu={**faults, "unplug_at_s": 100.0, "unplug_s": 2.0},
+                              turntable=faults)
+    assert faulty["trial"]["duration_s"] == pytest.approx(600.0)
+    s = faulty["streams"]
+    assert s["imu_outages"] == 1
+    # every frame lost to a drop, a bit error or the unplug is counted as missing, bar the last few
+    # (no later frame reveals them) and the damaged frames Xsens' 8-bit checksum lets through (~0.4 %),
+    # which the plausibility checks catch when their damage matters
+    injected = json.loads((out / "emulator.json").read_text())["devices"]
+    for stream, device in (("imu", "imu"), ("table", "turntable_data")):
+        f = injected[device]["faults"]
+        lost = f["dropped"] + f["corrupted"] + f["truncated"] + f["unplugged"]
+        assert lost - 0.005 * f["corrupted"] - 5 <= s[f"{stream}_missing"] <= lost
+    assert injected["imu"]["faults"]["unplugs"] == 1
+    assert s["corrupt"] > 1000 and s["skipped_bytes"] > 0
+    assert s["aligner_imu_filled"] > 0 and s["aligner_imu_bridged"] >= 400 and s["bridged_without_table"] == 0
+    np.testing.assert_allclose(faulty["estimate"]["accel_bias_ug"], clean["estimate"]["accel_bias_ug"], atol=1.0)
+    again = tmp_path / "again"
+    assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0
+    assert json.loads((again / "result.json").read_text()) == faulty

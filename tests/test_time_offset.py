@@ -36,3 +36,16 @@ def test_gyro_bias_does_not_move_the_offset():
     est.add([AlignedSample(t, tuple(a), tuple(b), tuple(c))
              for t, a, b, c in zip(batch.t, batch.dtheta.tolist(), batch.dv.tolist(), batch.angles.tolist())])
     assert est.estimate() == pytest.approx(0.0, abs=2e-6)
+
+
+def test_windows_between_gaps_are_combined():
+    sim = Simulation.from_config(make_config(duration=30, rate=200.0))
+    batch = next(sim.batches(10**9))
+    angles = sim.truth.angles(batch.t - 0.001)
+    est = TimeOffsetEstimator(sim.truth.earth, sim.truth.geometry, 200.0)
+    samples = [AlignedSample(t, tuple(a), tuple(b), tuple(c))
+               for t, a, b, c in zip(batch.t, batch.dtheta.tolist(), batch.dv.tolist(), angles.tolist())]
+    for start in range(0, len(samples), 1000):  # 5 s stretches
+        est.add(samples[start:start + 990])
+        est.restart()
+    assert est.estimate() == pytest.approx(0.001, abs=2e-6)

@@ -116,11 +116,13 @@ class ApparentGravityEstimator:
             pass
 
     def update_segments(
-        self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray, stops: Sequence[int]
+        self, t_start: np.ndarray, t_end: np.ndarray, f_ib0: np.ndarray, c_mean: np.ndarray, stops: Sequence[int],
+        accept: np.ndarray | None = None,
     ) -> Iterator[int]:
-        """As :meth:`update_many`, yielding after the samples up to each stop are in (to solve there)."""
+        """As :meth:`update_many`, yielding after the samples up to each stop are in (to solve there);
+        samples with ``accept`` False are left out."""
         h = measurement_matrix(t_start, t_end, c_mean, self.omega)
-        for stop in self.normal.add_segments(h, f_ib0, stops):
+        for stop in self.normal.add_segments(h, f_ib0, stops, accept):
             self.t = float(t_end[stop - 1])
             yield stop
 

@@ -21,8 +21,12 @@ class NormalEquations:
         for _ in self.add_segments(h, z, [len(z)]):
             pass
 
-    def add_segments(self, h: np.ndarray, z: np.ndarray, stops: Sequence[int]) -> Iterator[int]:
-        """Add the measurements up to each index in ``stops`` (increasing, the last = N), yielding after each."""
+    def add_segments(self, h: np.ndarray, z: np.ndarray, stops: Sequence[int],
+                     accept: np.ndarray | None = None) -> Iterator[int]:
+        """Add the measurements up to each index in ``stops`` (increasing, the last = N), yielding after each;
+        ``accept`` (N,) bool leaves out the measurements marked False."""
+        if accept is not None and not accept.all():
+            h, z = h * accept[:, None, None], z * accept[:, None]
         start = 0
         for stop in stops:
             if stop > start:
@@ -30,7 +34,7 @@ class NormalEquations:
                 self.info += np.einsum("nri,nrj->ij", hs, hs)
                 self.rhs += np.einsum("nri,nr->i", hs, zs)
                 self.zz += float(np.einsum("ni,ni->", zs, zs))
-                self.samples += stop - start
+                self.samples += stop - start if accept is None else int(accept[start:stop].sum())
             start = stop
             yield stop
 

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from hil.estimation.alignment import alignment_matrix, attitude_error, body_attitude, theoretical_error
 from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
@@ -19,6 +20,11 @@ from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
 from hil.frames import Earth, TableGeometry
 from hil.samples import AlignedBatch, AlignedSample, ImuGap
+
+
+OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neighbours is left out
+OUTLIER_WINDOW = 25  # samples before it that it is judged against
+OUTLIER_FLOOR = 5e-3  # m/s^2 (~0.5 mg): the gate is never tighter than this (quiet sensors, noise-free data)
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,7 @@ class OnlineEstimator:
         solve_period: float = 1.0,
         rank_tolerance: float = 1e-6,
         t0: float = 0.0,
+        outlier_sigmas: float | None = OUTLIER_SIGMAS,
     ) -> None:
         self.earth = earth
         self.geometry = geometry or TableGeometry()
@@ -54,6 +61,10 @@ class OnlineEstimator:
         self.gravity = ApparentGravityEstimator(rank_tolerance)
         self.table = TableReferenceEstimator(earth.f_n, rank_tolerance)
         self.snapshots: list[Snapshot] = []
+        self.outlier_sigmas = outlier_sigmas
+        self.outliers = 0  # specific-force samples left out of the least squares
+        self._f_history = np.zeros((0, 3))  # the last OUTLIER_WINDOW specific forces in i_b0
+        self._last_dt = 0.0
         self._t_last = t0
         self._angle_history: np.ndarray | None = None  # last two latched angles (2, 3)
         self._next_solve = t0 + solve_period
@@ -92,12 +103,17 @@ class OnlineEstimator:
         t_start = np.concatenate(([self._t_last - self.t0], t_end[:-1]))
         dt = t_end - t_start
         step = self.strapdown.update_many(batch.dtheta, batch.dv, dt)
+        f_ib0 = step.dv_ib0 / dt[:, None]
+        if self._last_dt and dt[0] > 1.5 * self._last_dt:
+            self._f_history = self._f_history[:0]  # data gap: judge afresh
+        self._last_dt = float(dt[-1])
+        accept = self._accept(f_ib0)
         table = None
         if batch.angles is not None:
             mean_attitude, attitude = self._table_attitudes(batch.angles)
-            table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops)
+            table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops, accept)
             references = attitude[np.array(stops) - 1]
-        for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, step.dv_ib0 / dt[:, None], step.c_mean, stops)):
+        for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, f_ib0, step.c_mean, stops, accept)):
             if table is not None:
                 next(table)
                 self._reference = references[k]
@@ -120,6 +136,7 @@ class OnlineEstimator:
             self.strapdown.carry(np.eye(3))
         self._attitude = self.strapdown.attitude
         self._angle_history = None
+        self._f_history = self._f_history[:0]
         self._t_last = gap.t_end
         return known
 
@@ -131,6 +148,28 @@ class OnlineEstimator:
 
     def table_referenced(self) -> TableReferencedBias:
         return self.table.solve()
+
+    def _accept(self, f_ib0: np.ndarray) -> np.ndarray | None:
+        """False for a specific force that jumps away from the median of the previous ``OUTLIER_WINDOW``
+        by more than ``outlier_sigmas`` robust sigmas (their MAD) on any axis: a frame whose damage the
+        checksum missed. f^ib0 moves by ~1e-5 m/s^2 per sample (earth rate, the bias turning with the
+        swing), far below the noise, so the median of the last few is a model-free prediction."""
+        if self.outlier_sigmas is None:
+            return None
+        history = self._f_history
+        series = np.vstack((history, f_ib0))
+        self._f_history = series[-OUTLIER_WINDOW:]
+        first = max(0, OUTLIER_WINDOW - len(history))  # the samples before it have no full window yet
+        accept = np.ones(len(f_ib0), dtype=bool)
+        if first < len(f_ib0):
+            start = len(history) + first - OUTLIER_WINDOW
+            windows = sliding_window_view(series[start:-1], OUTLIER_WINDOW, axis=0)  # (M, 3, K)
+            centre = np.median(windows, axis=-1)
+            spread = 1.4826 * np.median(np.abs(windows - centre[..., None]), axis=-1)
+            limit = np.maximum(self.outlier_sigmas * spread, OUTLIER_FLOOR)
+            accept[first:] = np.all(np.abs(f_ib0[first:] - centre) <= limit, axis=1)
+        self.outliers += int(len(accept) - accept.sum())
+        return accept
 
     def _table_attitudes(self, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """C_b^n over each interval (mean, by Simpson's rule) and at its end, from the latched angles.

@@ -36,15 +36,16 @@ class TableReferenceEstimator:
         self.rank_tolerance = rank_tolerance
         self.normal = NormalEquations(5)
 
-    def update_segments(self, f_b: np.ndarray, c_bn_mean: np.ndarray, stops: Sequence[int]) -> Iterator[int]:
+    def update_segments(self, f_b: np.ndarray, c_bn_mean: np.ndarray, stops: Sequence[int],
+                        accept: np.ndarray | None = None) -> Iterator[int]:
         """Add N measured mean specific forces (N, 3) with the mean table attitude C_b^n over each interval
-        (N, 3, 3), yielding after the samples up to each stop are in."""
+        (N, 3, 3), yielding after the samples up to each stop are in; ``accept`` False leaves a sample out."""
         c_nb = np.swapaxes(c_bn_mean, 1, 2)
         z = f_b - c_nb @ self.f_n
         h = np.zeros((len(z), 3, 5))
         h[:, :, :3] = np.eye(3)
         h[:, :, 3:] = (c_nb @ skew(self.f_n))[:, :, :2]
-        yield from self.normal.add_segments(h, z, stops)
+        yield from self.normal.add_segments(h, z, stops, accept)
 
     def solve(self) -> TableReferencedBias:
         normal = self.normal

@@ -1,0 +1,82 @@
+"""A physical plausibility check on decoded IMU samples, behind the wire checksum.
+
+A short checksum (Xsens MTData2's 8 bits) lets a few damaged frames through; when the damage hits a
+high bit of a float the sample is wildly wrong. On a turntable the body rate cannot exceed the
+table's rate limits by much and the specific force stays within a fraction of g of gravity, so a
+sample outside ``max_rate`` or ``|f| - g`` beyond ``force_tolerance`` is rejected (and counted).
+Damage to low bits of the increments is caught by comparing the gyro with the table (:class:`GyroTableGate`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hil.estimation.strapdown import rotation_matrices
+from hil.frames import Earth, TableGeometry
+from hil.samples import ImuSample
+
+RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
+FORCE_TOLERANCE_G = 0.2
+GATE_FLOOR_RAD = 1e-5  # gyro/table disagreement allowed per sample, plus ...
+GATE_FRACTION = 0.01  # ... this fraction of the sample's rotation
+
+
+class ImuPlausibility:
+    """``ok(sample)`` for samples of ``rate_hz``; ``rejected`` counts the failures."""
+
+    def __init__(self, rate_hz: float, gravity: float, max_rate: float,
+                 force_tolerance: float | None = None) -> None:
+        self.period = 1.0 / rate_hz
+        self.gravity = gravity
+        self.max_angle = max_rate * self.period  # rad per sample
+        self.force_tolerance = FORCE_TOLERANCE_G * gravity if force_tolerance is None else force_tolerance
+        self.rejected = 0
+
+    def ok(self, sample: ImuSample) -> bool:
+        angle = math.hypot(*sample.dtheta)
+        force = math.hypot(*sample.dv) / self.period
+        good = angle <= self.max_angle and abs(force - self.gravity) <= self.force_tolerance
+        self.rejected += not good
+        return good
+
+
+def small_rotation_vectors(c: np.ndarray) -> np.ndarray:
+    """Rotation vectors of (N, 3, 3) rotations under 90 deg: ``v asin|v| / |v|`` with ``v`` the axial
+    part of ``(C - C^T) / 2`` (|v| = sin of the angle)."""
+    v = 0.5 * np.stack((c[:, 2, 1] - c[:, 1, 2], c[:, 0, 2] - c[:, 2, 0], c[:, 1, 0] - c[:, 0, 1]), axis=-1)
+    s = np.linalg.norm(v, axis=1)
+    scale = np.where(s > 1e-12, np.arcsin(np.minimum(s, 1.0)) / np.maximum(s, 1e-300), 1.0)
+    return v * scale[:, None]
+
+
+class GyroTableGate:
+    """Rejects gyro increments that disagree with the rotation the table angles show over the same interval.
+
+    The predicted increment is the rotation vector of ``C_n^b(t1) C_n(t2)^n(t1) C_b^n(t2)`` (gimbal
+    angles at both ends plus the earth's turn). Mounting error, scale factor, quantisation and the
+    neglected coning term stay far below ``floor + fraction * |rotation|``; a frame whose damage the
+    checksum missed does not. Rejected samples become gaps the estimator bridges with the table.
+    """
+
+    def __init__(self, earth: Earth, geometry: TableGeometry, floor: float = GATE_FLOOR_RAD,
+                 fraction: float = GATE_FRACTION) -> None:
+        self.earth = earth
+        self.geometry = geometry
+        self.floor = floor
+        self.fraction = fraction
+        self.rejected = 0
+
+    def consistent(self, t_start: np.ndarray, t_end: np.ndarray, angles_start: np.ndarray, angles_end: np.ndarray,
+                   dtheta: np.ndarray) -> np.ndarray:
+        """Per sample (N,), True where the gyro increment agrees with the table."""
+        c = self.geometry.attitude_matrix(np.vstack((angles_start, angles_end)))[0]
+        n = len(dtheta)
+        earth_turn = rotation_matrices(np.outer(t_end - t_start, self.earth.omega_n))
+        relative = np.einsum("nji,njk,nkl->nil", c[:n], earth_turn, c[n:])
+        predicted = small_rotation_vectors(relative)
+        error = np.linalg.norm(dtheta - predicted, axis=1)
+        good = error <= self.floor + self.fraction * np.linalg.norm(predicted, axis=1)
+        self.rejected += int(n - good.sum())
+        return good

@@ -1,0 +1,49 @@
+"""The IMU plausibility check: gravity-sized specific force and table-sized rates pass, wild values do not."""
+
+import math
+
+from hil.plausibility import ImuPlausibility
+from hil.samples import ImuSample
+
+G = 9.79
+
+
+def test_plausible_and_implausible_samples():
+    check = ImuPlausibility(200.0, G, max_rate=math.radians(200))
+    at_rest = ImuSample(1, (1e-7, 0.0, 0.0), (0.0, 0.0, G / 200))
+    swinging = ImuSample(2, (math.radians(30) / 200, 0.0, 0.0), (0.01, 0.02, G / 200))
+    assert check.ok(at_rest) and check.ok(swinging)
+    exponent_hit = ImuSample(3, (0.0, 0.0, 0.0), (0.0, 0.0, G / 200 * 2**8))
+    spinning = ImuSample(4, (math.radians(500) / 200, 0.0, 0.0), (0.0, 0.0, G / 200))
+    free_fall = ImuSample(5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert not any(check.ok(s) for s in (exponent_hit, spinning, free_fall))
+    assert check.rejected == 3
+
+
+def test_small_rotation_vectors_match_scipy():
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from hil.plausibility import small_rotation_vectors
+
+    v = np.random.default_rng(2).normal(size=(20, 3)) * np.array([[1e-9], [1e-4], [0.5]]).repeat(7, axis=0)[:20]
+    np.testing.assert_allclose(small_rotation_vectors(Rotation.from_rotvec(v).as_matrix()), v, atol=1e-15)
+
+
+def test_gyro_table_gate_passes_clean_increments_and_catches_a_damaged_one():
+    import numpy as np
+
+    from conftest import make_config
+    from emulators.simulation import Simulation
+    from hil.plausibility import GyroTableGate
+
+    sim = Simulation.from_config(make_config(duration=10, rate=200.0, errors={"gyro_bias_dph": [0.01] * 3,
+                                                                              "gyro_noise_dph": [0.01] * 3}))
+    batch = next(sim.batches(10**9))
+    gate = GyroTableGate(sim.truth.earth, sim.truth.geometry)
+    t_start = np.concatenate(([0.0], batch.t[:-1]))
+    starts = sim.truth.angles(t_start)
+    dtheta = batch.dtheta.copy()
+    dtheta[500, 1] += 2e-5  # a damaged mantissa: 0.2 deg/s for one sample
+    good = gate.consistent(t_start, batch.t, starts, batch.angles, dtheta)
+    assert not good[500] and good.sum() == len(good) - 1 and gate.rejected == 1
