@@ -45,11 +45,16 @@ def _summary(result: dict, out: Path) -> str:
 
 
 def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str) -> None:
-    """Write result.json, series.csv, config.yaml and the figures, and print the summary."""
+    """Write result.json, series.csv, config.yaml, the figures and report.html, and print the summary."""
     from hil.results import write_outputs
 
     write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
+    from hil.report import measurements, overall, write_report
+
+    write_report(out, cfg.output.limits)
     print(_summary(result, out))
+    print(f"  report: {overall(measurements(result, cfg.output.limits))} against output.limits "
+          f"({out / 'report.html'})")
 
 
 def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
@@ -162,6 +167,17 @@ def cmd_replay(args: argparse.Namespace) -> int:
               file=sys.stderr)
     _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, recording.metadata["config"])
     _close_viewer(viewer)
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from hil.report import ReportError, write_report
+
+    try:
+        path = write_report(Path(args.dir))
+    except ReportError as exc:
+        raise UsageError(str(exc)) from None
+    print(path)
     return 0
 
 
@@ -287,6 +303,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
     p.add_argument("--no-wait", action="store_true", help="start the pulse train without waiting for readers")
     p.set_defaults(func=cmd_emulate)
+
+    p = sub.add_parser("report", help="rebuild a trial's report.html from its outputs")
+    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml)")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("decode", help="decode a raw capture to CSV; counters as JSON on the last line")
     p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc")
