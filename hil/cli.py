@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 from hil.config import ConfigError, load_config
@@ -92,8 +93,10 @@ def _close_viewer(viewer) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from emulators.emulate import parse_speed, spawn_emulator
+    from drivers.table_client import InterlockError, LimitError, TableError
     from hil.live import LiveTrial, TrialAborted
     from hil.progress import ConsoleProgress
+    from hil.table_control import MotionCheck, TableControl
 
     try:
         parse_speed(args.speed)
@@ -115,18 +118,29 @@ def cmd_run(args: argparse.Namespace) -> int:
         emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration,
                                          stats_file=out / "emulator.json")
     failure = None
+    control = None
     viewer = _viewer(args, cfg, out, blocking=False)
+    command_url = _command_url(cfg, ports)
     try:
-        with ConsoleProgress(duration, quiet=args.quiet) as progress:
+        with ConsoleProgress(duration, quiet=args.quiet) as progress, ExitStack() as stack:
+            check = None
+            if command_url is not None:
+                control = stack.enter_context(TableControl(command_url, cfg.turntable))
+                control.arm()
+                check = MotionCheck(cfg.turntable, cfg.trial.rate_hz)
             speed = parse_speed(args.speed) if emulated else 1.0
-            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=speed or 1.0,
-                              on_progress=progress.update,
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=speed,
+                              motion_check=check, on_progress=progress.update,
                               source_done=(lambda: emulator.poll() is not None) if emulator else None)
             try:
                 trial.run()
             except TrialAborted as exc:
                 failure = str(exc)
+    except (TableError, LimitError, InterlockError) as exc:
+        raise UsageError(str(exc)) from None
     finally:
+        if control is not None and control.stop_error and (emulator is None or emulator.poll() is None):
+            print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
         if emulator is not None:
             _stop(emulator)
     processor = trial.processor
@@ -138,6 +152,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"hil: trial ended early: {failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def _command_url(cfg, ports: dict | None) -> str | None:
+    """The table's acl port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
+    url = cfg.turntable.command_port
+    if url == "emulator":
+        if ports is None or "turntable_cmd" not in ports:
+            raise UsageError("turntable.command_port: 'emulator' needs turntable.source: emulator")
+        return ports["turntable_cmd"]
+    return url
 
 
 def _stop(process) -> None:

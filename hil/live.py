@@ -30,10 +30,13 @@ from drivers.transport import CanTransport, SerialTransport, Transport
 from hil.config import Config
 from hil.processing import IMU, TABLE, TrialProcessor
 from hil.recording import Recorder, to_ns
+from hil.samples import AlignedSample
 from hil.sinks import Viewer, ViewerSinks, health
+from hil.table_control import MotionCheck
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
-WATCHDOG_S = 10.0  # no data from any device for this long ends the trial (a commanded table stops after 1 s)
+WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
+TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
 START_TIMEOUT_S = 15.0  # the first data must arrive within this
 SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks arrive within this
 END_TOLERANCE_S = 1.0  # frames lost at the very end: the trial still counts as complete
@@ -51,10 +54,11 @@ class Fanout(RawListener):
         self._queue = hand_off
         self._lock = threading.Lock()
         self.last_arrival = 0.0  # monotonic time of the last chunk with data
+        self.last_by_stream: dict[str, float] = {}
 
     def on_raw(self, chunk: RawChunk) -> None:
         self._put(dataclasses.replace(chunk, host_time=to_ns(chunk.host_time) / 1e9))
-        self.last_arrival = time.monotonic()
+        self.last_arrival = self.last_by_stream[chunk.stream] = time.monotonic()
 
     def on_event(self, event: StreamEvent) -> None:
         self._put(dataclasses.replace(event, host_time=to_ns(event.host_time) / 1e9))
@@ -104,11 +108,14 @@ class LiveTrial:
     ``source_done`` (optional) is polled: when it returns True (the emulator process has exited) and
     the data has stopped, the trial ends; it is complete if it reached the duration within
     ``END_TOLERANCE_S`` (its last frames may have been dropped). ``time_scale`` is the emulator's
-    speed. ``on_progress`` gets the processor about twice a second.
+    speed. ``on_progress`` gets the processor about twice a second. With a ``motion_check`` (the
+    harness commands the table) the trial ends when the table does not move as commanded or its data
+    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off.
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
-                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float = 1.0,
+                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float | None = 1.0,
+                 motion_check: MotionCheck | None = None,
                  on_progress: Callable[[TrialProcessor, dict], None] | None = None,
                  source_done: Callable[[], bool] | None = None) -> None:
         self.cfg = cfg
@@ -123,7 +130,8 @@ class LiveTrial:
         self.latency = LatencyStats()
         self.ended_by_source = False
         sinks = ViewerSinks(viewer, self._live_health)
-        self.processor = TrialProcessor(cfg, duration, time_scale, sinks.on_snapshot, sinks.on_aligned)
+        self.motion_check = motion_check
+        self.processor = TrialProcessor(cfg, duration, time_scale, sinks.on_snapshot, self._aligned_to(sinks))
         sinks.processor = self.processor
         codecs = {name: d.codec for name, d in self.processor.decoders.items()}
         self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
@@ -145,6 +153,17 @@ class LiveTrial:
             if self.viewer is not None:
                 self.viewer.close()
 
+    def _aligned_to(self, sinks: ViewerSinks) -> Callable[[list[AlignedSample]], None]:
+        if self.motion_check is None:
+            return sinks.on_aligned
+        check = self.motion_check
+
+        def both(samples: list[AlignedSample]) -> None:
+            sinks.on_aligned(samples)
+            check.add(samples)
+
+        return both
+
     def health(self) -> dict[str, dict[str, float]]:
         """Stream counters with the live figures (queue length, latency)."""
         figures = health(self.processor)
@@ -164,6 +183,8 @@ class LiveTrial:
                 item = None
             if item is not None:
                 self.processor.feed(item)
+                if self.motion_check is not None and self.motion_check.failure:
+                    raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
                 if isinstance(item, RawChunk):
                     self.latency.add(item.host_time)
             now = time.monotonic()
@@ -184,5 +205,8 @@ class LiveTrial:
                                    f"of {self.duration:.1f} s")
         if last == 0.0 and now - started > START_TIMEOUT_S:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
+        table_last = self.fanout.last_by_stream.get(TABLE)
+        if self.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
+            raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
         if last and now - last > WATCHDOG_S:
             raise TrialAborted(f"no data from any device for {WATCHDOG_S:.0f} s")

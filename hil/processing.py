@@ -33,11 +33,12 @@ class StreamDecoder:
 
     ``time_scale`` is how much faster than real time the device runs (an emulator at ``--speed X``):
     the framer's counter unwrapping, which sizes outages longer than a counter period from the host
-    receive times, then expects that many more frames per host second.
+    receive times, then expects that many more frames per host second. None (``--speed max``): the
+    host times say nothing about the device's, and only the counters are used.
     """
 
     codec: Codec
-    time_scale: float = 1.0
+    time_scale: float | None = 1.0
     framer: Framer = field(init=False)
     outages: int = 0
     _reconnects: int = 0  # reconnections not yet followed by data
@@ -46,7 +47,7 @@ class StreamDecoder:
         self.framer = self.codec.framer()
         unwrapper = getattr(self.framer, "unwrapper", None)
         if unwrapper is not None and unwrapper.rate_hz:
-            unwrapper.rate_hz *= self.time_scale
+            unwrapper.rate_hz = None if self.time_scale is None else unwrapper.rate_hz * self.time_scale
 
     def feed(self, chunk: RawChunk) -> list[ImuSample | TableSample]:
         if chunk.data:
@@ -77,7 +78,7 @@ class TrialProcessor:
     samples (for the viewers); both run on the caller's thread.
     """
 
-    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float = 1.0, on_snapshot: Callable[[Snapshot], None] | None = None,
+    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0, on_snapshot: Callable[[Snapshot], None] | None = None,
                  on_aligned: Callable[[list[AlignedSample]], None] | None = None) -> None:
         self.cfg = cfg
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)

@@ -4,7 +4,7 @@ Format (MCAP, https://mcap.dev; readable by any MCAP tool):
 
 - metadata record ``trial`` at the start: ``config`` (the trial YAML as given), ``version`` (this
   package's version), ``format`` (``turntable-hil/1``), ``duration_s`` (the trial length the live
-  run used, empty when open-ended), ``time_scale`` (the emulator's speed, 1 for real devices);
+  run used, empty when open-ended), ``time_scale`` (the emulator's speed, 1 for real devices, empty for as fast as possible);
 - one channel per stream (``imu``, ``table``, ...), schemaless; its ``message_encoding`` says what a
   message holds: ``application/octet-stream`` (bytes exactly as read from a serial port) or
   ``turntable-hil/can-frame`` (4-byte big-endian arbitration id, 1 flag byte with bit 0 = extended
@@ -75,7 +75,7 @@ class Recorder:
     """
 
     def __init__(self, path: str | Path, config_text: str, flush_s: float = 0.1,
-                 duration: float | None = None, time_scale: float = 1.0) -> None:
+                 duration: float | None = None, time_scale: float | None = 1.0) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - owned by the writer thread until close()
@@ -83,7 +83,7 @@ class Recorder:
         self._writer.start(profile="", library=f"turntable-hil/{package_version()}")
         self._writer.add_metadata("trial", {"config": config_text, "version": package_version(), "format": FORMAT,
                                             "duration_s": "" if duration is None else repr(duration),
-                                            "time_scale": repr(time_scale)})
+                                            "time_scale": "" if time_scale is None else repr(time_scale)})
         self._channels: dict[tuple[str, str], int] = {}
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._flush_s = flush_s

@@ -50,7 +50,8 @@ def replay(source: str | Path, viewer: Viewer | None = None) -> tuple[TrialProce
     cfg = recorded_config(recording, path)
     duration = recording.metadata.get("duration_s")
     sinks = ViewerSinks(viewer)
-    time_scale = float(recording.metadata.get("time_scale") or 1.0)
+    scale = recording.metadata.get("time_scale", "1.0")
+    time_scale = float(scale) if scale else None
     processor = TrialProcessor(cfg, float(duration) if duration else None, time_scale, sinks.on_snapshot,
                                sinks.on_aligned)
     sinks.processor = processor

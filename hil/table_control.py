@@ -1,0 +1,122 @@
+"""Turntable control during a trial: arm the configured motion over ``acl``, check it, always stop.
+
+:class:`TableControl` loads the limits, checks the interlocks, commands ``turntable.motion`` (swing:
+Synthesis mode, an oscillator about the centre position; static: Position; rate: Rate) and turns the
+sync output on. :class:`MotionCheck` then watches the gimbal angles the table reports: after one
+period of settling, each swinging axis must cover 80-120 % of its commanded peak-to-peak range over
+the last period, a static axis must hold its position within 0.5 deg, a rate axis must turn within
+10 % of its rate. ``stop`` sends ``:Mode ALL,Off`` whatever happened, and keeps the error if that
+cannot be confirmed.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from drivers.table_client import GIMBALS, TableCommandClient, TableError
+from hil.config import DEG, TurntableConfig
+from hil.samples import AlignedSample
+
+SETTLE_S = 2.0  # beyond the longest period, for the table to reach the commanded motion
+STATIC_TOLERANCE_DEG = 0.5
+RANGE_TOLERANCE = 0.2  # swing: peak-to-peak within +-20 % of the commanded
+RATE_TOLERANCE = 0.1
+
+
+class TableControl:
+    """The ``acl`` side of a trial; use as a context manager so the table is always turned off."""
+
+    def __init__(self, url: str, table: TurntableConfig) -> None:
+        if table.motion.kind == "positions":
+            raise TableError("turntable.motion: kind 'positions' is not commanded by the harness; "
+                             "run the sequence from the table's console or use swing, static or rate")
+        self.table = table
+        self.client = TableCommandClient(url, table.limits, table.baudrate)
+        self.stop_error: str | None = None
+
+    def __enter__(self) -> TableControl:
+        self.client.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def arm(self) -> None:
+        """Limits, interlock check, the configured motion on every axis, sync output on."""
+        client, motion = self.client, self.table.motion
+        client.apply_limits()
+        for gimbal in GIMBALS:
+            axis = getattr(motion.axes, gimbal)
+            if motion.kind == "rate":
+                client.set_mode(gimbal, "Rate")
+                client.demand_rate(gimbal, axis.rate_dps)
+                continue
+            client.demand_position(gimbal, axis.center_deg)
+            if motion.kind == "swing" and axis.amplitude_deg:
+                client.set_mode(gimbal, "Synthesis")
+                client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
+            else:
+                client.set_mode(gimbal, "Position")
+        client.configure_sync(True)
+
+    def stop(self) -> None:
+        """``:Mode ALL,Off`` and close the port (safe to call twice); a failure is kept in :attr:`stop_error`."""
+        try:
+            self.client.close()
+        except TableError as exc:
+            self.stop_error = str(exc)
+
+
+class MotionCheck:
+    """Compares the reported gimbal angles with the commanded motion; :attr:`failure` says what is wrong."""
+
+    def __init__(self, table: TurntableConfig, rate_hz: float) -> None:
+        motion = table.motion
+        self.kind = motion.kind
+        self.axes = [getattr(motion.axes, g) for g in GIMBALS]
+        periods = [a.period_s for a in self.axes if a.period_s and a.amplitude_deg]
+        self.window = max(periods, default=2.0)
+        self.settle = self.window + SETTLE_S
+        self._samples: deque[tuple[float, np.ndarray]] = deque(maxlen=int(self.window * rate_hz) + 1)
+        self._start: float | None = None
+        self.checked_at: float | None = None
+        self.failure: str | None = None
+
+    def add(self, samples: list[AlignedSample]) -> None:
+        for s in samples:
+            if s.angles is None:
+                continue
+            if self._start is None:
+                self._start = s.t
+            self._samples.append((s.t, np.asarray(s.angles)))
+        if self._samples and self._samples[-1][0] - self._start >= self.settle:
+            t = self._samples[-1][0]
+            if self.failure is None and (self.checked_at is None or t - self.checked_at >= self.window):
+                self.failure = self._check()
+                self.checked_at = t
+
+    def _check(self) -> str | None:
+        times = np.array([t for t, _ in self._samples])
+        angles = np.unwrap(np.array([a for _, a in self._samples]), axis=0) / DEG
+        for k, (gimbal, axis) in enumerate(zip(GIMBALS, self.axes)):
+            if self.kind == "rate":
+                rate = (angles[-1, k] - angles[0, k]) / (times[-1] - times[0])
+                if abs(rate - axis.rate_dps) > RATE_TOLERANCE * max(abs(axis.rate_dps), 1.0):
+                    return f"the {gimbal} axis turns at {rate:.2f} deg/s, commanded {axis.rate_dps:g}"
+            elif self.kind == "swing" and axis.amplitude_deg:
+                span = np.ptp(angles[:, k])
+                wanted = 2.0 * axis.amplitude_deg
+                if abs(span - wanted) > RANGE_TOLERANCE * wanted:
+                    return f"the {gimbal} axis swings over {span:.2f} deg, commanded {wanted:g} deg peak to peak"
+            else:
+                offset = np.max(np.abs(_wrap_deg(angles[:, k] - axis.center_deg)))
+                if offset > STATIC_TOLERANCE_DEG:
+                    return f"the {gimbal} axis is {offset:.2f} deg away from its commanded {axis.center_deg:g} deg"
+        return None
+
+
+def _wrap_deg(x: np.ndarray) -> np.ndarray:
+    return (x + 180.0) % 360.0 - 180.0
+

@@ -1,0 +1,70 @@
+"""Turntable control in a trial: the motion check, and hil run commanding the emulated table over acl."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import make_config
+from hil.cli import main
+from hil.samples import AlignedSample
+from hil.table_control import MotionCheck
+
+ROOT_CONFIG = "configs/emulated_swing.yaml"
+
+
+def _samples(scale=1.0, offset_deg=0.0, duration=30.0, rate=100.0):
+    cfg = make_config(duration=duration, rate=rate)
+    axes = [getattr(cfg.turntable.motion.axes, g) for g in ("outer", "middle", "inner")]
+    t = np.arange(1, int(duration * rate) + 1) / rate
+    angles = np.column_stack([scale * a.amplitude_deg * np.sin(2 * math.pi * t / a.period_s) + a.center_deg
+                              + offset_deg for a in axes])
+    return cfg, [AlignedSample(float(ti), (0.0,) * 3, (0.0,) * 3, tuple(np.radians(a))) for ti, a in zip(t, angles)]
+
+
+def test_the_commanded_swing_passes_and_a_short_one_fails():
+    cfg, good = _samples()
+    check = MotionCheck(cfg.turntable, 100.0)
+    check.add(good)
+    assert check.failure is None and check.checked_at is not None
+    cfg, short = _samples(scale=0.5)
+    check = MotionCheck(cfg.turntable, 100.0)
+    check.add(short)
+    assert "swings over" in check.failure
+
+
+def test_a_static_table_off_its_position_fails():
+    cfg = make_config(duration=10, kind="static")
+    _, samples = _samples(scale=0.0, offset_deg=1.0)
+    check = MotionCheck(cfg.turntable, 100.0)
+    check.add(samples)
+    assert "away from its commanded" in check.failure
+
+
+def _commanded(tmp_path, **turntable):
+    cfg = yaml.safe_load(open(ROOT_CONFIG))
+    cfg["turntable"].update(command_port="emulator", **turntable)
+    path = tmp_path / "cmd.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def test_run_arms_the_emulated_table_over_acl(tmp_path):
+    out = tmp_path / "out"
+    code = main(["run", str(_commanded(tmp_path)), "--duration", "30", "--speed", "max", "--quiet",
+                 "--viewer", "none", "--no-figures", "--out", str(out)])
+    assert code == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["trial"]["duration_s"] == pytest.approx(30.0) and result["estimate"]["gram_rank"] == 12
+
+
+def test_an_interlock_trip_ends_the_trial_and_keeps_its_outputs(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["run", str(_commanded(tmp_path, interlock_trip_at_s=20.0)), "--duration", "60", "--speed", "max",
+                 "--quiet", "--viewer", "none", "--no-figures", "--out", str(out)])
+    assert code == 1
+    assert "not moving as commanded" in capsys.readouterr().err
+    result = json.loads((out / "result.json").read_text())
+    assert 20.0 < result["trial"]["duration_s"] < 40.0
