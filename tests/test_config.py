@@ -42,7 +42,7 @@ def test_yaml_tags_are_not_executed(tmp_path):
         load_config(path)
 
 
-@pytest.mark.parametrize("name", ["emulated_swing.yaml", "liu2019_sim.yaml"])
+@pytest.mark.parametrize("name", ["emulated_swing.yaml", "liu2019_sim.yaml", "lab_swing.yaml"])
 def test_shipped_configs_validate(name):
     cfg = load_config(f"configs/{name}")
     assert cfg.turntable.motion.kind == "swing"
