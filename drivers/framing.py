@@ -133,6 +133,12 @@ class ByteFramer(Framer):
     def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
         return self.feed(chunk.data, chunk.host_time)
 
+    def _sent_at(self, host_time: float, bytes_from_frame: int, length: int) -> float:
+        """When the device sent a frame that is followed by more bytes in the same read: a host that
+        was held up reads a backlog at once, and the frames in it left the device one period apart."""
+        rate = self.codec.rate_hz
+        return host_time if not rate else host_time - (bytes_from_frame - length) / length / rate
+
     def feed(self, data: bytes, host_time: float = math.nan) -> list[Decoded]:
         """Decoded frames completed by ``data``, received at ``host_time``."""
         codec, counters, buf = self.codec, self.counters, self._buf
@@ -166,7 +172,7 @@ class ByteFramer(Framer):
                 counters.skipped_bytes += 1
                 pos += 1
                 continue
-            index, missing = self.unwrapper.next(codec.sequence(record), host_time)
+            index, missing = self.unwrapper.next(codec.sequence(record), self._sent_at(host_time, end - start, length))
             if self.unwrapper.count(counters, index, missing):
                 out.append(Decoded(record, index, host_time, length))
             else:

@@ -189,3 +189,17 @@ def test_wide_counter_ignores_a_far_jump_the_next_frame_does_not_confirm():
             delivered.append(index)
     assert delivered == [100, 101, 102, 103, 5001, 5002]
     assert counters.corrupt == 2 and counters.missing == 5001 - 103 - 1
+
+
+def test_a_backlog_read_after_a_host_stall_is_not_taken_for_counter_wraps():
+    from drivers.kvh1750 import Kvh1750Codec
+    from hil.samples import ImuSample
+
+    codec = Kvh1750Codec(rate_hz=200.0)
+    frames = [codec.encode(codec.from_sample(ImuSample(k, (0.0,) * 3, (0.0, 0.0, 0.05)))) for k in range(1, 401)]
+    framer = codec.framer()
+    framer.feed(b"".join(frames[:100]), host_time=0.5)
+    # the host was held up for 1.5 s: the 300 frames sent meanwhile arrive in one read, none lost
+    decoded = framer.feed(b"".join(frames[100:]), host_time=2.0)
+    assert len(decoded) == 300 and framer.counters.missing == 0
+    assert [d.sync_index for d in decoded] == list(range(decoded[0].sync_index, decoded[0].sync_index + 300))
