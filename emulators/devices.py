@@ -21,8 +21,8 @@ import termios
 import threading
 import time
 import tty
-from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,7 +39,6 @@ from hil.samples import ImuSample, TableSample
 
 WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
 DRAIN_S = 5.0  # longest wait for a reader to take the bytes queued before an unplug
-REPLUG_S = 5.0  # longest wait for the unplugged pty's own name to come free again
 REOPEN_SETTLE_S = 0.5  # after a replug, a reader's open (which flushes its input) may be slow to finish
 LATENCY_BIN_S = 10e-6  # resolution of the write-latency histogram
 LATENCY_BINS = 10_000  # up to 100 ms; later writes land in the last bin
@@ -48,21 +47,35 @@ LATENCY_BINS = 10_000  # up to 100 ms; later writes land in the last bin
 class PtyPort:
     """One pseudo-terminal: the emulator writes the master side; clients open :attr:`path` (the slave).
 
-    :meth:`unplug` closes the master, as pulling a USB adapter removes its device: readers get an
-    error and the path disappears. :meth:`replug` brings the same ``/dev/pts/N`` back once the readers
-    have let go of it (devpts hands out the lowest free number, so the numbers below it are held
-    meanwhile); if it stays taken for :data:`REPLUG_S` the port comes back under a new path.
+    With ``link`` the port is published as that symbolic link to the slave, like a udev by-id name:
+    :meth:`unplug` closes the master, as pulling a USB adapter removes its device (readers get an
+    error, the link dangles), and :meth:`replug` opens a new pty and points the link at it, so a
+    reader that reopens the link finds the device again, never another program's pty that took the
+    old number.
     """
 
-    def __init__(self, want: str | None = None) -> None:
-        self.master, slave = _open_pty(want)
+    def __init__(self, link: Path | None = None) -> None:
+        self.link = link
+        self._open()
+
+    def _open(self) -> None:
+        self.master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no newline translation: bytes pass unchanged
-        self.path = os.ttyname(slave)
-        os.close(slave)  # the path stays valid while the master is open
+        self.tty = os.ttyname(slave)
+        os.close(slave)  # the slave stays valid while the master is open
         os.set_blocking(self.master, False)
         self._poll = select.poll()
         self._poll.register(self.master, select.POLLOUT)
         self.plugged = True
+        if self.link is not None:
+            tmp = self.link.with_name(self.link.name + ".new")
+            tmp.unlink(missing_ok=True)
+            tmp.symlink_to(self.tty)
+            os.replace(tmp, self.link)
+
+    @property
+    def path(self) -> str:
+        return str(self.link) if self.link is not None else self.tty
 
     def has_reader(self) -> bool:
         """True while some client holds the slave side open (the master reports no hang-up)."""
@@ -84,7 +97,7 @@ class PtyPort:
 
     def unread(self) -> int:
         """Bytes written but not yet read by the client (the slave's input queue)."""
-        fd = os.open(self.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        fd = os.open(self.tty, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         try:
             return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0" * 4))[0]
         finally:
@@ -105,43 +118,19 @@ class PtyPort:
         return True
 
     def unplug(self) -> None:
-        self.close()
-
-    def replug(self) -> None:
-        self.__init__(self.path)
-
-    def close(self) -> None:
-        """Close the master; clients then read end-of-file/EIO and the path disappears."""
+        """Close the master; clients then read end-of-file/EIO and the slave disappears."""
         if self.plugged:
             os.close(self.master)
             self.plugged = False
 
+    def replug(self) -> None:
+        self._open()
 
-def _open_pty(want: str | None) -> tuple[int, int]:
-    """A new pty (master, slave), named ``want`` if that comes free within :data:`REPLUG_S`."""
-    deadline = time.monotonic() + REPLUG_S
-    while True:
-        held: list[tuple[int, int]] = []
-        try:
-            while True:
-                master, slave = os.openpty()
-                if want is None or os.ttyname(slave) == want:
-                    return master, slave
-                held.append((master, slave))
-                if _pty_number(os.ttyname(slave)) > _pty_number(want):
-                    break  # ``want`` is still taken
-        finally:
-            for fds in held:
-                os.close(fds[0])
-                os.close(fds[1])
-        if time.monotonic() > deadline:
-            want = None
-        time.sleep(0.02)
-
-
-def _pty_number(path: str) -> int:
-    tail = path.rsplit("/", 1)[-1]
-    return int(tail) if tail.isdigit() else -1
+    def close(self) -> None:
+        """Unplug for good: the link goes too."""
+        self.unplug()
+        if self.link is not None:
+            self.link.unlink(missing_ok=True)
 
 
 class CanPort:
@@ -269,7 +258,7 @@ class DeviceStream:
 
     def next_time(self) -> float:
         """Write time of the next tick (trial time)."""
-        return float(self.source.clock.tick_times(np.array([self._start + self._pos]))[0])
+        return (self._start + self._pos) * self.source.clock.period
 
     def pop(self, servo: Servo) -> Emission:
         if self._pos == len(self._cache):
@@ -311,9 +300,9 @@ class DeviceWriter:
     """
 
     def __init__(self, name: str, port: Any, faults: FaultInjector, baudrate: int | None, speed: float | None,
-                 stop: threading.Event, wait_readers: bool, on_path: Callable[[], None]) -> None:
+                 stop: threading.Event, wait_readers: bool) -> None:
         self.name, self.port, self.faults, self.baudrate, self.speed = name, port, faults, baudrate, speed
-        self.stop, self.wait_readers, self.on_path = stop, wait_readers, on_path
+        self.stop, self.wait_readers = stop, wait_readers
         self.latency = LatencyHistogram()
         self.frames = 0
         self.queue: queue.Queue = queue.Queue(maxsize=0 if speed else 256)
@@ -353,10 +342,7 @@ class DeviceWriter:
             counts["unplugged"] += 1
             return False
         if not port.plugged:
-            old = port.path
             port.replug()
-            if port.path != old:
-                self.on_path()
             if self.wait_readers:
                 wait_for_readers([port], self.stop, REOPEN_SETTLE_S)
         return True

@@ -7,7 +7,9 @@ file or on stdout::
     {"imu": "/dev/pts/N" | {"interface": "udp_multicast", "channel": "239.0.0.1"},
      "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT"}
 
-The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on the python-can bus of
+A device configured to unplug (``faults.unplug_at_s``) is published as a stable symbolic link to its
+pty, ``/tmp/hil-emulate-XXXX/imu`` or ``.../turntable_data`` (as udev's by-id names), which the replug
+points at the new pty. The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on the python-can bus of
 ``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP port. The run's
 statistics (:class:`EmulatorStats`) go to stderr as JSON at exit, and to ``--stats-file``.
 """
@@ -20,6 +22,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import asdict, dataclass, field
@@ -111,7 +114,7 @@ class _Devices:
     """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
 
     def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
-                 wait_readers: bool, on_path) -> None:
+                 wait_readers: bool) -> None:
         rate = cfg.imu_rate_hz
         sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
             update={"duration_s": duration})}))
@@ -133,21 +136,27 @@ class _Devices:
         self.ports: dict = {}
         self.writers: dict[str, DeviceWriter] = {}
         self.server: AclServer | None = None
+        unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
+        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if any(unplugging) else None
+
+        def pty(name: str, unplugs: bool) -> PtyPort:
+            return PtyPort(Path(self._links.name) / name if unplugs else None)
+
         try:
             if imu_cfg.protocol == "can-dbc":
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:
                 check_baudrate("imu", len(codec.encode(codec.from_sample(PROBE))), rate, imu_cfg.baudrate)
-                imu_port, imu_damage, imu_baud = PtyPort(), ByteDamage(), imu_cfg.baudrate
+                imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
             check_baudrate("turntable", 24, rate, cfg.turntable.baudrate)
-            self.ports["turntable_data"] = PtyPort()
+            self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
             self.server = AclServer(self.servo)
             for k, (name, damage, baud, faults) in enumerate((
                     ("imu", imu_damage, imu_baud, imu_cfg.faults),
                     ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
                 self.writers[name] = DeviceWriter(name, self.ports[name], FaultInjector(faults, damage, seed, k),
-                                                  baud, speed, stop, wait_readers, on_path)
+                                                  baud, speed, stop, wait_readers)
         except BaseException:
             self.close()
             raise
@@ -162,6 +171,8 @@ class _Devices:
             self.server.close()
         for port in self.ports.values():
             port.close()
+        if self._links is not None:
+            self._links.cleanup()
 
 
 def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
@@ -184,16 +195,11 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
     devices: _Devices | None = None
-
-    def publish() -> None:
-        names = devices.names()
-        print(json.dumps(names), flush=True)
-        if ports_file is not None:
-            _write_json(ports_file, names)
-
     try:
-        devices = _Devices(cfg, duration, speed, stop, wait_readers, publish)
-        publish()
+        devices = _Devices(cfg, duration, speed, stop, wait_readers)
+        print(json.dumps(devices.names()), flush=True)
+        if ports_file is not None:
+            _write_json(ports_file, devices.names())
         ptys = [p for p in devices.ports.values() if isinstance(p, PtyPort)]
         if wait_readers and not wait_for_readers(ptys, stop):
             return _stats(devices, 0, 0.0, True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 import struct
 import threading
 from pathlib import Path
@@ -58,6 +60,25 @@ def read_all(path: str, out: dict[str, bytes], key: str) -> None:
             except serial.SerialException:
                 break  # master closed: end of stream
     out[key] = bytes(data)
+
+
+def read_raw(path: str, buf: bytearray) -> None:
+    """Append every byte the pty delivers to ``buf`` until the emulator closes it. Plain os.read: unlike
+    a serial library's open, nothing flushes the bytes that arrive while the port is being opened."""
+    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY)
+    try:
+        while True:
+            try:
+                chunk = os.read(fd, 65536)
+            except OSError as exc:
+                if exc.errno != errno.EIO:
+                    raise
+                return
+            if not chunk:
+                return
+            buf += chunk
+    finally:
+        os.close(fd)
 
 
 def run(tmp_path: Path, errors: dict | None = None, speed: str = "max") -> tuple[dict[str, bytes], object]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import errno
 import json
 import math
 import os
@@ -12,13 +11,14 @@ import time
 import numpy as np
 import pytest
 import yaml
+from test_emulated_devices import read_raw
 
 from drivers.framing import SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec, KvhFrame
 from drivers.session import DeviceSession
 from drivers.tap import SampleListener
 from drivers.transport import SerialTransport
-from drivers.tts1 import Tts1Codec
+from drivers.tts1 import Status, Tts1Codec
 from emulators.emulate import spawn_emulator
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.harness import EmulatorThread
@@ -40,33 +40,11 @@ def trial(duration=DURATION, imu=None, turntable=None, seed=5) -> dict:
             "imu": imu or {}}
 
 
-def read_all(path: str, out: dict, key: str) -> None:
-    """Every byte the pty delivers until the emulator closes it, read with plain os.read: unlike a
-    serial library's open, nothing flushes the bytes that arrive while the port is being opened."""
-    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY)
-    chunks = []
-    try:
-        while True:
-            try:
-                chunk = os.read(fd, 65536)
-            except OSError as exc:
-                if exc.errno != errno.EIO:
-                    raise
-                break
-            if not chunk:
-                break
-            chunks.append(chunk)
-    finally:
-        os.close(fd)
-    out[key] = b"".join(chunks)
-
-
 def capture(cfg: dict, speed: float | None = None):
     """Run the emulator to its end; its stats and the bytes each pty delivered."""
     with EmulatorThread(parse_config(cfg), speed) as emu:
-        out: dict[str, bytes] = {}
-        readers = [threading.Thread(target=read_all, args=(emu.ports[k], out, k))
-                   for k in ("imu", "turntable_data")]
+        out = {k: bytearray() for k in ("imu", "turntable_data")}
+        readers = [threading.Thread(target=read_raw, args=(emu.ports[k], buf)) for k, buf in out.items()]
         for r in readers:
             r.start()
         stats = emu.join()
@@ -165,10 +143,13 @@ class Samples(SampleListener):
         self.samples.append(sample)
 
 
-def test_unplug_closes_the_pty_and_the_session_reconnects_to_the_same_path():
+def test_unplug_closes_the_pty_and_the_session_reconnects_through_its_stable_link():
     # The table's 32-bit counter says exactly how many frames were lost, however late they come back.
     cfg = parse_config(trial(duration=1.5, turntable={"faults": {"unplug_at_s": 0.5, "unplug_s": 0.25}}))
     with EmulatorThread(cfg) as emu:
+        link = emu.ports["turntable_data"]
+        assert os.path.islink(link) and os.readlink(link).startswith("/dev/pts/")
+        assert emu.ports["imu"].startswith("/dev/pts/")  # a device that never unplugs keeps its pty name
         sessions = {name: DeviceSession(SerialTransport(emu.ports[name], 921600, name), codec,
                                         sample_listeners=[Samples()], backoff_s=(0.02, 0.1)).start()
                     for name, codec in (("imu", Kvh1750Codec(RATE)), ("turntable_data", Tts1Codec()))}
@@ -177,11 +158,14 @@ def test_unplug_closes_the_pty_and_the_session_reconnects_to_the_same_path():
             deadline = time.monotonic() + 10
             while table.counters.frames + table.counters.missing < 300 and time.monotonic() < deadline:
                 time.sleep(0.02)
-            outages = {name: s.outages for name, s in sessions.items()}  # before the end of the run closes the ports
-            stats = emu.join()
         finally:
+            # stopped before the run ends: a session left reopening a bare /dev/pts/N could land on
+            # another program's pty that took the number
             for s in sessions.values():
                 s.stop()
+        outages = {name: s.outages for name, s in sessions.items()}
+        stats = emu.join()
+        assert not os.path.lexists(link)
     injected = stats.devices["turntable_data"].faults
     assert injected["unplugs"] == 1 and injected["unplugged"] == 50
     assert outages == {"imu": 0, "turntable_data": 1}
@@ -198,8 +182,7 @@ def test_stats_go_to_stderr_and_the_stats_file(tmp_path):
     config.write_text(yaml.safe_dump(trial(duration=0.5, imu={"faults": {"drop_rate": 0.1}})))
     stats_file = tmp_path / "stats.json"
     proc, ports = spawn_emulator(config, tmp_path / "ports.json", stats_file=stats_file)
-    out: dict = {}
-    readers = [threading.Thread(target=read_all, args=(ports[k], out, k)) for k in ("imu", "turntable_data")]
+    readers = [threading.Thread(target=read_raw, args=(ports[k], bytearray())) for k in ("imu", "turntable_data")]
     for r in readers:
         r.start()
     assert proc.wait(20) == 0
@@ -239,3 +222,20 @@ def test_device_clock_jitter_drift_and_free_running():
     assert free.device_time(np.array([100.0]))[0] == pytest.approx(100.01)
     synced = DeviceClock(RATE, 0.0, DeviceTiming(clock_drift_ppm=100.0))
     assert synced.ticks(60.0) == 12000 and synced.device_time(np.array([1.0]))[0] == pytest.approx(1.0001)
+
+
+def test_write_jitter_delays_every_paced_frame_by_up_to_jitter_ms():
+    stats, _ = capture(trial(duration=0.5, imu={"faults": {"jitter_ms": 3.0}}), speed=1.0)
+    imu = stats.devices["imu"]
+    assert imu.faults["delayed"] == imu.frames == 100
+    # U(0, 3 ms) on top of 0.39 ms of wire time: the slowest percent is late by nearly 3 ms or more
+    assert imu.latency_p99_ms >= 2.5 and stats.devices["turntable_data"].faults["delayed"] == 0
+
+
+def test_a_free_running_table_ticks_on_its_own_drifting_clock():
+    stats, out = capture(trial(turntable={"timing": {"free_running": True, "clock_drift_ppm": 5000.0}}))
+    _, decoded = framed(Tts1Codec(), out["turntable_data"])
+    # 2 s on a clock 0.5 % fast at 200 Hz: 402 frames, each flagged free-running; the IMU keeps the pulses
+    assert [d.sync_index for d in decoded] == list(range(1, 403))
+    assert all(d.record.status & Status.FREE_RUNNING for d in decoded)
+    assert stats.devices["imu"].frames == 400 and stats.pulses == 400

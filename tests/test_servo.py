@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 import pytest
-import serial
+from test_emulated_devices import read_raw
 
 from drivers.acl import AclCommand
 from drivers.kvh1750 import Kvh1750Codec
@@ -93,22 +93,12 @@ def test_commands_outside_the_limits_or_with_open_interlocks_are_refused():
     assert servo.revision == 1  # only the interlock change re-planned the motion
 
 
-def read_frames(path: str, stop: threading.Event, out: bytearray) -> None:
-    with serial.Serial(path, timeout=0.05) as port:
-        while not stop.is_set():
-            try:
-                out += port.read(65536)
-            except serial.SerialException:
-                return
-
-
 class Readers:
     """Read the IMU and table ptys into byte buffers until the emulator closes them."""
 
     def __init__(self, ports: dict) -> None:
-        self.stop = threading.Event()
         self.imu, self.table = bytearray(), bytearray()
-        self.threads = [threading.Thread(target=read_frames, args=(ports[k], self.stop, buf))
+        self.threads = [threading.Thread(target=read_raw, args=(ports[k], buf))
                         for k, buf in (("imu", self.imu), ("turntable_data", self.table))]
         for t in self.threads:
             t.start()
@@ -122,13 +112,19 @@ class Readers:
             assert time.monotonic() < deadline
             time.sleep(0.01)
 
+    def wait_swing_frames(self, n: int) -> None:
+        deadline = time.monotonic() + 20
+        while sum(d.record.status >> 5 == Mode.SYNTHESIS for d in self.table_frames()) < n:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+
     def join(self) -> None:
         for t in self.threads:
             t.join(10)
 
 
 def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
-    cfg = static_config()
+    cfg = static_config(duration=8.0)
     with EmulatorThread(cfg, speed=5.0) as emu:
         readers = Readers(emu.ports)
         readers.wait_table_frames(100)
@@ -142,7 +138,7 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
                 client.demand_position("middle", 61.0)
             with pytest.raises(TableError, match=r"\?200"):  # the table refuses it too
                 client.send(AclCommand(":Demand:Position", ("2", 61.0)))
-            readers.wait_table_frames(700)
+            readers.wait_swing_frames(200)
             assert client.send(AclCommand(":Mode?", ("1",))).text == "S"
         # closing the client switched the table Off: it brakes from the next pulse on
         emu.join()
@@ -151,7 +147,8 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
     modes = [d.record.status >> 5 for d in frames]
     k_s = frames[modes.index(Mode.SYNTHESIS)].sync_index
     k_off = next((d.sync_index for d, m in zip(frames, modes) if m == Mode.OFF), frames[-1].sync_index + 1)
-    assert 100 < k_s < 600 and k_off > 700 and all(m == Mode.POSITION for m in modes[:k_s - 1])
+    assert k_s > 100 and k_off > k_s + 200 and all(m == Mode.POSITION for m in modes[:k_s - 1])
+    assert frames[0].sync_index == 1
     frames = frames[:k_off - 1]
     latch = np.array([d.sync_index for d in frames]) / RATE + 50e-6
     t_s = k_s / RATE
