@@ -39,7 +39,8 @@ from hil.samples import ImuSample, TableSample
 
 WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
 DRAIN_S = 5.0  # longest wait for a reader to take the bytes queued before an unplug
-REOPEN_SETTLE_S = 0.5  # after a replug, a reader's open (which flushes its input) may be slow to finish
+REOPEN_SETTLE_S = 0.5  # after a replug, the longest wait for a reader to finish opening the port
+PROBE_SPEED = termios.B50  # a fresh pty's line speed, so the reader's own settings show when it configures it
 LATENCY_BIN_S = 10e-6  # resolution of the write-latency histogram
 LATENCY_BINS = 10_000  # up to 100 ms; later writes land in the last bin
 
@@ -67,6 +68,9 @@ class PtyPort:
         self._poll = select.poll()
         self._poll.register(self.master, select.POLLOUT)
         self.plugged = True
+        attrs = termios.tcgetattr(self.master)  # on a pty master: the slave's settings
+        attrs[4] = attrs[5] = PROBE_SPEED
+        termios.tcsetattr(self.master, termios.TCSANOW, attrs)
         if self.link is not None:
             tmp = self.link.with_name(self.link.name + ".new")
             tmp.unlink(missing_ok=True)
@@ -80,6 +84,10 @@ class PtyPort:
     def has_reader(self) -> bool:
         """True while some client holds the slave side open (the master reports no hang-up)."""
         return not any(events & select.POLLHUP for _, events in self._poll.poll(0))
+
+    def configured(self) -> bool:
+        """True once a reader has set the line up (a serial library does, and then flushes its input)."""
+        return termios.tcgetattr(self.master)[5] != PROBE_SPEED
 
     def write(self, data: bytes, stop: threading.Event) -> bool:
         """Write all of ``data``, waiting while the kernel buffer is full; False if stopped first."""
@@ -147,6 +155,9 @@ class CanPort:
 
     def has_reader(self) -> bool:
         return True  # a bus does not know its listeners
+
+    def configured(self) -> bool:
+        return True
 
     def write(self, messages: list, stop: threading.Event) -> bool:
         for m in messages:
@@ -343,8 +354,11 @@ class DeviceWriter:
             return False
         if not port.plugged:
             port.replug()
-            if self.wait_readers:
-                wait_for_readers([port], self.stop, REOPEN_SETTLE_S)
+            if self.wait_readers and wait_for_readers([port], self.stop, 0.0):
+                deadline = time.monotonic() + REOPEN_SETTLE_S
+                while not port.configured() and time.monotonic() < deadline and not self.stop.wait(0.005):
+                    pass
+                self.stop.wait(0.02)  # the reader's flush follows its set-up
         return True
 
     def _send(self, frames: list, due: float | None) -> bool:
