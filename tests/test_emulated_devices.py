@@ -1,4 +1,4 @@
-"""The emulated devices on ptys, read like hardware: pyserial, a frame checker written from DESIGN.md, the framers."""
+"""The emulated devices on ptys: a frame checker written from DESIGN.md, the framers, the truth model."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import serial
 import yaml
 from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
 
@@ -50,18 +49,6 @@ def check_tts1(frame: bytes) -> tuple[int, tuple[int, int, int], int]:
     return counter, (o, m, i), delay
 
 
-def read_all(path: str, out: dict[str, bytes], key: str) -> None:
-    """Everything the port delivers until the emulator closes it."""
-    data = bytearray()
-    with serial.Serial(path, timeout=0.05) as port:
-        while True:
-            try:
-                data += port.read(65536)
-            except serial.SerialException:
-                break  # master closed: end of stream
-    out[key] = bytes(data)
-
-
 def read_raw(path: str, buf: bytearray) -> None:
     """Append every byte the pty delivers to ``buf`` until the emulator closes it. Plain os.read: unlike
     a serial library's open, nothing flushes the bytes that arrive while the port is being opened."""
@@ -86,8 +73,8 @@ def run(tmp_path: Path, errors: dict | None = None, speed: str = "max") -> tuple
     config = tmp_path / "emulated.yaml"
     config.write_text(yaml.safe_dump(cfg))
     proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed)
-    out: dict[str, bytes] = {}
-    threads = [threading.Thread(target=read_all, args=(ports[k], out, k)) for k in ("imu", "turntable_data")]
+    out = {k: bytearray() for k in ("imu", "turntable_data")}  # read raw: no serial-library flush on open
+    threads = [threading.Thread(target=read_raw, args=(ports[k], buf)) for k, buf in out.items()]
     for t in threads:
         t.start()
     for t in threads:

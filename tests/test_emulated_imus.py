@@ -16,7 +16,7 @@ import cantools
 import numpy as np
 import pytest
 import yaml
-from test_emulated_devices import read_all
+from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture
 from drivers.transport import open_can_bus
@@ -54,9 +54,9 @@ def xsens_items(frame: bytes) -> dict[int, bytes]:
 def test_xsens_on_a_pty_carries_counter_drifting_sample_time_and_increments(tmp_path):
     imu = {"protocol": "xsens-mtdata2", "latch_delay_us": 300, "timing": {"clock_drift_ppm": 500.0}}
     cfg = parse_config(trial(imu))
-    out: dict[str, bytes] = {}
+    out = {k: bytearray() for k in ("imu", "turntable_data")}
     with EmulatorThread(cfg) as emu:
-        readers = [threading.Thread(target=read_all, args=(emu.ports[k], out, k)) for k in ("imu", "turntable_data")]
+        readers = [threading.Thread(target=read_raw, args=(emu.ports[k], buf)) for k, buf in out.items()]
         for r in readers:
             r.start()
         emu.join()
@@ -111,7 +111,7 @@ def test_can_imu_on_the_in_process_virtual_bus_is_logged_to_blf(tmp_path):
     try:
         with EmulatorThread(parse_config(cfg)) as emu:
             assert emu.ports["imu"] == {"interface": "virtual", "channel": "emulated-imu-test"}
-            table = threading.Thread(target=read_all, args=(emu.ports["turntable_data"], {}, "table"))
+            table = threading.Thread(target=read_raw, args=(emu.ports["turntable_data"], bytearray()))
             table.start()  # the pulse train starts once the table port has a reader
             received = 0
             while received < 6 * 200:
@@ -140,7 +140,7 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
         time.sleep(1.0)  # the logger joins the group
         proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed="2")
         assert ports["imu"] == {"interface": "udp_multicast", "channel": group}
-        read_all(ports["turntable_data"], {}, "table")
+        read_raw(ports["turntable_data"], bytearray())
         assert proc.wait(20) == 0
         time.sleep(0.3)
     finally:
@@ -175,7 +175,7 @@ def test_frames_are_written_when_their_last_byte_would_have_arrived():
     cfg = parse_config(dict(trial({}, duration=0.5), turntable={"baudrate": 57600,
                                                                  "motion": {"kind": "swing", "axes": SWING}}))
     with EmulatorThread(cfg, speed=1.0) as emu:
-        readers = [threading.Thread(target=read_all, args=(emu.ports[k], {}, k)) for k in ("imu", "turntable_data")]
+        readers = [threading.Thread(target=read_raw, args=(emu.ports[k], bytearray())) for k in ("imu", "turntable_data")]
         for r in readers:
             r.start()
         stats = emu.join()
