@@ -48,7 +48,9 @@ class SerialTransport(Transport):
 
     def open(self) -> None:
         try:
-            port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=POLL_S)
+            # exclusive: an advisory lock, so a second reader (a stale session of another process
+            # reconnecting to a reused pty number) cannot share the port and split its bytes
+            port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=POLL_S, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f"{self.stream}: cannot open {self.url}: {exc}") from exc
         try:

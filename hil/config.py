@@ -237,6 +237,7 @@ class ImuConfig(_Model):
 class EstimatorConfig(_Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
+    batch_samples: int = Field(10, ge=1, le=10000)  # live: samples handed to the estimator at once
 
 
 class ReportLimits(_Model):

@@ -198,6 +198,10 @@ class LiveTrial:
 
     def _check_alive(self, now: float, started: float) -> None:
         last = self.fanout.last_arrival
+        near_end = self.duration is not None and self.processor.trial_time >= self.duration - END_TOLERANCE_S
+        if last and now - last > SETTLE_S and near_end:
+            self.ended_by_source = True  # the devices stopped at the end; its last frames were lost
+            return
         if self.source_done() and now - last > SETTLE_S:  # the readers handed over the last bytes
             self.ended_by_source = True  # everything the devices sent has been processed
             if self.duration is not None and self.processor.trial_time < self.duration - END_TOLERANCE_S:

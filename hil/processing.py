@@ -85,11 +85,15 @@ class TrialProcessor:
         self.geometry = TableGeometry.from_config(cfg.turntable)
         self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale),
                          TABLE: StreamDecoder(make_codec("tts1"), time_scale)}
-        self.aligner = Aligner(cfg.imu_rate_hz, cfg.trial.rate_hz, cfg.imu.latch_delay_us * 1e-6)
+        free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
+        self.aligner = Aligner(cfg.imu_rate_hz, cfg.trial.rate_hz, cfg.imu.latch_delay_us * 1e-6,
+                               free_running=free_running)
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
         self.gate = GyroTableGate(self.earth, self.geometry)
         self._previous: AlignedSample | None = None  # the last sample the estimator took
+        self._block: list[AlignedSample] = []  # aligned samples waiting for the estimator
+        self._t_end = 0.0
         self.estimator: OnlineEstimator | None = None
         self.time_offset = TimeOffsetEstimator(self.earth, self.geometry, cfg.imu_rate_hz)
         self.duration = duration
@@ -121,7 +125,7 @@ class TrialProcessor:
 
     def finish(self) -> None:
         """End of data: release what the aligner still holds."""
-        self._estimate(self.aligner.flush())
+        self._estimate(self.aligner.flush(), final=True)
 
     @property
     def complete(self) -> bool:
@@ -131,8 +135,8 @@ class TrialProcessor:
 
     @property
     def trial_time(self) -> float:
-        """Trial time (s) of the last sample the estimator has."""
-        return 0.0 if self.estimator is None else self.estimator.time
+        """Trial time (s) at the end of the last sample aligned."""
+        return 0.0 if self.estimator is None else self._t_end - self.estimator.t0
 
     def counts(self) -> StreamCounts:
         imu, table = (self.decoders[s].framer.counters for s in (IMU, TABLE))
@@ -163,36 +167,49 @@ class TrialProcessor:
         result["streams"]["sync_offset_ms"] = None if offset is None else offset * 1e3
         return result
 
-    def _estimate(self, ready: list[AlignedSample | ImuGap]) -> None:
-        if not ready:
-            return
+    def _estimate(self, ready: list[AlignedSample | ImuGap], final: bool = False) -> None:
+        """Hand aligned samples to the estimator in blocks of ``estimator.batch_samples`` (a gap or the
+        end closes a block early): the block boundaries depend on the samples only, so a replay
+        updates the estimator exactly as the live run did."""
         if self.estimator is None:
+            if not ready:
+                return
             self.estimator = OnlineEstimator(self.earth, self.geometry, 1.0 / self.cfg.estimator.solve_rate_hz,
                                              self.cfg.estimator.rank_tolerance, t0=self.aligner.t0)
         before = len(self.estimator.snapshots)
-        run: list[AlignedSample] = []
-        for item in [*ready, None]:
+        if ready:
+            last = ready[-1]
+            self._t_end = last.t if isinstance(last, AlignedSample) else last.t_end
+        for item in ready:
             if isinstance(item, AlignedSample):
-                run.append(item)
+                self._block.append(item)
+                if len(self._block) >= self.cfg.estimator.batch_samples:
+                    self._update(self._block)
+                    self._block = []
                 continue
-            for chunk in self._gated(run):
-                if isinstance(chunk, ImuGap):
-                    self.estimator.bridge(chunk)
-                    self.time_offset.restart()
-                    continue
-                self.estimator.update_samples(chunk)
-                self.time_offset.add(chunk)
-            if run and self._on_aligned is not None:
-                self._on_aligned(run)
-            if isinstance(item, ImuGap):
-                self.bridged_without_table += not self.estimator.bridge(item)
-                self.time_offset.restart()
-                self._previous = None if item.angles_end is None else AlignedSample(item.t_end, (0.0,) * 3,
-                                                                                    (0.0,) * 3, item.angles_end)
-            run = []
+            self._update(self._block)
+            self._block = []
+            self.bridged_without_table += not self.estimator.bridge(item)
+            self.time_offset.restart()
+            self._previous = None if item.angles_end is None else AlignedSample(item.t_end, (0.0,) * 3,
+                                                                                (0.0,) * 3, item.angles_end)
+        if final:
+            self._update(self._block)
+            self._block = []
         if self._on_snapshot is not None:
             for snap in self.estimator.snapshots[before:]:
                 self._on_snapshot(snap)
+
+    def _update(self, run: list[AlignedSample]) -> None:
+        for chunk in self._gated(run):
+            if isinstance(chunk, ImuGap):
+                self.estimator.bridge(chunk)
+                self.time_offset.restart()
+                continue
+            self.estimator.update_samples(chunk)
+            self.time_offset.add(chunk)
+        if run and self._on_aligned is not None:
+            self._on_aligned(run)
 
     def _gated(self, run: list[AlignedSample]) -> list[list[AlignedSample] | ImuGap]:
         """The run split where the gyro disagrees with the table: those samples become bridged gaps."""

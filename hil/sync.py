@@ -20,6 +20,10 @@ instant lies within the last knot interval, where the error is ~1e-13 rad for a 
 
 Decisions depend only on the order in which samples arrive, never on wall-clock time, so a
 replay of the same frames gives bit-identical output.
+
+Fallback for devices without a sync input (``free_running``): each counter is mapped to host time by
+an :class:`~hil.clock_model.AffineClock` fitted to the receive times, and the table's latch instants are
+placed on the IMU's time line through both fits (accuracy set by the host's receive-time jitter).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hil.clock_model import AffineClock
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 
 Vec3 = tuple[float, float, float]
@@ -59,6 +64,7 @@ class AlignerCounters:
     imu_bridged: int = 0  # missing IMU samples inside gaps bridged with the table attitude
     imu_gaps: int = 0  # gaps of the IMU count (filled or bridged)
     without_angles: int = 0  # samples released without table angles (table gap or table silent)
+    table_unmapped: int = 0  # free-running: table samples before the IMU's clock was known
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
@@ -125,7 +131,7 @@ class Aligner:
 
     def __init__(self, imu_rate_hz: float, table_rate_hz: float, imu_delay_s: float = 0.0, *,
                  with_table: bool = True, max_fill: int = 10, reorder_window: int = 4,
-                 max_angle_gap_s: float = 0.1, table_wait_s: float = 5.0) -> None:
+                 max_angle_gap_s: float = 0.1, table_wait_s: float = 5.0, free_running: bool = False) -> None:
         self.imu_period = 1.0 / imu_rate_hz
         self.table_period = 1.0 / table_rate_hz
         self.imu_delay = imu_delay_s
@@ -142,6 +148,7 @@ class Aligner:
         self._table = _TableKnots()
         self._out: list[AlignedSample | ImuGap] = []
         self._last_angles: Vec3 | None = None
+        self.clocks = (AffineClock(imu_rate_hz), AffineClock(table_rate_hz)) if free_running else None
 
     def imu_time(self, index: int) -> float:
         return index * self.imu_period + self.imu_delay
@@ -154,6 +161,8 @@ class Aligner:
     def add_imu(self, sample: ImuSample) -> list[AlignedSample | ImuGap]:
         """Take one IMU sample; returns what became ready."""
         k = sample.sync_index
+        if self.clocks is not None:
+            self.clocks[0].add(k, sample.host_time)
         if self._next is None:
             self._next = self._first = k
         if k < self._next:
@@ -167,6 +176,15 @@ class Aligner:
     def add_table(self, sample: TableSample) -> list[AlignedSample | ImuGap]:
         """Take one table sample; returns what became ready."""
         t = sample.sync_index * self.table_period + sample.latch_delay
+        if self.clocks is not None:
+            imu, table = self.clocks
+            table.add(sample.sync_index, sample.host_time)
+            if not imu.ready:
+                self.counters.table_unmapped += 1
+                return self._release()
+            # the table's latch instant on the host clock, then as an IMU count, then on the IMU time line
+            host = table.time(sample.sync_index) + sample.latch_delay
+            t = (host - imu.time(0)) / imu.period * self.imu_period
         if not self._table.insert(sample.sync_index, t, np.asarray(sample.angles, dtype=float)):
             self.counters.table_duplicates += 1
         return self._release()

@@ -191,3 +191,23 @@ def test_ctrl_c_inside_a_session_still_switches_the_table_off(table):
             raise KeyboardInterrupt
     assert table.lines[0] == "*IDN?" and ":Limit:Rate 2,20" in table.lines
     assert table.lines[-2:] == [":Mode 1,Synthesis", ":Mode ALL,Off"]
+
+
+def test_a_second_reader_cannot_open_a_port_already_in_use():
+    import os
+    import tty
+
+    from drivers.transport import SerialTransport, TransportError
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    first, second = SerialTransport(path, 115200, "imu"), SerialTransport(path, 115200, "imu")
+    try:
+        first.open()
+        with pytest.raises(TransportError, match="cannot open"):
+            second.open()
+    finally:
+        first.close()
+        os.close(slave)
+        os.close(master)
