@@ -4,7 +4,7 @@ Runs the default emulated trial (emulated devices in their own process) through 
 this process and prints: CPU time of this process over the trial (share of one core), the
 chunk-arrival -> estimator-updated latency p50/p99/max, and the resident memory every minute.
 
-    .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml]
+    .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml] [--batch N]
 """
 
 from __future__ import annotations
@@ -32,8 +32,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0)
     parser.add_argument("--config", default="configs/emulated_swing.yaml")
+    parser.add_argument("--batch", type=int, help="estimator.batch_samples (default: the config's)")
     args = parser.parse_args()
     cfg = load_config(args.config)
+    if args.batch is not None:
+        cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
     text = Path(args.config).read_text()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
@@ -59,12 +62,13 @@ def main() -> None:
         wall = wall1 - wall0
         lat = trial.latency.percentiles_ms()
         counts = trial.processor.counts()
+        print(f"estimator.batch_samples {cfg.estimator.batch_samples}")
         print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
               f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")
         print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
-        print("latency chunk arrival -> estimate updated: "
-              + ", ".join(f"{k.removeprefix('latency_')} {v:.2f}" for k, v in lat.items()))
+        print("frame arrival -> estimate updated, ms (latency: from the frame completing a block; "
+              "age: from its first frame): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
         print("resident memory (trial s, MiB): " + ", ".join(f"({t:.0f}, {m:.1f})" for t, m in memory))
 
 

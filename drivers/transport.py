@@ -5,6 +5,7 @@ Both return whatever has arrived as :class:`RawChunk` records and never wait for
 
 from __future__ import annotations
 
+import os
 import time
 from abc import ABC, abstractmethod
 
@@ -45,8 +46,10 @@ class SerialTransport(Transport):
     def __init__(self, url: str, baudrate: int, stream: str) -> None:
         self.url, self.baudrate, self.stream = url, baudrate, stream
         self.port: serial.SerialBase | None = None
+        self._pty: tuple[int, int] | None = None  # (device, creation time) of a /dev/pts node first opened
 
     def open(self) -> None:
+        self._check_same_pty()
         try:
             # exclusive: an advisory lock, so a second reader (a stale session of another process
             # reconnecting to a reused pty number) cannot share the port and split its bytes
@@ -58,6 +61,22 @@ class SerialTransport(Transport):
         except (AttributeError, NotImplementedError, OSError, ValueError):
             pass  # not a local UART (pty, socket, rfc2217): nothing to tune
         self.port = port
+
+    def _check_same_pty(self) -> None:
+        """A pseudo-terminal's number is handed to the next program that asks once it is closed: never
+        reopen ``/dev/pts/N`` when it is a different pty from the one first opened (a real port's node,
+        recreated on replug, and a link re-pointed at a new pty are reopened as usual)."""
+        if not self.url.startswith("/dev/pts/"):
+            return
+        try:
+            info = os.stat(self.url)
+        except OSError:
+            return  # gone: the open fails and says so
+        identity = (info.st_rdev, info.st_ctime_ns)
+        if self._pty is None:
+            self._pty = identity
+        elif identity != self._pty:
+            raise TransportError(f"{self.stream}: {self.url} is now another program's pseudo-terminal; not reopening")
 
     def read(self) -> RawChunk | None:
         if self.port is None:

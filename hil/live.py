@@ -71,18 +71,29 @@ class Fanout(RawListener):
 
 @dataclass
 class LatencyStats:
-    """Chunk arrival (host time) to estimator updated, over the last samples."""
+    """How fresh the estimate is, over the last 100 000 estimator updates (ms):
 
-    values: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
+    - ``latency``: from the arrival of the frame that completed a block of samples to the estimator
+      having taken the block;
+    - ``age``: from the arrival of the first frame of that block (the oldest sample it held).
+    """
 
-    def add(self, arrival: float) -> None:
-        self.values.append(time.time() - arrival)
+    latency: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
+    age: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
+
+    def add(self, first_arrival: float, last_arrival: float) -> None:
+        now = time.time()
+        self.latency.append(now - last_arrival)
+        self.age.append(now - first_arrival)
 
     def percentiles_ms(self) -> dict[str, float]:
-        if not self.values:
+        if not self.latency:
             return {}
-        p50, p99, worst = np.percentile(np.fromiter(self.values, float), [50, 99, 100]) * 1e3
-        return {"latency_p50_ms": float(p50), "latency_p99_ms": float(p99), "latency_max_ms": float(worst)}
+        out = {}
+        for name, values in (("latency", self.latency), ("age", self.age)):
+            p50, p99, worst = np.percentile(np.fromiter(values, float), [50, 99, 100]) * 1e3
+            out.update({f"{name}_p50_ms": float(p50), f"{name}_p99_ms": float(p99), f"{name}_max_ms": float(worst)})
+        return out
 
 
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
@@ -176,17 +187,22 @@ class LiveTrial:
     def _loop(self) -> None:
         started = time.monotonic()
         next_progress = started
+        first_arrival: float | None = None  # the first chunk since the estimator's last update
         while not (self.processor.complete or self.ended_by_source):
             try:
                 item = self.queue.get(timeout=0.05)
             except queue.Empty:
                 item = None
             if item is not None:
+                updates = self.processor.updates
+                if isinstance(item, RawChunk) and first_arrival is None:
+                    first_arrival = item.host_time
                 self.processor.feed(item)
                 if self.motion_check is not None and self.motion_check.failure:
                     raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
-                if isinstance(item, RawChunk):
-                    self.latency.add(item.host_time)
+                if self.processor.updates != updates and isinstance(item, RawChunk):
+                    self.latency.add(first_arrival, item.host_time)
+                    first_arrival = None
             now = time.monotonic()
             if now >= next_progress:
                 next_progress = now + 0.5

@@ -94,6 +94,7 @@ class TrialProcessor:
         self._previous: AlignedSample | None = None  # the last sample the estimator took
         self._block: list[AlignedSample] = []  # aligned samples waiting for the estimator
         self._t_end = 0.0
+        self.updates = 0  # blocks handed to the estimator
         self.estimator: OnlineEstimator | None = None
         self.time_offset = TimeOffsetEstimator(self.earth, self.geometry, cfg.imu_rate_hz)
         self.duration = duration
@@ -201,6 +202,7 @@ class TrialProcessor:
                 self._on_snapshot(snap)
 
     def _update(self, run: list[AlignedSample]) -> None:
+        self.updates += bool(run)
         for chunk in self._gated(run):
             if isinstance(chunk, ImuGap):
                 self.estimator.bridge(chunk)

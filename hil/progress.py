@@ -49,7 +49,7 @@ class ConsoleProgress:
         streams = " ".join(
             f"{name} {rates[name]:.0f}Hz c{health[name]['corrupt']:.0f} m{health[name]['missing']:.0f}"
             for name in ("imu", "table"))
-        p99 = health["aligner"].get("latency_p99_ms")
+        p99 = health["aligner"].get("age_p99_ms")
         latency = f" p99 {p99:.1f}ms" if p99 is not None else ""
         self._progress.update(self._task, completed=processor.trial_time, description=f"{text} | {streams}{latency}",
                               time=f"{processor.trial_time:.0f}/{self.duration or 0:.0f} s")

@@ -211,3 +211,30 @@ def test_a_second_reader_cannot_open_a_port_already_in_use():
         first.close()
         os.close(slave)
         os.close(master)
+
+
+def test_a_reused_pty_number_is_not_reopened():
+    import os
+    import tty
+
+    from drivers.transport import SerialTransport, TransportError
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    transport = SerialTransport(path, 115200, "table")
+    transport.open()
+    transport.close()
+    os.close(slave)
+    os.close(master)  # the device goes; another program gets the same number a little later
+    time.sleep(0.05)  # creation times come from the kernel's coarse clock
+    held = [os.openpty() for _ in range(4)]
+    try:
+        if path not in {os.ttyname(s) for _, s in held}:
+            pytest.skip("the pty number was not handed out again")
+        with pytest.raises(TransportError, match="another program"):
+            transport.open()
+    finally:
+        for m, s in held:
+            os.close(s)
+            os.close(m)

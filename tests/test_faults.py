@@ -168,7 +168,9 @@ def test_unplug_closes_the_pty_and_the_session_reconnects_through_its_stable_lin
         assert not os.path.lexists(link)
     injected = stats.devices["turntable_data"].faults
     assert injected["unplugs"] == 1 and injected["unplugged"] == 50
-    assert outages == {"imu": 0, "turntable_data": 1}
+    # one unplug; on a loaded host the reader may reopen the new pty while the emulator is still
+    # setting it up and see one more short outage
+    assert outages["imu"] == 0 and outages["turntable_data"] in (1, 2)
     # 50 frames lost while unplugged (more only if the host flushed some while it reopened the port)
     head = {name: s.sample_listeners[0].samples[0].sync_index - 1 for name, s in sessions.items()}
     assert table.counters.gaps == 1 and table.counters.missing >= 50
