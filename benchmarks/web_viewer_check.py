@@ -27,7 +27,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from emulators.simulation import Simulation
-from hil.config import UG, parse_config
+from hil.config import UG, load_config
 from hil.estimation.online import OnlineEstimator
 from hil.viz import TrialViewer
 
@@ -51,15 +51,8 @@ def listening_addresses(port: int) -> set[str]:
 
 
 def log_trial(out: Path) -> TrialViewer:
-    cfg = parse_config({
-        "trial": {"name": "web-check", "duration_s": 60.0, "rate_hz": 200, "seed": 5},
-        "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
-        "turntable": {"motion": {"kind": "swing", "axes": {
-            "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
-            "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
-            "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6}}}},
-        "imu": {"errors": {"accel_bias_ug": [60, 150, 260], "accel_noise_ug": [50, 50, 50]}},
-    })  # fmt: skip
+    cfg = load_config("configs/emulated_swing.yaml")  # the default trial, shortened
+    cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 60.0, "rate_hz": 200.0})})
     sim = Simulation.from_config(cfg)
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
     viewer = TrialViewer("serve", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,

@@ -31,7 +31,7 @@ from pathlib import Path
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 from drivers.codec import RawChunk, StreamEvent
 
@@ -79,7 +79,9 @@ class Recorder:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - owned by the writer thread until close()
-        self._writer = Writer(self._file, compression=CompressionType.NONE, use_chunking=False)
+        # no message index: it would grow in memory for the whole trial (readers here read in order)
+        self._writer = Writer(self._file, compression=CompressionType.NONE, use_chunking=False,
+                              index_types=IndexType.NONE)
         self._writer.start(profile="", library=f"turntable-hil/{package_version()}")
         self._writer.add_metadata("trial", {"config": config_text, "version": package_version(), "format": FORMAT,
                                             "duration_s": "" if duration is None else repr(duration),

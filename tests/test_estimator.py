@@ -190,3 +190,17 @@ def test_a_damaged_specific_force_is_left_out():
     (clean, clean_outliers), (bias, outliers) = results
     assert clean_outliers == 0 and outliers == 1
     np.testing.assert_allclose(bias, clean, atol=0.05 * 9.80665e-6)  # 0.05 ug: one sample of 6000 fewer
+
+
+def test_snapshot_history_stays_bounded_and_keeps_the_latest():
+    from emulators.simulation import Simulation
+    from hil.estimation.online import OnlineEstimator
+
+    cfg = make_config(duration=100, rate=50, errors=PAPER_ERRORS)
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0, max_snapshots=16)
+    for batch in sim.batches(chunk=500):
+        est.update_many(batch)
+    times = [s.t for s in est.snapshots]
+    assert len(times) <= 16 and times[-1] == pytest.approx(100.0) and times == sorted(times)
+    assert times[0] == pytest.approx(1.0)  # the start of the trial is kept, at a coarser spacing

@@ -22,6 +22,7 @@ from hil.frames import Earth, TableGeometry
 from hil.samples import AlignedBatch, AlignedSample, ImuGap
 
 
+MAX_SNAPSHOTS = 7200  # 2 h at 1 Hz, ~40 MB; older history is thinned beyond
 OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neighbours is left out
 OUTLIER_WINDOW = 25  # samples before it that it is judged against
 OUTLIER_FLOOR = 5e-3  # m/s^2 (~0.5 mg): the gate is never tighter than this (quiet sensors, noise-free data)
@@ -52,6 +53,7 @@ class OnlineEstimator:
         rank_tolerance: float = 1e-6,
         t0: float = 0.0,
         outlier_sigmas: float | None = OUTLIER_SIGMAS,
+        max_snapshots: int = MAX_SNAPSHOTS,
     ) -> None:
         self.earth = earth
         self.geometry = geometry or TableGeometry()
@@ -62,6 +64,7 @@ class OnlineEstimator:
         self.table = TableReferenceEstimator(earth.f_n, rank_tolerance)
         self.snapshots: list[Snapshot] = []
         self.outlier_sigmas = outlier_sigmas
+        self.max_snapshots = max_snapshots
         self.outliers = 0  # specific-force samples left out of the least squares
         self._f_history = np.zeros((0, 3))  # the last OUTLIER_WINDOW specific forces in i_b0
         self._last_dt = 0.0
@@ -120,7 +123,7 @@ class OnlineEstimator:
             self._attitude = step.c_end[stop - 1]
             self._t_last = float(batch.t[stop - 1])
             if stop in solve_stops:
-                self.snapshots.append(self._snapshot())
+                self._keep(self._snapshot())
 
     def bridge(self, gap: ImuGap) -> bool:
         """Carry the attitude across lost IMU samples with the table: the body rotation over the gap is
@@ -143,11 +146,18 @@ class OnlineEstimator:
     def solution(self) -> Snapshot:
         """The solution with everything received so far."""
         if not self.snapshots or self.snapshots[-1].samples != self.gravity.samples:
-            self.snapshots.append(self._snapshot())
+            self._keep(self._snapshot())
         return self.snapshots[-1]
 
     def table_referenced(self) -> TableReferencedBias:
         return self.table.solve()
+
+    def _keep(self, snap: Snapshot) -> None:
+        """Append a snapshot; past ``max_snapshots`` every other older one is dropped, so a 24-hour
+        trial's history stays bounded (full display rate for the first ``max_snapshots``, then thinner)."""
+        self.snapshots.append(snap)
+        if len(self.snapshots) > self.max_snapshots:
+            self.snapshots = [*self.snapshots[:-1:2], snap]
 
     def _accept(self, f_ib0: np.ndarray) -> np.ndarray | None:
         """False for a specific force that jumps away from the median of the previous ``OUTLIER_WINDOW``
