@@ -17,6 +17,7 @@ statistics (:class:`EmulatorStats`) go to stderr as JSON at exit, and to ``--sta
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -259,8 +260,10 @@ def parse_speed(text: str) -> float | None:
 
 
 def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration: float | None = None,
-                   timeout_s: float = 20.0, stats_file: Path | None = None) -> tuple[subprocess.Popen, dict]:
-    """Start ``python -m emulators.emulate`` in its own process; returns it and its ports once open."""
+                   timeout_s: float = 20.0, stats_file: Path | None = None, log_file: Path | None = None
+                   ) -> tuple[subprocess.Popen, dict]:
+    """Start ``python -m emulators.emulate`` in its own process; returns it and its ports once open.
+    Its stderr (the stats at the end, any error) goes to ``log_file`` when given."""
     ports_file.unlink(missing_ok=True)
     cmd = [sys.executable, "-m", "emulators.emulate", str(config), "--ports-file", str(ports_file),
            "--speed", speed]
@@ -268,7 +271,8 @@ def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration:
         cmd += ["--duration", str(duration)]
     if stats_file is not None:
         cmd += ["--stats-file", str(stats_file)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+    with open(log_file, "wb") if log_file is not None else contextlib.nullcontext() as log:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log)  # the child keeps its own copy
     deadline = time.monotonic() + timeout_s
     while not ports_file.exists():
         if proc.poll() is not None or time.monotonic() > deadline:

@@ -116,7 +116,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if duration is None:
             raise UsageError("an emulated trial needs trial.duration_s or --duration")
         emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration,
-                                         stats_file=out / "emulator.json")
+                                         stats_file=out / "emulator.json", log_file=out / "emulator.log")
     failure = None
     control = None
     viewer = _viewer(args, cfg, out, blocking=False)

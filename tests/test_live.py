@@ -38,6 +38,8 @@ def test_run_estimates_the_bias_within_its_sigma(live_run):
     error = np.subtract(est["accel_bias_ug"], result["truth"]["accel_bias_ug"])
     assert np.all(np.abs(error) < 4 * np.array(est["accel_bias_sigma_ug"]))
     assert (live_run / "recording.mcap").stat().st_size > 24000 * 2 * 30
+    assert json.loads((live_run / "emulator.json").read_text())["pulses"] == 24000
+    assert "pulses" in (live_run / "emulator.log").read_text()  # the emulator's stderr, not the console
 
 
 def test_replay_reproduces_the_result_exactly(live_run, tmp_path):
