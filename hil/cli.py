@@ -176,14 +176,13 @@ def _stop(process) -> None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from hil.replay import recording_path, replay
-
-    from hil.replay import recorded_config_of
+    from hil.replay import open_recording, recording_path, replay
 
     source_dir = recording_path(args.source).parent
     out = Path(args.out) if args.out else source_dir / "replay"
-    viewer = _viewer(args, recorded_config_of(args.source), out, blocking=True)
-    processor, recording, cfg = replay(args.source, viewer=viewer)
+    recording, cfg = open_recording(args.source)
+    viewer = _viewer(args, cfg, out, blocking=True)
+    processor = replay(recording, cfg, viewer)
     if processor.estimator is None:
         raise UsageError(f"{args.source}: the recording holds no IMU data")
     if recording.truncated:

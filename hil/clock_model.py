@@ -24,6 +24,7 @@ class AffineClock:
         self.bucket = max(1, int(round(bucket_s * nominal_rate_hz)))
         self._minima: deque[tuple[int, float]] = deque(maxlen=buckets)
         self._current: tuple[int, float] | None = None  # the earliest arrival in the open bucket
+        self._current_lead = 0.0
         self._bucket_id: int | None = None
         self._fit: tuple[float, float] | None = None  # (offset at count 0, period)
 
@@ -34,9 +35,9 @@ class AffineClock:
                 self._minima.append(self._current)
                 self._refit()
             self._bucket_id, self._current = bucket, None
-        lead = host_time - count * self.nominal_period
-        if self._current is None or lead < self._current[1] - self._current[0] * self.nominal_period:
-            self._current = (count, host_time)
+        lead = host_time - count * self.nominal_period  # arrival against the nominal clock
+        if self._current is None or lead < self._current_lead:
+            self._current, self._current_lead = (count, host_time), lead
         if self._fit is None:
             self._fit = (host_time - count * self.nominal_period, self.nominal_period)
 

@@ -159,6 +159,17 @@ class TableGeometry:
         return self.body_rate_from(middle_inner, inner, angle_rates)
 
 
+def table_body_rotation(geometry: TableGeometry, earth: Earth, dt: np.ndarray, angles_start: np.ndarray,
+                        angles_end: np.ndarray) -> np.ndarray:
+    """The body's rotation in inertial space over intervals of length ``dt`` (N,) from the gimbal angles
+    (N, 3) at both ends: ``C_n^b(t1) C_n(t2)^n(t1) C_b^n(t2)`` (the earth's turn included), (N, 3, 3)."""
+    start, end = np.atleast_2d(angles_start), np.atleast_2d(angles_end)
+    c = geometry.attitude_matrix(np.vstack((start, end)))[0]
+    n = len(start)
+    earth_turn = earth.n_to_n0(dt).as_matrix()
+    return np.einsum("nji,njk,nkl->nil", c[:n], earth_turn, c[n:])
+
+
 def _axis_matrices(angle: np.ndarray, axis: int) -> np.ndarray:
     """Elementary rotations about one coordinate axis (0 = x, 1 = y, 2 = z), (N, 3, 3)."""
     c, s = np.cos(angle), np.sin(angle)

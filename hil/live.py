@@ -215,14 +215,14 @@ class LiveTrial:
     def _check_alive(self, now: float, started: float) -> None:
         last = self.fanout.last_arrival
         near_end = self.duration is not None and self.processor.trial_time >= self.duration - END_TOLERANCE_S
-        if last and now - last > SETTLE_S and near_end:
-            self.ended_by_source = True  # the devices stopped at the end; its last frames were lost
-            return
-        if self.source_done() and now - last > SETTLE_S:  # the readers handed over the last bytes
-            self.ended_by_source = True  # everything the devices sent has been processed
-            if self.duration is not None and self.processor.trial_time < self.duration - END_TOLERANCE_S:
+        # the data has ended: the devices stopped at the end (its last frames may be lost), or the
+        # emulator's process is gone and the readers have handed over its last bytes
+        if now - last > SETTLE_S and ((last and near_end) or self.source_done()):
+            self.ended_by_source = True
+            if not near_end and self.duration is not None:
                 raise TrialAborted(f"the emulated devices stopped at {self.processor.trial_time:.1f} s "
                                    f"of {self.duration:.1f} s")
+            return
         if last == 0.0 and now - started > START_TIMEOUT_S:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
         table_last = self.fanout.last_by_stream.get(TABLE)

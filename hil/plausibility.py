@@ -13,8 +13,7 @@ import math
 
 import numpy as np
 
-from hil.estimation.strapdown import rotation_matrices
-from hil.frames import Earth, TableGeometry
+from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.samples import ImuSample
 
 RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
@@ -71,10 +70,8 @@ class GyroTableGate:
     def consistent(self, t_start: np.ndarray, t_end: np.ndarray, angles_start: np.ndarray, angles_end: np.ndarray,
                    dtheta: np.ndarray) -> np.ndarray:
         """Per sample (N,), True where the gyro increment agrees with the table."""
-        c = self.geometry.attitude_matrix(np.vstack((angles_start, angles_end)))[0]
         n = len(dtheta)
-        earth_turn = rotation_matrices(np.outer(t_end - t_start, self.earth.omega_n))
-        relative = np.einsum("nji,njk,nkl->nil", c[:n], earth_turn, c[n:])
+        relative = table_body_rotation(self.geometry, self.earth, t_end - t_start, angles_start, angles_end)
         predicted = small_rotation_vectors(relative)
         error = np.linalg.norm(dtheta - predicted, axis=1)
         good = error <= self.floor + self.fraction * np.linalg.norm(predicted, axis=1)

@@ -24,6 +24,7 @@ import json
 import queue
 import struct
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -106,25 +107,26 @@ class Recorder:
         self._file.close()
 
     def _run(self) -> None:
+        """Write what is queued, then flush; at least one flush every ``flush_s``; None ends it."""
         while True:
-            try:
-                item = self._queue.get(timeout=self._flush_s)
-            except queue.Empty:
-                self._file.flush()
-                continue
-            if item is None:
-                return
-            self._add(item)
-            while True:  # everything already queued, then one flush
-                try:
-                    item = self._queue.get_nowait()
-                except queue.Empty:
-                    break
+            for item in self._queued():
                 if item is None:
                     self._file.flush()
                     return
                 self._add(item)
             self._file.flush()
+
+    def _queued(self) -> Iterator[RawChunk | StreamEvent | None]:
+        """Everything queued now, after waiting up to ``flush_s`` for the first."""
+        try:
+            yield self._queue.get(timeout=self._flush_s)
+        except queue.Empty:
+            return
+        while True:
+            try:
+                yield self._queue.get_nowait()
+            except queue.Empty:
+                return
 
     def _add(self, item: RawChunk | StreamEvent) -> None:
         if isinstance(item, StreamEvent):

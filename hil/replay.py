@@ -29,25 +29,19 @@ def recorded_config(recording: Recording, source: str | Path) -> Config:
     return parse_config(data, f"{source} (recorded config)")
 
 
-def _read(source: str | Path) -> tuple[Path, Recording]:
+def open_recording(source: str | Path) -> tuple[Recording, Config]:
+    """A run directory's or a file's recording, read once, and the trial config stored in it."""
     path = recording_path(source)
     try:
-        return path, read_recording(path)
+        recording = read_recording(path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    return recording, recorded_config(recording, path)
 
 
-def recorded_config_of(source: str | Path) -> Config:
-    """The trial config stored in a run directory's or a file's recording."""
-    path, recording = _read(source)
-    return recorded_config(recording, path)
-
-
-def replay(source: str | Path, viewer: Viewer | None = None) -> tuple[TrialProcessor, Recording, Config]:
-    """Process a recording (and log it to ``viewer``); returns the finished processor, the recording and
-    its config."""
-    path, recording = _read(source)
-    cfg = recorded_config(recording, path)
+def replay(recording: Recording, cfg: Config, viewer: Viewer | None = None) -> TrialProcessor:
+    """Process a recording's items with its config (and log them to ``viewer``); returns the finished
+    processor."""
     duration = recording.metadata.get("duration_s")
     sinks = ViewerSinks(viewer)
     scale = recording.metadata.get("time_scale", "1.0")
@@ -60,4 +54,4 @@ def replay(source: str | Path, viewer: Viewer | None = None) -> tuple[TrialProce
     processor.finish()
     if viewer is not None and processor.estimator is not None:
         viewer.log_health(processor.trial_time, health(processor))
-    return processor, recording, cfg
+    return processor

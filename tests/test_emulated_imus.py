@@ -149,19 +149,16 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
     check_log(log, cfg, complete=False)
 
 
-def test_the_emulators_can_socket_never_sends_off_the_host():
-    port = CanPort("udp_multicast", "239.74.163.92")
+@pytest.mark.parametrize(("group", "level", "option"), [
+    ("239.74.163.92", socket.IPPROTO_IP, socket.IP_MULTICAST_TTL),
+    ("ff15:7079:7468:6f6e:6465:6d6f:6d63:6173", socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS),
+])
+def test_the_emulators_can_socket_never_sends_off_the_host(group, level, option):
+    port = CanPort("udp_multicast", group)
     try:
-        sock = port.bus._multicast._socket
-        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+        assert port.bus._multicast._socket.getsockopt(level, option) == 0
     finally:
         port.close()
-    port6 = CanPort("udp_multicast", "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173")
-    try:
-        sock = port6.bus._multicast._socket
-        assert sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS) == 0
-    finally:
-        port6.close()
 
 
 def test_a_line_too_slow_for_the_frames_is_refused():

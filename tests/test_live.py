@@ -13,7 +13,7 @@ import pytest
 
 from hil.cli import main
 from hil.recording import read_recording
-from hil.replay import replay
+from hil.replay import open_recording, replay
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,7 +70,7 @@ def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):
     rec = read_recording(recording)
     assert rec.truncated or rec.items  # cut anywhere: still readable
     first = rec.items[0].host_time
-    processor, _, _ = replay(recording)
+    processor = replay(*open_recording(recording))
     # everything the devices sent up to 1 s before the kill is there and replays
     assert processor.trial_time >= killed_at - first - 1.0 - 0.1
     assert processor.decoders["imu"].framer.counters.corrupt == 0

@@ -17,12 +17,16 @@ def _items():
     ]
 
 
-def test_round_trip_keeps_order_bytes_and_nanosecond_times(tmp_path):
-    path = tmp_path / "r.mcap"
-    rec = Recorder(path, "trial: {name: x}\n")
-    for item in _items():
+def _record(path, items, config="x"):
+    rec = Recorder(path, config)
+    for item in items:
         rec.write(item)
     rec.close()
+    return path
+
+
+def test_round_trip_keeps_order_bytes_and_nanosecond_times(tmp_path):
+    path = _record(tmp_path / "r.mcap", _items(), "trial: {name: x}\n")
     back = read_recording(path)
     assert not back.truncated
     assert back.metadata["config"] == "trial: {name: x}\n" and back.metadata["format"] == FORMAT
@@ -37,11 +41,7 @@ def test_round_trip_keeps_order_bytes_and_nanosecond_times(tmp_path):
 
 
 def test_a_file_cut_anywhere_reads_up_to_its_last_whole_record(tmp_path):
-    path = tmp_path / "r.mcap"
-    rec = Recorder(path, "x")
-    for i in range(50):
-        rec.write(RawChunk("imu", 1.0 + i, bytes([i]) * 40))
-    rec.close()
+    path = _record(tmp_path / "r.mcap", [RawChunk("imu", 1.0 + i, bytes([i]) * 40) for i in range(50)])
     data = path.read_bytes()
     counts = []
     for cut in range(len(data) // 2, len(data) - 1, 97):
@@ -54,11 +54,7 @@ def test_a_file_cut_anywhere_reads_up_to_its_last_whole_record(tmp_path):
 
 
 def test_other_tools_read_it_with_the_mcap_reader(tmp_path):
-    path = tmp_path / "r.mcap"
-    rec = Recorder(path, "x")
-    for item in _items():
-        rec.write(item)
-    rec.close()
+    path = _record(tmp_path / "r.mcap", _items())
     with open(path, "rb") as fh:
         reader = make_reader(fh)
         topics = [channel.topic for _, channel, _ in reader.iter_messages()]

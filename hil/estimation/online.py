@@ -18,7 +18,7 @@ from hil.estimation.alignment import alignment_matrix, attitude_error, body_atti
 from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
-from hil.frames import Earth, TableGeometry
+from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.samples import AlignedBatch, AlignedSample, ImuGap
 
 
@@ -132,9 +132,8 @@ class OnlineEstimator:
         attitude is then held, and the estimate degrades by the rotation the gap hid."""
         known = gap.angles_start is not None and gap.angles_end is not None
         if known:
-            c_bn = self.geometry.attitude_matrix(np.array([gap.angles_start, gap.angles_end]))[0]
-            earth_turn = self.earth.n_to_n0(gap.t_end - gap.t_start).as_matrix()[0]
-            self.strapdown.carry(c_bn[0].T @ earth_turn @ c_bn[1])
+            self.strapdown.carry(table_body_rotation(self.geometry, self.earth, gap.t_end - gap.t_start,
+                                                     gap.angles_start, gap.angles_end)[0])
         else:
             self.strapdown.carry(np.eye(3))
         self._attitude = self.strapdown.attitude
