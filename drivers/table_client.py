@@ -2,7 +2,7 @@
 
 Limits come from :class:`hil.config.LimitsConfig` (ordered outer, middle, inner). A demand outside
 them raises :class:`LimitError` before a byte is written. Closing the client, in any way (normal end,
-an exception, Ctrl-C inside a ``with`` block), sends ``:Mode ALL,Off``.
+an exception, Ctrl-C inside a ``with`` block), sends ``:Mode ALL,Off`` and reads the modes back.
 """
 
 from __future__ import annotations
@@ -46,11 +46,15 @@ class TableCommandClient:
         return self
 
     def close(self) -> None:
-        """Send ``:Mode ALL,Off`` (whatever happened before) and release the port."""
+        """Send ``:Mode ALL,Off`` (whatever happened before), read the modes back and release the port;
+        raises :class:`TableError` when the table did not confirm that every axis is off."""
         if self.port is None:
             return
         try:
             self.send(AclCommand(":Mode", ("ALL", "Off")))
+            modes = self.send(AclCommand(":Mode?", ("ALL",))).text
+            if {m.strip().upper() for m in modes.split(",")} != {"O"}:
+                raise TableError(f"turntable: after :Mode ALL,Off the axes report modes {modes!r}, not all off")
         finally:
             self.port.close()
             self.port = None
@@ -143,9 +147,6 @@ class TableCommandClient:
     def configure_sync(self, on: bool) -> None:
         """Start or stop ``tts1`` output on the external sync."""
         self.send(AclCommand(":Configure:Sync", ("ON" if on else "OFF",)))
-
-    def off(self) -> None:
-        self.send(AclCommand(":Mode", ("ALL", "Off")))
 
     def _check_position(self, gimbal: str, low: float, high: float) -> None:
         k = _index(gimbal)

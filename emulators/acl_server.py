@@ -4,20 +4,28 @@ from __future__ import annotations
 
 import selectors
 import socket
+import sys
 import threading
+from collections import Counter
 
-from drivers.acl import AclCodec, AclError, AclReply, LineFramer
+from drivers.acl import AclCodec, AclCommand, AclError, AclReply, LineFramer
 from emulators.servo import Servo
 
 POLL_S = 0.05
 
 
 class AclServer:
-    """Serves ``acl`` on 127.0.0.1 (an ephemeral port unless given), any number of clients, one reply a line."""
+    """Serves ``acl`` on 127.0.0.1 (an ephemeral port unless given), any number of clients, one reply a line.
+
+    :attr:`received` counts the commands by header; every ``:Mode`` command is also logged on stderr
+    (the emulator's log), so a test or an operator sees that the table was turned off.
+    """
 
     def __init__(self, servo: Servo, port: int = 0) -> None:
         self.servo = servo
         self.codec = AclCodec()
+        self.received: Counter[str] = Counter()
+        self.modes_off = 0  # ``:Mode ALL,Off`` commands received
         self._listener = socket.create_server(("127.0.0.1", port))
         self._listener.setblocking(False)
         self._selector = selectors.DefaultSelector()
@@ -60,13 +68,23 @@ class AclServer:
             if not line.strip():
                 continue
             try:
-                reply = self.servo.handle(self.codec.parse_command(line))
+                command = self.codec.parse_command(line)
             except AclError as exc:
                 reply = AclReply(str(exc), exc.code)
+            else:
+                reply = self.servo.handle(command)
+                self._note(command, reply)
             try:
                 conn.sendall(self.codec.format_reply(reply))
             except OSError:
                 break
+
+    def _note(self, command: AclCommand, reply: AclReply) -> None:
+        self.received[command.header] += 1
+        if command.header == ":Mode":
+            self.modes_off += command.args == ("ALL", "Off") and reply.ok
+            status = "OK" if reply.ok else f"?{reply.error} {reply.text}"
+            print(f"acl: {command.header} {','.join(map(str, command.args))} -> {status}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         """Stop serving, close every connection and release the port."""

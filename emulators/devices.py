@@ -65,8 +65,6 @@ class PtyPort:
         self.tty = os.ttyname(slave)
         os.close(slave)  # the slave stays valid while the master is open
         os.set_blocking(self.master, False)
-        self._poll = select.poll()
-        self._poll.register(self.master, select.POLLOUT)
         self.plugged = True
         attrs = termios.tcgetattr(self.master)  # on a pty master: the slave's settings
         attrs[4] = attrs[5] = PROBE_SPEED
@@ -81,9 +79,20 @@ class PtyPort:
     def path(self) -> str:
         return str(self.link) if self.link is not None else self.tty
 
+    def _events(self, timeout_ms: float) -> list[int]:
+        """The master's poll events (a poll object per call: the writer thread and the drain may ask at once)."""
+        poll = select.poll()
+        poll.register(self.master, select.POLLOUT)
+        return [events for _, events in poll.poll(timeout_ms)]
+
     def has_reader(self) -> bool:
         """True while some client holds the slave side open (the master reports no hang-up)."""
-        return not any(events & select.POLLHUP for _, events in self._poll.poll(0))
+        return not any(events & select.POLLHUP for events in self._events(0))
+
+    def accepting(self) -> bool:
+        """True when a reader holds the port and its input queue has room: a UART's bytes would arrive."""
+        events = self._events(0)
+        return bool(events) and not any(e & select.POLLHUP for e in events) and any(e & select.POLLOUT for e in events)
 
     def configured(self) -> bool:
         """True once a reader has set the line up (a serial library does, and then flushes its input)."""
@@ -95,7 +104,7 @@ class PtyPort:
         while view:
             if stop.is_set():
                 return False
-            if not self._poll.poll(WAIT_S * 1000):
+            if not self._events(WAIT_S * 1000):
                 continue
             try:
                 view = view[os.write(self.master, view):]
@@ -155,6 +164,9 @@ class CanPort:
 
     def has_reader(self) -> bool:
         return True  # a bus does not know its listeners
+
+    def accepting(self) -> bool:
+        return True
 
     def configured(self) -> bool:
         return True
@@ -307,7 +319,9 @@ class DeviceWriter:
 
     A frame of n bytes at ``baudrate`` (10 bits a byte) is written when its last byte would have
     arrived: ``wire = 10 n / baudrate`` after the line is free, divided by the speed. The latency
-    from a frame's pulse to the end of its write goes into :attr:`latency`.
+    from a frame's pulse to the end of its write goes into :attr:`latency`. Without ``wait_readers``
+    the device behaves like powered hardware: a frame that no reader would take (nobody holds the
+    port, or the reader's input queue is full) is lost, as on a UART, and counted in :attr:`lost_unread`.
     """
 
     def __init__(self, name: str, port: Any, faults: FaultInjector, baudrate: int | None, speed: float | None,
@@ -316,6 +330,7 @@ class DeviceWriter:
         self.stop, self.wait_readers = stop, wait_readers
         self.latency = LatencyHistogram()
         self.frames = 0
+        self.lost_unread = 0
         self.queue: queue.Queue = queue.Queue(maxsize=0 if speed else 256)
         self._line_free = 0.0
         self.thread = threading.Thread(target=self._run, name=f"emulate-{name}", daemon=True)
@@ -371,6 +386,9 @@ class DeviceWriter:
                 delay = ready - time.monotonic()
                 if delay > 0 and self.stop.wait(delay):
                     return False
+            if not self.wait_readers and not self.port.accepting():
+                self.lost_unread += 1
+                continue
             if not self.port.write(frame, self.stop):
                 return False
             self.frames += 1

@@ -17,7 +17,7 @@ statistics (:class:`EmulatorStats`) go to stderr as JSON at exit, and to ``--sta
 from __future__ import annotations
 
 import argparse
-import contextlib
+import ctypes
 import json
 import os
 import signal
@@ -49,18 +49,21 @@ from hil.samples import ImuSample
 
 DRAIN_S = 5.0  # longest wait at the end for readers to take the bytes still queued
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
+PR_SET_PDEATHSIG = 1  # prctl option: a signal for the child when its parent dies
 BITS_PER_BYTE = 10  # 8N1
 PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
 
 
 @dataclass(frozen=True)
 class DeviceStats:
-    """What one emulated device wrote: frames, injected faults per kind, pulse-to-write latency."""
+    """What one emulated device wrote: frames, injected faults per kind, pulse-to-write latency, and the
+    frames lost because no reader took them (``hil emulate`` without ``--wait-readers``)."""
 
     frames: int
     faults: dict[str, int]
     latency_p50_ms: float | None  # None when unpaced (speed max)
     latency_p99_ms: float | None
+    lost_unread: int = 0
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,9 @@ class EmulatorStats:
     elapsed_s: float
     stopped: bool  # True when stopped by a signal or the stop event before the duration
     devices: dict[str, DeviceStats] = field(default_factory=dict)  # keys "imu", "turntable_data"
+    table_commands: dict[str, int] = field(default_factory=dict)  # acl commands received, by header
+    table_modes_off: int = 0  # ``:Mode ALL,Off`` commands the table accepted
+    table_modes: str = ""  # the table's modes at the end (``:Mode? ALL``: inner, middle, outer)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -178,14 +184,18 @@ class _Devices:
 
 def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
                  duration: float | None = None, stop_event: threading.Event | None = None,
-                 wait_readers: bool = True) -> EmulatorStats:
+                 wait_readers: bool = False, stats_file: Path | None = None, hold: bool = False) -> EmulatorStats:
     """Emulate the IMU and the turntable until the duration, a signal or ``stop_event``.
 
     ``speed`` is the multiple of real time (None: as fast as the readers take the bytes); ``duration``
     (s) defaults to ``trial.duration_s``. With ``wait_readers`` the pulse train starts once a client has
     opened each pty (as a table enables its sync output when the host is ready), and resumes after an
-    unplug once a client has reopened the port; otherwise at once. From the main thread, SIGTERM and
-    SIGINT set the stop event. Ports, command socket and ports file are released on return.
+    unplug once a client has reopened the port; otherwise at once, and a port nobody reads loses its
+    frames (counted). From the main thread, SIGTERM, SIGINT and SIGHUP set the stop event. The
+    statistics go to ``stats_file`` when the pulse train has ended; with ``hold`` the devices then stay
+    powered (the table answers ``acl``, the data ports are silent) until stopped, as a table stays on
+    its base after a trial, and the file is rewritten with the commands received meanwhile. Ports,
+    command socket and ports file are released on return.
     """
     duration = cfg.trial.duration_s if duration is None else duration
     if duration is None:
@@ -193,7 +203,7 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     stop = stop_event or threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
+        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
     devices: _Devices | None = None
     try:
@@ -210,7 +220,15 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
             writer.finish(DRAIN_S)
         for port in devices.ports.values():
             port.drain(stop, DRAIN_S)
-        return _stats(devices, pulses, time.monotonic() - clock.start, stop.is_set())
+        elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
+        if stats_file is not None:
+            _write_json(stats_file, _stats(devices, pulses, elapsed, stopped).as_dict())
+        if hold:
+            stop.wait()
+        stats = _stats(devices, pulses, elapsed, stopped)
+        if stats_file is not None:
+            _write_json(stats_file, stats.as_dict())
+        return stats
     finally:
         if devices is not None:
             devices.close()
@@ -244,9 +262,12 @@ def _pulse_loop(devices: _Devices, clock: SyncClock, stop: threading.Event) -> i
 
 
 def _stats(devices: _Devices, pulses: int, elapsed: float, stopped: bool) -> EmulatorStats:
+    server = devices.server
     return EmulatorStats(pulses, elapsed, stopped, {
-        name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50), w.latency.percentile_ms(99))
-        for name, w in devices.writers.items()})
+        name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50), w.latency.percentile_ms(99),
+                          w.lost_unread)
+        for name, w in devices.writers.items()},
+        dict(server.received), server.modes_off, ",".join(d.mode for d in reversed(devices.servo.demands)))
 
 
 def parse_speed(text: str) -> float | None:
@@ -259,27 +280,54 @@ def parse_speed(text: str) -> float | None:
     return value
 
 
+class EmulatorError(RuntimeError):
+    """The emulator process could not start its devices; the message is the emulator's own."""
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: receive SIGTERM when the parent dies (Linux), so no emulator outlives
+    a harness that was killed outright."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
 def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration: float | None = None,
-                   timeout_s: float = 20.0, stats_file: Path | None = None, log_file: Path | None = None
-                   ) -> tuple[subprocess.Popen, dict]:
+                   timeout_s: float = 20.0, stats_file: Path | None = None, log_file: Path | None = None,
+                   wait_readers: bool = True, hold: bool = False) -> tuple[subprocess.Popen, dict]:
     """Start ``python -m emulators.emulate`` in its own process; returns it and its ports once open.
-    Its stderr (the stats at the end, any error) goes to ``log_file`` when given."""
+
+    The child runs in its own session, so a Ctrl-C or a hang-up of the terminal reaches only the
+    harness, which turns the table off before it stops the devices; it ends with the harness. With
+    ``hold`` it keeps its devices up after the pulse train until stopped (see :func:`run_emulator`). Its
+    stderr (the stats at the end, any error) goes to ``log_file`` when given. Raises
+    :class:`EmulatorError` with the emulator's last line when it exits before opening its ports.
+    """
     ports_file.unlink(missing_ok=True)
+    if stats_file is not None:
+        stats_file.unlink(missing_ok=True)  # its appearance tells that the pulse train has ended
     cmd = [sys.executable, "-m", "emulators.emulate", str(config), "--ports-file", str(ports_file),
            "--speed", speed]
     if duration is not None:
         cmd += ["--duration", str(duration)]
     if stats_file is not None:
         cmd += ["--stats-file", str(stats_file)]
-    with open(log_file, "wb") if log_file is not None else contextlib.nullcontext() as log:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log)  # the child keeps its own copy
-    deadline = time.monotonic() + timeout_s
-    while not ports_file.exists():
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            proc.wait()
-            raise RuntimeError(f"emulator did not open its ports (exit code {proc.returncode})")
-        time.sleep(0.02)
+    if wait_readers:
+        cmd.append("--wait-readers")
+    if hold:
+        cmd.append("--hold")
+    with open(log_file, "w+b") if log_file is not None else tempfile.TemporaryFile() as log:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                                preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+        deadline = time.monotonic() + timeout_s
+        while not ports_file.exists():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                proc.wait()
+                log.seek(0)
+                lines = log.read().decode(errors="replace").strip().splitlines()
+                raise EmulatorError(lines[-1].removeprefix("emulator: error: ") if lines else
+                                    f"the emulator did not open its ports (exit code {proc.returncode})")
+            time.sleep(0.02)
     return proc, json.loads(ports_file.read_text())
 
 
@@ -289,15 +337,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ports-file", type=Path)
     parser.add_argument("--speed", type=parse_speed, default=1.0, help="multiple of real time, or max")
     parser.add_argument("--duration", type=float, help="s; default trial.duration_s")
-    parser.add_argument("--no-wait", action="store_true", help="start the pulse train without waiting for readers")
-    parser.add_argument("--stats-file", type=Path, help="write the run's statistics here as JSON at exit")
+    parser.add_argument("--wait-readers", action="store_true", help="start the pulse train once every port has a reader")
+    parser.add_argument("--stats-file", type=Path, help="write the run's statistics here as JSON at the end")
+    parser.add_argument("--hold", action="store_true",
+                        help="after the pulse train, keep the devices (the acl port) up until stopped")
     args = parser.parse_args(argv)
-    stats = run_emulator(load_config(args.config), args.ports_file, args.speed, args.duration,
-                         wait_readers=not args.no_wait)
-    text = json.dumps(stats.as_dict())
-    print(text, file=sys.stderr)
-    if args.stats_file is not None:
-        _write_json(args.stats_file, stats.as_dict())
+    try:
+        stats = run_emulator(load_config(args.config), args.ports_file, args.speed, args.duration,
+                             wait_readers=args.wait_readers, stats_file=args.stats_file, hold=args.hold)
+    except (ConfigError, OSError) as exc:
+        print(f"emulator: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(stats.as_dict()), file=sys.stderr)
     return 0
 
 

@@ -6,7 +6,6 @@ import argparse
 import json
 import sys
 import time
-from contextlib import ExitStack
 from pathlib import Path
 
 from hil.config import ConfigError, load_config
@@ -45,17 +44,30 @@ def _summary(result: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
-def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str) -> None:
-    """Write result.json, series.csv, config.yaml, the figures and report.html, and print the summary."""
+def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str,
+            ended: str = "completed") -> str:
+    """Write result.json (with how the trial ``ended``), series.csv, config.yaml, the figures, report.html
+    and junit.xml, and print the summary; returns the overall outcome against ``output.limits``."""
+    from hil.report import measurements, overall, write_report
     from hil.results import write_outputs
 
+    result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
     write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
-    from hil.report import measurements, overall, write_report
-
     write_report(out, cfg.output.limits)
+    outcome = overall(measurements(result, cfg.output.limits))
     print(_summary(result, out))
-    print(f"  report: {overall(measurements(result, cfg.output.limits))} against output.limits "
-          f"({out / 'report.html'})")
+    print(f"  report: {outcome} against output.limits ({out / 'report.html'})")
+    return outcome
+
+
+def _exit_code(ended: str, outcome: str) -> int:
+    """DESIGN.md's exit codes: 1 a trial that ended early or was interrupted, 3 one that FAILs its limits."""
+    from hil.report import FAIL
+
+    if ended != "completed":
+        print(f"hil: trial {ended}", file=sys.stderr)
+        return 1
+    return 3 if outcome == FAIL else 0
 
 
 def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
@@ -69,8 +81,11 @@ def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
     from hil.viz import TrialViewer
 
     truth = np.array(cfg.imu.errors.accel_bias_ug) * UG if cfg.imu.source == "emulator" else None
-    viewer = TrialViewer(args.viewer, out, geometry=TableGeometry.from_config(cfg.turntable), truth_bias=truth,
-                         bind=args.bind, recording_name=cfg.trial.name, blocking=blocking)
+    try:
+        viewer = TrialViewer(args.viewer, out, geometry=TableGeometry.from_config(cfg.turntable), truth_bias=truth,
+                             bind=args.bind, recording_name=cfg.trial.name, blocking=blocking)
+    except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
+        raise UsageError(f"--viewer {args.viewer}: the viewer did not start: {exc}") from None
     if viewer.url:
         print(f"web viewer: {viewer.url}", file=sys.stderr)
     return viewer
@@ -92,66 +107,87 @@ def _close_viewer(viewer) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from emulators.emulate import parse_speed, spawn_emulator
-    from drivers.table_client import InterlockError, LimitError, TableError
-    from hil.live import LiveTrial, TrialAborted
-    from hil.progress import ConsoleProgress
-    from hil.table_control import MotionCheck, TableControl
+    """``hil run``: exit 0 done, 1 ended early or interrupted (outputs kept), 2 bad input, 3 FAILs its limits."""
+    from hil.stop_signals import StopSignals
 
-    try:
-        parse_speed(args.speed)
-    except ValueError as exc:
-        raise UsageError(f"--speed: {exc}") from None
     config_path = Path(args.config)
     cfg = load_config(config_path)
-    config_text = config_path.read_text()
-    duration = args.duration if args.duration is not None else cfg.trial.duration_s
-    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
-    out.mkdir(parents=True, exist_ok=True)
+    _check_speed(args.speed)
     emulated = {cfg.imu.source, cfg.turntable.source} == {"emulator"}
     if not emulated and "emulator" in {cfg.imu.source, cfg.turntable.source}:
         raise UsageError("imu.source and turntable.source: emulate both devices or neither")
-    emulator, ports = None, None
-    if emulated:
-        if duration is None:
-            raise UsageError("an emulated trial needs trial.duration_s or --duration")
-        emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration,
-                                         stats_file=out / "emulator.json", log_file=out / "emulator.log")
-    failure = None
-    control = None
-    viewer = _viewer(args, cfg, out, blocking=False)
-    command_url = _command_url(cfg, ports)
+    duration = args.duration if args.duration is not None else cfg.trial.duration_s
+    if emulated and duration is None:
+        raise UsageError("an emulated trial needs trial.duration_s or --duration")
+    if emulated and cfg.imu.protocol == "can-dbc" and cfg.imu.can is not None and cfg.imu.can.interface == "virtual":
+        raise UsageError("imu.can.interface: 'virtual' reaches only its own process, and the emulated devices run "
+                         "in theirs; use udp_multicast (the default without an imu.can block)")
+    out = _out_dir(args, cfg.trial.name, cfg.output.dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with StopSignals() as signals:
+        trial, ended = _acquire(args, cfg, config_path, out, duration, emulated, lambda: signals.received)
+        processor = trial.processor
+        snapshots = processor.estimator.snapshots if processor.estimator is not None else []
+        outcome = _finish(args, cfg, out, processor.result(), snapshots, config_path.read_text(), ended)
+    if ended == "completed":
+        _close_viewer(trial.viewer)
+    return _exit_code(ended, outcome)
+
+
+def _acquire(args: argparse.Namespace, cfg, config_path: Path, out: Path, duration: float | None, emulated: bool,
+             stop_requested):
+    """The live part of ``hil run``: emulator (if emulated), viewer, table control and the trial; the table
+    is sent Off and the emulator reaped on every way out. Returns the finished trial and how it ended."""
+    from emulators.emulate import EmulatorError, parse_speed, spawn_emulator
+    from drivers.table_client import InterlockError, LimitError, TableError
+    from hil.live import LiveTrial
+    from hil.progress import ConsoleProgress
+    from hil.table_control import MotionCheck, TableControl
+
+    emulator, ports, control, viewer = None, None, None, None
     try:
-        with ConsoleProgress(duration, quiet=args.quiet) as progress, ExitStack() as stack:
+        if emulated:
+            try:
+                emulator, ports = spawn_emulator(config_path, out / "ports.json", args.speed, duration,
+                                                 stats_file=out / "emulator.json", log_file=out / "emulator.log",
+                                                 hold=True)
+            except EmulatorError as exc:
+                raise UsageError(f"{config_path}: {exc}") from None
+        viewer = _viewer(args, cfg, out, blocking=False)
+        command_url = _command_url(cfg, ports)
+        with ConsoleProgress(duration, quiet=args.quiet) as progress:
             check = None
             if command_url is not None:
-                control = stack.enter_context(TableControl(command_url, cfg.turntable))
+                control = TableControl(command_url, cfg.turntable)
+                control.client.open()
                 control.arm()
                 check = MotionCheck(cfg.turntable, cfg.trial.rate_hz)
-            speed = parse_speed(args.speed) if emulated else 1.0
-            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=speed,
-                              motion_check=check, on_progress=progress.update,
-                              source_done=(lambda: emulator.poll() is not None) if emulator else None)
-            try:
-                trial.run()
-            except TrialAborted as exc:
-                failure = str(exc)
+            trial = LiveTrial(cfg, config_path.read_text(), out, duration, ports, viewer=viewer,
+                              time_scale=parse_speed(args.speed) if emulated else 1.0, motion_check=check,
+                              on_progress=progress.update, stop_requested=stop_requested,
+                              source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
+                              if emulator else None)
+            return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
+        if viewer is not None:
+            viewer.close()
         raise UsageError(str(exc)) from None
     finally:
-        if control is not None and control.stop_error and (emulator is None or emulator.poll() is None):
-            print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
+        if control is not None:
+            control.stop()
+            if control.stop_error:
+                print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
         if emulator is not None:
             _stop(emulator)
-    processor = trial.processor
-    if processor.estimator is None:
-        raise UsageError(failure or "no IMU data was received")
-    _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, config_text)
-    _close_viewer(viewer)
-    if failure:
-        print(f"hil: trial ended early: {failure}", file=sys.stderr)
-        return 1
-    return 0
+
+
+def _check_speed(text: str) -> None:
+    from emulators.emulate import parse_speed
+
+    try:
+        parse_speed(text)
+    except ValueError as exc:
+        raise UsageError(f"--speed: {exc}") from None
 
 
 def _command_url(cfg, ports: dict | None) -> str | None:
@@ -188,9 +224,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if recording.truncated:
         print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
               file=sys.stderr)
-    _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, recording.metadata["config"])
+    ended = recording.ended or ("early: the recording was cut short" if recording.truncated else "completed")
+    outcome = _finish(args, cfg, out, processor.result(), processor.estimator.snapshots,
+                      recording.metadata["config"], ended)
     _close_viewer(viewer)
-    return 0
+    return _exit_code(ended, outcome)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -225,11 +263,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             viewer.log_table(batch.t, batch.angles)
     n = sim.samples
     result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
-    _finish(args, cfg, out, result, est.snapshots, Path(args.config).read_text())
+    outcome = _finish(args, cfg, out, result, est.snapshots, Path(args.config).read_text())
     if viewer is not None:
         viewer.log_snapshots(est.snapshots)
     _close_viewer(viewer)
-    return 0
+    return _exit_code("completed", outcome)
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
@@ -251,9 +289,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     est.update_many(batch)
     n = len(batch)
     result = build_result(cfg.trial.name, est, StreamCounts(n, n if batch.angles is not None else 0, n))
-    _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
-            Path(args.config).read_text())
-    return 0
+    outcome = _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
+                      Path(args.config).read_text())
+    return _exit_code("completed", outcome)
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -271,7 +309,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         speed = parse_speed(args.speed)
     except ValueError as exc:
         raise UsageError(f"--speed: {exc}") from None
-    run_emulator(load_config(args.config), args.ports_file, speed, args.duration, wait_readers=not args.no_wait)
+    run_emulator(load_config(args.config), args.ports_file, speed, args.duration, wait_readers=args.wait_readers)
     return 0
 
 
@@ -324,7 +362,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
     p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
-    p.add_argument("--no-wait", action="store_true", help="start the pulse train without waiting for readers")
+    p.add_argument("--wait-readers", action="store_true",
+                   help="hold the pulse train until every port has a reader (default: stream at once, as hardware "
+                        "does; frames nobody reads are lost and counted)")
     p.set_defaults(func=cmd_emulate)
 
     p = sub.add_parser("report", help="rebuild a trial's report.html from its outputs")
@@ -341,12 +381,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from drivers.transport import TransportError
     from hil.csv_input import DataError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, DataError, UsageError) as exc:
+    except (ConfigError, DataError, UsageError, TransportError) as exc:
         print(f"hil: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

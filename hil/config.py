@@ -197,8 +197,11 @@ class CanSignals(_Model):
 
 
 class CanConfig(_Model):
-    interface: str = "virtual"
-    channel: str = "hil"
+    """The IMU's python-can bus. The default, ``udp_multicast`` on python-can's IPv4 group (hop limit 0:
+    never off this host), can be opened by another process; ``virtual`` only within one process."""
+
+    interface: str = "udp_multicast"
+    channel: str = "239.74.163.2"
     dbc: str = "configs/imu_lab_highres.dbc"
     bitrate: int = Field(1_000_000, gt=0)
     signals: CanSignals = CanSignals()

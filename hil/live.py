@@ -113,28 +113,36 @@ def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Tr
     return {IMU: imu, TABLE: SerialTransport(table_port, cfg.turntable.baudrate, TABLE)}
 
 
+COMPLETED = "completed"
+
+
 class LiveTrial:
-    """Acquire, record and estimate until the duration is reached, the devices stop, or Ctrl-C.
+    """Acquire, record and estimate until the duration is reached, the devices stop, or a stop signal.
 
     ``source_done`` (optional) is polled: when it returns True (the emulator process has exited) and
     the data has stopped, the trial ends; it is complete if it reached the duration within
     ``END_TOLERANCE_S`` (its last frames may have been dropped). ``time_scale`` is the emulator's
     speed. ``on_progress`` gets the processor about twice a second. With a ``motion_check`` (the
     harness commands the table) the trial ends when the table does not move as commanded or its data
-    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off.
+    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off. ``stop_requested`` (optional)
+    is polled every step: a signal name ends the trial as interrupted. A trial whose IMU samples are
+    all rejected for ``STALL_S`` ends early with the processor's diagnosis.
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
                  ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float | None = 1.0,
                  motion_check: MotionCheck | None = None,
                  on_progress: Callable[[TrialProcessor, dict], None] | None = None,
-                 source_done: Callable[[], bool] | None = None) -> None:
+                 source_done: Callable[[], bool] | None = None,
+                 stop_requested: Callable[[], str | None] | None = None) -> None:
         self.cfg = cfg
         self.out = out
         self.duration = duration
         self.viewer = viewer
         self.on_progress = on_progress
         self.source_done = source_done or (lambda: False)
+        self.stop_requested = stop_requested or (lambda: None)
+        self.interrupted: str | None = None
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale)
         self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
         self.fanout = Fanout(self.recorder, self.queue)
@@ -148,18 +156,29 @@ class LiveTrial:
         self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
                          for name, t in transports(cfg, ports).items()]
 
-    def run(self) -> None:
-        """Run to the end; raises :class:`TrialAborted` (after closing everything) if the data stopped."""
+    def run(self) -> str:
+        """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``.
+
+        Raises :class:`~drivers.transport.TransportError` (after closing everything) when a port cannot
+        be opened at the start.
+        """
+        ended = "early: the trial did not start"
         try:
             for session in self.sessions:
                 session.start()
-            self._loop()
+            try:
+                self._loop()
+            except TrialAborted as exc:
+                ended = f"early: {exc}"
+            else:
+                ended = f"interrupted: {self.interrupted}" if self.interrupted else COMPLETED
+            return ended
         finally:
             for session in self.sessions:
                 session.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
                 self.processor.feed(self.queue.get_nowait())
-            self.recorder.close()
+            self.recorder.close(ended)
             self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
@@ -189,6 +208,9 @@ class LiveTrial:
         next_progress = started
         first_arrival: float | None = None  # the first chunk since the estimator's last update
         while not (self.processor.complete or self.ended_by_source):
+            self.interrupted = self.stop_requested()
+            if self.interrupted:
+                return
             try:
                 item = self.queue.get(timeout=0.05)
             except queue.Empty:
@@ -200,6 +222,8 @@ class LiveTrial:
                 self.processor.feed(item)
                 if self.motion_check is not None and self.motion_check.failure:
                     raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
+                if self.processor.stalled:
+                    raise TrialAborted(self.processor.stalled)
                 if self.processor.updates != updates and isinstance(item, RawChunk):
                     self.latency.add(first_arrival, item.host_time)
                     first_arrival = None

@@ -14,9 +14,12 @@ import math
 import numpy as np
 
 from hil.frames import Earth, TableGeometry, table_body_rotation
+
+UG_PER_MPS2 = 9.80665  # a reading in m/s^2 taken as g (or the reverse) is off by this factor
 from hil.samples import ImuSample
 
 RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
+STALL_S = 5.0  # every IMU sample rejected for this long (of samples) ends a live trial
 FORCE_TOLERANCE_G = 0.2
 GATE_FLOOR_RAD = 1e-5  # gyro/table disagreement allowed per sample, plus ...
 GATE_FRACTION = 0.01  # ... this fraction of the sample's rotation
@@ -32,13 +35,28 @@ class ImuPlausibility:
         self.max_angle = max_rate * self.period  # rad per sample
         self.force_tolerance = FORCE_TOLERANCE_G * gravity if force_tolerance is None else force_tolerance
         self.rejected = 0
+        self.last_rejected: tuple[float, float] | None = None  # (|f| in g, rate / max rate) of the last failure
 
     def ok(self, sample: ImuSample) -> bool:
         angle = math.hypot(*sample.dtheta)
         force = math.hypot(*sample.dv) / self.period
         good = angle <= self.max_angle and abs(force - self.gravity) <= self.force_tolerance
-        self.rejected += not good
+        if not good:
+            self.rejected += 1
+            self.last_rejected = (force / self.gravity, angle / self.max_angle)
         return good
+
+    def diagnosis(self, unit_key: str) -> str:
+        """What the last rejected samples say about the config, naming the key most likely wrong."""
+        force_g, rate = self.last_rejected or (math.nan, math.nan)
+        if any(abs(force_g - r) < 0.05 * r for r in (UG_PER_MPS2, 1.0 / UG_PER_MPS2)):
+            return (f"the specific force reads {force_g:.3g} g at rest or swinging: the accelerometer unit is "
+                    f"wrong (check {unit_key}: g or m/s^2)")
+        if rate > 1.0:
+            return (f"the gyros read {rate:.3g} times the table's fastest rate limit: check the gyro unit and output "
+                    f"({unit_key.rsplit('.', 1)[0]}.gyro_unit, gyro_output), imu.rate_hz and turntable.limits")
+        return (f"the specific force reads {force_g:.3g} g, not 1 g: check imu.rate_hz (the increments are per "
+                f"sample), imu.protocol and {unit_key}")
 
 
 def small_rotation_vectors(c: np.ndarray) -> np.ndarray:
@@ -66,6 +84,7 @@ class GyroTableGate:
         self.floor = floor
         self.fraction = fraction
         self.rejected = 0
+        self.last_ratio = math.nan  # |gyro| / |table rotation| (medians) of the last block with a rejection
 
     def consistent(self, t_start: np.ndarray, t_end: np.ndarray, angles_start: np.ndarray, angles_end: np.ndarray,
                    dtheta: np.ndarray) -> np.ndarray:
@@ -74,6 +93,40 @@ class GyroTableGate:
         relative = table_body_rotation(self.geometry, self.earth, t_end - t_start, angles_start, angles_end)
         predicted = small_rotation_vectors(relative)
         error = np.linalg.norm(dtheta - predicted, axis=1)
-        good = error <= self.floor + self.fraction * np.linalg.norm(predicted, axis=1)
+        size = np.linalg.norm(predicted, axis=1)
+        good = error <= self.floor + self.fraction * size
         self.rejected += int(n - good.sum())
+        if not good.all():
+            self.last_ratio = float(np.median(np.linalg.norm(dtheta, axis=1)) / max(np.median(size), 1e-300))
         return good
+
+    def diagnosis(self, unit_key: str) -> str:
+        """What the disagreement says about the config, naming the key most likely wrong."""
+        ratio = self.last_ratio
+        if abs(ratio - 180.0 / math.pi) < 0.05 * 180.0 / math.pi or abs(ratio - math.pi / 180.0) < 0.05 * math.pi / 180:
+            return (f"the gyro increments are {ratio:.3g} times the table's rotation: the gyro unit is wrong "
+                    f"(check {unit_key.rsplit('.', 1)[0]}.gyro_unit: rad or deg)")
+        return (f"the gyro increments are {ratio:.3g} times the rotation the table angles show: check imu.rate_hz "
+                f"and trial.rate_hz (which pulse latches the table), the gyro output "
+                f"({unit_key.rsplit('.', 1)[0]}.gyro_output) and turntable.mounting_deg")
+
+
+class RejectionWatch:
+    """Counts the IMU samples rejected in a row (none reached the estimator since); :attr:`stalled` once
+    they span ``STALL_S`` at the IMU rate, so a live trial with a wrong unit, rate or protocol stops
+    within seconds instead of acquiring for ever."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.limit = max(1, round(STALL_S * rate_hz))
+        self.run = 0
+
+    def rejected(self, n: int = 1) -> None:
+        self.run += n
+
+    def taken(self, rejected_after: int = 0) -> None:
+        """Samples reached the estimator; ``rejected_after`` were rejected after the last of them."""
+        self.run = rejected_after
+
+    @property
+    def stalled(self) -> bool:
+        return self.run >= self.limit

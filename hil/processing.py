@@ -17,8 +17,8 @@ from drivers.registry import imu_codec, make_codec
 from hil.config import DEG, Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
-from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility
-from hil.results import StreamCounts, build_result
+from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility, RejectionWatch
+from hil.results import StreamCounts, build_result, empty_result
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner
 from hil.time_offset import TimeOffsetEstimator
@@ -91,6 +91,8 @@ class TrialProcessor:
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
         self.gate = GyroTableGate(self.earth, self.geometry)
+        self.watch = RejectionWatch(cfg.imu_rate_hz)
+        self._stalled_by: ImuPlausibility | GyroTableGate | None = None
         self._previous: AlignedSample | None = None  # the last sample the estimator took
         self._block: list[AlignedSample] = []  # aligned samples waiting for the estimator
         self._t_end = 0.0
@@ -122,7 +124,23 @@ class TrialProcessor:
                 ready += self.aligner.add_table(sample)
             elif self.plausibility.ok(sample):
                 ready += self.aligner.add_imu(sample)
+            else:
+                self._rejected(self.plausibility)
         self._estimate(ready)
+
+    @property
+    def stalled(self) -> str | None:
+        """Why every IMU sample has been rejected for the last ``STALL_S`` (naming the likely config key),
+        or None while samples reach the estimator."""
+        if not self.watch.stalled or self._stalled_by is None:
+            return None
+        unit_key = "imu.kvh1750.accel_unit" if self.cfg.imu.protocol == "kvh1750" else f"imu.protocol ({self.cfg.imu.protocol}) units"
+        return (f"every IMU sample for {self.watch.run / self.cfg.imu_rate_hz:.1f} s was rejected: "
+                f"{self._stalled_by.diagnosis(unit_key)}")
+
+    def _rejected(self, by: ImuPlausibility | GyroTableGate, n: int = 1) -> None:
+        self.watch.rejected(n)
+        self._stalled_by = by
 
     def finish(self) -> None:
         """End of data: release what the aligner still holds."""
@@ -159,10 +177,10 @@ class TrialProcessor:
                             imu.corrupt + table.corrupt + self.plausibility.rejected + self.gate.rejected, extra)
 
     def result(self) -> dict:
-        """The result.json document (call after :meth:`finish`)."""
-        if self.estimator is None:
-            raise RuntimeError("no IMU sample was received: nothing to estimate")
+        """The result.json document (call after :meth:`finish`); estimates null when no IMU sample got through."""
         truth = list(self.cfg.imu.errors.accel_bias_ug) if self.cfg.imu.source == "emulator" else None
+        if self.estimator is None:
+            return empty_result(self.cfg.trial.name, self.counts(), truth)
         result = build_result(self.cfg.trial.name, self.estimator, self.counts(), truth)
         offset = self.time_offset.estimate()
         result["streams"]["sync_offset_ms"] = None if offset is None else offset * 1e3
@@ -218,12 +236,18 @@ class TrialProcessor:
         previous = self._previous
         self._previous = run[-1] if run else previous
         if not run or previous is None or previous.angles is None or any(s.angles is None for s in run):
+            if run:
+                self.watch.taken()
             return [run] if run else []
         t_end = np.array([s.t for s in run])
         t_start = np.concatenate(([previous.t], t_end[:-1]))
         angles = np.array([s.angles for s in run])
         starts = np.vstack(([previous.angles], angles[:-1]))
         good = self.gate.consistent(t_start, t_end, starts, angles, np.array([s.dtheta for s in run]))
+        if good.any():
+            self.watch.taken(len(good) - 1 - int(np.flatnonzero(good)[-1]))
+        else:
+            self._rejected(self.gate, len(good))
         if good.all():
             return [run]
         out: list[list[AlignedSample] | ImuGap] = []

@@ -9,6 +9,8 @@ Format (MCAP, https://mcap.dev; readable by any MCAP tool):
   message holds: ``application/octet-stream`` (bytes exactly as read from a serial port) or
   ``turntable-hil/can-frame`` (4-byte big-endian arbitration id, 1 flag byte with bit 0 = extended
   id, then the payload);
+- metadata record ``trial_end`` at the end, ``ended``: how the live trial ended (``completed``,
+  ``early: <reason>``, ``interrupted: <signal>``); absent in a file cut short;
 - channel ``events``, JSON messages ``{"stream": .., "event": "outage" | "reconnected", "detail": ..}``;
 - ``log_time`` is the host receive time in integer nanoseconds (the pipeline works on that rounded
   time, so a replay sees exactly what the live run saw); ``sequence`` is the global arrival order.
@@ -100,9 +102,12 @@ class Recorder:
         """Queue one chunk or event for the file (thread-safe, constant time)."""
         self._queue.put(item)
 
-    def close(self) -> None:
+    def close(self, ended: str | None = None) -> None:
+        """Write what is queued, then ``ended`` (how the trial ended) and the MCAP summary."""
         self._queue.put(None)
         self._thread.join()
+        if ended is not None:
+            self._writer.add_metadata("trial_end", {"ended": ended})
         self._writer.finish()
         self._file.close()
 
@@ -155,6 +160,7 @@ class Recording:
     metadata: dict[str, str]
     items: list[RawChunk | StreamEvent]
     truncated: bool  # the file ended inside a record (the process was killed)
+    ended: str | None = None  # how the live trial ended, when the recorder was closed
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -163,11 +169,14 @@ def read_recording(path: str | Path) -> Recording:
     channels: dict[int, Channel] = {}
     items: list[RawChunk | StreamEvent] = []
     truncated = False
+    ended = None
     with open(path, "rb") as fh:
         try:
             for record in StreamReader(fh).records:
                 if isinstance(record, Metadata) and record.name == "trial":
                     metadata = dict(record.metadata)
+                elif isinstance(record, Metadata) and record.name == "trial_end":
+                    ended = record.metadata.get("ended")
                 elif isinstance(record, Channel):
                     channels[record.id] = record
                 elif isinstance(record, Message):
@@ -178,7 +187,7 @@ def read_recording(path: str | Path) -> Recording:
             truncated = True
     if metadata.get("format") != FORMAT:
         raise ValueError(f"{path}: not a turntable-hil recording (format {metadata.get('format')!r})")
-    return Recording(metadata, items, truncated)
+    return Recording(metadata, items, truncated, ended)
 
 
 def _item(channel: Channel, message: Message) -> RawChunk | StreamEvent:

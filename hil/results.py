@@ -92,6 +92,21 @@ def build_result(
     return result
 
 
+def empty_result(name: str, streams: StreamCounts, truth_bias_ug: list[float] | None = None) -> dict:
+    """The result.json document of a trial in which no IMU sample reached the estimator."""
+    result = {
+        "trial": {"name": name, "duration_s": 0.0, "samples": 0},
+        "streams": streams.as_dict(),
+        "estimate": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False, "gram_rank": 0,
+                     "gram_condition": None, "converged_at_s": None, "noise_ug": None},
+        "table_reference": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "tilt_deg": None},
+        "alignment_deg": {"method1": None, "method2": None, "theoretical": None},
+    }
+    if truth_bias_ug is not None:
+        result["truth"] = {"accel_bias_ug": list(truth_bias_ug)}
+    return result
+
+
 def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
     """One row per snapshot, in SERIES_COLUMNS order (empty cells where a value does not exist)."""
     nan3 = [float("nan")] * 3
@@ -122,7 +137,7 @@ def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: b
         writer = csv.writer(fh)
         writer.writerow(SERIES_COLUMNS)
         writer.writerows(["" if isinstance(v, float) and np.isnan(v) else v for v in row] for row in rows)
-    if figures:
+    if figures and rows:
         from hil.figures import write_figures
 
         write_figures(out, np.array(rows, dtype=float), result)

@@ -99,7 +99,7 @@ def test_emulate_writes_ports_and_exits_cleanly_on_sigterm(tmp_path):
     write_config(tmp_path / "c.yaml", duration=600)
     ports = tmp_path / "ports.json"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli", "emulate", str(tmp_path / "c.yaml"), "--ports-file", str(ports), "--no-wait"],
+        [sys.executable, "-m", "hil.cli", "emulate", str(tmp_path / "c.yaml"), "--ports-file", str(ports)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     deadline = time.monotonic() + 20

@@ -14,7 +14,7 @@ import pytest
 from drivers.acl import AclCodec, AclReply
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
 from drivers.session import DeviceSession
-from drivers.table_client import InterlockError, LimitError, TableCommandClient
+from drivers.table_client import InterlockError, LimitError, TableCommandClient, TableError
 from drivers.tap import RawListener, SampleListener
 from drivers.transport import SerialTransport
 from hil.config import LimitsConfig
@@ -115,9 +115,11 @@ def test_session_survives_unplug_and_replug_and_counts_the_gap(link):
 class FakeTable:
     """The far end of the command port: answers every line and records what it received."""
 
-    def __init__(self, link: Path, interlocks: str = "Closed") -> None:
+    def __init__(self, link: Path, interlocks: str = "Closed", obeys_off: bool = True) -> None:
         self.pty = Pty(link)
         self.interlocks = interlocks
+        self.obeys_off = obeys_off
+        self.modes = "P,P,P"  # inner, middle, outer, as ``:Mode? ALL`` reports them
         self.lines: list[str] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -132,7 +134,10 @@ class FakeTable:
             for line in framer.feed(os.read(self.pty.master, 4096)):
                 command = codec.parse_command(line)
                 self.lines.append(line.decode())
-                text = {"*IDN?": "Emulated table", ":Interlock?": self.interlocks}.get(command.header, "OK")
+                if command.header == ":Mode" and command.args == ("ALL", "Off") and self.obeys_off:
+                    self.modes = "O,O,O"
+                text = {"*IDN?": "Emulated table", ":Interlock?": self.interlocks,
+                        ":Mode?": self.modes}.get(command.header, "OK")
                 os.write(self.pty.master, codec.format_reply(AclReply(text)))
 
     def close(self) -> None:
@@ -164,7 +169,7 @@ def test_demand_beyond_a_limit_raises_and_nothing_is_written(table):
     time.sleep(0.1)
     assert table.lines == [":Demand:Position 1,10"]
     client.close()
-    assert table.lines[-1] == ":Mode ALL,Off"
+    assert table.lines[-2:] == [":Mode ALL,Off", ":Mode? ALL"]
 
 
 def table_link(table: FakeTable) -> str:
@@ -177,7 +182,18 @@ def test_motion_needs_closed_interlocks(tmp_path):
         with TableCommandClient(table_link(table), LIMITS) as client:
             with pytest.raises(InterlockError, match="interlocks of the outer axis are open"):
                 client.set_mode("outer", "Position")
-        assert table.lines == [":Interlock? 3", ":Mode ALL,Off"]
+        assert table.lines == [":Interlock? 3", ":Mode ALL,Off", ":Mode? ALL"]
+    finally:
+        table.close()
+
+
+def test_a_table_that_does_not_confirm_off_is_reported(tmp_path):
+    table = FakeTable(tmp_path / "ttyTABLE", obeys_off=False)
+    try:
+        client = TableCommandClient(table_link(table), LIMITS).open()
+        with pytest.raises(TableError, match="not all off"):
+            client.close()
+        assert table.lines == [":Mode ALL,Off", ":Mode? ALL"] and client.port is None
     finally:
         table.close()
 
@@ -190,7 +206,7 @@ def test_ctrl_c_inside_a_session_still_switches_the_table_off(table):
             client.set_mode("inner", "Synthesis")
             raise KeyboardInterrupt
     assert table.lines[0] == "*IDN?" and ":Limit:Rate 2,20" in table.lines
-    assert table.lines[-2:] == [":Mode 1,Synthesis", ":Mode ALL,Off"]
+    assert table.lines[-3:] == [":Mode 1,Synthesis", ":Mode ALL,Off", ":Mode? ALL"]
 
 
 def test_a_second_reader_cannot_open_a_port_already_in_use():

@@ -194,7 +194,7 @@ def test_stats_go_to_stderr_and_the_stats_file(tmp_path):
     assert stats["pulses"] == 100 and not stats["stopped"]
     imu = stats["devices"]["imu"]
     assert imu["frames"] + imu["faults"]["dropped"] == 100 and imu["faults"]["dropped"] > 0
-    assert set(imu) == {"frames", "faults", "latency_p50_ms", "latency_p99_ms"}
+    assert set(imu) == {"frames", "faults", "latency_p50_ms", "latency_p99_ms", "lost_unread"} and imu["lost_unread"] == 0
 
 
 def test_unwrapper_tells_repeats_and_late_frames_from_wraps():

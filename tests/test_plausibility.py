@@ -47,3 +47,26 @@ def test_gyro_table_gate_passes_clean_increments_and_catches_a_damaged_one():
     dtheta[500, 1] += 2e-5  # a damaged mantissa: 0.2 deg/s for one sample
     good = gate.consistent(t_start, batch.t, starts, batch.angles, dtheta)
     assert not good[500] and good.sum() == len(good) - 1 and gate.rejected == 1
+
+
+def test_a_wrong_accelerometer_unit_is_named_in_the_diagnosis():
+    check = ImuPlausibility(200.0, G, max_rate=math.radians(200))
+    in_mps2_read_as_g = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, G * 9.80665 / 200))
+    assert not check.ok(in_mps2_read_as_g)
+    assert "imu.kvh1750.accel_unit" in check.diagnosis("imu.kvh1750.accel_unit")
+    in_g_read_as_mps2 = ImuSample(2, (0.0, 0.0, 0.0), (0.0, 0.0, G / 9.80665 / 200))
+    assert not check.ok(in_g_read_as_mps2)
+    assert "accelerometer unit is wrong" in check.diagnosis("imu.kvh1750.accel_unit")
+
+
+def test_the_rejection_watch_stalls_after_five_seconds_of_samples_and_resets_on_a_taken_one():
+    from hil.plausibility import RejectionWatch
+
+    watch = RejectionWatch(200.0)
+    watch.rejected(999)
+    assert not watch.stalled
+    watch.taken(3)
+    watch.rejected(996)
+    assert not watch.stalled
+    watch.rejected()
+    assert watch.stalled and watch.run == 1000

@@ -1,0 +1,79 @@
+"""``hil emulate`` behaves like powered hardware: every port streams whether or not anyone reads it."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import serial
+import yaml
+
+from test_emulated_shutdown import CONFIG
+
+KVH_HEADER = b"\xfe\x81\xff\x55"
+
+
+def _emulate(tmp_path: Path, cfg: dict, *extra: str) -> tuple[subprocess.Popen, dict, Path]:
+    config, ports_file, stats = tmp_path / "c.yaml", tmp_path / "ports.json", tmp_path / "stats.json"
+    config.write_text(yaml.safe_dump(cfg))
+    proc = subprocess.Popen([sys.executable, "-m", "emulators.emulate", str(config), "--ports-file", str(ports_file),
+                             "--stats-file", str(stats), *extra], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 20
+    while not ports_file.exists():
+        assert proc.poll() is None and time.monotonic() < deadline, "the emulator did not open its ports"
+        time.sleep(0.05)
+    return proc, json.loads(ports_file.read_text()), stats
+
+
+def _stop(proc: subprocess.Popen, stats: Path) -> dict:
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(20) == 0
+    return json.loads(stats.read_text())
+
+
+def test_a_reader_on_the_imu_port_alone_gets_its_frames_at_the_configured_rate(tmp_path):
+    proc, ports, stats_file = _emulate(tmp_path, CONFIG)
+    try:
+        with serial.Serial(ports["imu"], 921600, timeout=0.05) as imu:  # nobody opens the table port
+            imu.read(1 << 16)  # what arrived before the first timed read
+            counters, started = [], time.monotonic()
+            data = b""
+            while time.monotonic() - started < 3.0:
+                data += imu.read(4096)
+            elapsed = time.monotonic() - started
+        frames = [data[i:i + 36] for i in range(data.find(KVH_HEADER), len(data) - 35, 36)]
+        counters = [f[29] for f in frames if f.startswith(KVH_HEADER)]
+    finally:
+        stats = _stop(proc, stats_file)
+    assert len(counters) == len(frames) and len(frames) > 0
+    assert all((b - a) % 128 == 1 for a, b in zip(counters, counters[1:]))  # consecutive: nothing lost
+    assert 0.7 * 200 < len(frames) / elapsed < 1.3 * 200
+    table = stats["devices"]["turntable_data"]
+    assert table["frames"] == 0 and table["lost_unread"] > 0.7 * 200 * elapsed  # a port nobody reads drops
+
+
+def test_python_can_logger_in_another_process_captures_the_default_emulated_can_imu(tmp_path):
+    cfg = dict(CONFIG, imu={"protocol": "can-dbc"})  # no imu.can block: the default bus
+    log = tmp_path / "imu.asc"
+    logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "udp_multicast", "-c", "239.74.163.2",
+                               "--bus-kwargs", "hop_limit=0", "-f", str(log)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(1.0)  # the logger joins the group
+        proc, ports, stats_file = _emulate(tmp_path, cfg)
+        assert ports["imu"] == {"interface": "udp_multicast", "channel": "239.74.163.2"}
+        time.sleep(2.0)
+        stats = _stop(proc, stats_file)
+    finally:
+        logger.send_signal(signal.SIGINT)
+        logger.wait(10)
+    messages = list(can.LogReader(str(log)))
+    samples = stats["devices"]["imu"]["frames"]  # one sample is a message per DBC message id
+    per_sample = len({m.arbitration_id for m in messages})
+    assert samples > 0 and per_sample >= 2
+    assert len(messages) >= 0.9 * samples * per_sample  # multicast on loopback: next to nothing lost

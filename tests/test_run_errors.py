@@ -1,0 +1,66 @@
+"""``hil run`` explains what is wrong in one line (exit 2), or ends a trial that cannot work (exit 1)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from emulators.emulate import spawn_emulator
+from hil.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+FAST = ["--speed", "max", "--quiet", "--viewer", "none", "--no-figures"]
+
+
+def _config(tmp_path: Path, name: str, **sections) -> Path:
+    cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
+    for section, values in sections.items():
+        cfg.setdefault(section, {}).update(values)
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hil: error: "), err
+    return lines[0]
+
+
+def test_a_config_the_emulator_rejects_is_one_line_with_its_reason(tmp_path, capsys):
+    config = _config(tmp_path, "slow-line", imu={"baudrate": 9600})
+    assert main(["run", str(config), "--duration", "5", *FAST, "--out", str(tmp_path / "out")]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "imu.baudrate" in line and "9600" in line
+
+
+def test_an_emulated_can_imu_on_the_in_process_virtual_bus_is_refused(tmp_path, capsys):
+    config = _config(tmp_path, "virtual", imu={"protocol": "can-dbc", "can": {"interface": "virtual"}})
+    assert main(["run", str(config), "--duration", "5", *FAST, "--out", str(tmp_path / "out")]) == 2
+    assert "imu.can.interface" in _one_line(capsys.readouterr().err)
+
+
+def test_a_port_that_cannot_be_opened_is_one_line_with_its_url(tmp_path, capsys):
+    config = _config(tmp_path, "lab", imu={"source": "serial", "port": "/dev/ttyNOSUCH0"},
+                     turntable={"source": "serial", "data_port": "/dev/ttyNOSUCH1"})
+    assert main(["run", str(config), "--duration", "5", *FAST, "--out", str(tmp_path / "out")]) == 2
+    assert "/dev/ttyNOSUCH" in _one_line(capsys.readouterr().err)
+
+
+def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_key(tmp_path, capsys):
+    device = _config(tmp_path, "device", imu={"kvh1750": {"accel_unit": "g"}})
+    proc, ports = spawn_emulator(device, tmp_path / "ports.json", "max", 60.0)
+    try:
+        harness = _config(tmp_path, "harness", imu={"source": "serial", "port": ports["imu"],
+                                                     "kvh1750": {"accel_unit": "m/s^2"}},
+                          turntable={"source": "serial", "data_port": ports["turntable_data"]})
+        out = tmp_path / "out"
+        assert main(["run", str(harness), "--duration", "60", *FAST, "--out", str(out)]) == 1
+    finally:
+        proc.kill()
+        proc.wait()
+    err = capsys.readouterr().err
+    assert "imu.kvh1750.accel_unit" in err and "rejected" in err
+    result = yaml.safe_load((out / "result.json").read_text())
+    assert result["ended"].startswith("early: every IMU sample") and result["trial"]["duration_s"] < 10

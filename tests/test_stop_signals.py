@@ -1,0 +1,59 @@
+"""Every way out of a trial that commands the table is safe: SIGTERM, SIGINT and SIGHUP mid-trial."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hil.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _commanded_config(tmp_path: Path) -> Path:
+    cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
+    cfg["turntable"]["command_port"] = "emulator"
+    path = tmp_path / "commanded.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def _wait_for_data(proc: subprocess.Popen, recording: Path) -> None:
+    deadline = time.monotonic() + 60
+    while not (recording.exists() and recording.stat().st_size > 100_000):
+        assert proc.poll() is None, proc.communicate()[1]
+        assert time.monotonic() < deadline, "no data recorded within 60 s"
+        time.sleep(0.1)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_a_signal_mid_trial_turns_the_table_off_and_keeps_replayable_outputs(tmp_path, sig):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", str(_commanded_config(tmp_path)),
+                             "--duration", "300", "--speed", "4", "--quiet", "--viewer", "none", "--no-figures",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for_data(proc, out / "recording.mcap")
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, err
+    result = json.loads((out / "result.json").read_text())
+    assert result["ended"] == f"interrupted: {sig.name}"
+    assert 0 < result["trial"]["duration_s"] < 300
+    assert (out / "report.html").exists()
+    emulator = json.loads((out / "emulator.json").read_text())
+    assert emulator["table_modes_off"] == 1 and emulator["table_modes"] == "O,O,O"
+    assert "acl: :Mode ALL,Off -> OK" in (out / "emulator.log").read_text()
+    assert "could not confirm" not in err
+    # the recording holds everything the trial processed and says how it ended
+    assert main(["replay", str(out), "--out", str(tmp_path / "replay"), "--viewer", "none", "--no-figures"]) == 1
+    assert (tmp_path / "replay" / "result.json").read_text() == (out / "result.json").read_text()
