@@ -86,8 +86,8 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
                                "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
     out.append(_info("bias_observable", est.get("observable"), "", "scaled Gram matrix of full rank"))
     out.append(_info("gram_rank", est.get("gram_rank"), "of 12", "rank of the scaled Gram matrix (2019 eq. 19)"))
-    if est.get("gram_condition") is not None:
-        out.append(_info("gram_condition", est.get("gram_condition"), "", "condition number of the scaled Gram matrix"))
+    if "gram_condition" in est:  # null when the matrix is singular
+        out.append(_info("gram_condition", est["gram_condition"], "", "condition number of the scaled Gram matrix"))
     out.append(_at_most("converged_at", est.get("converged_at_s"), "s", limits.converged_by_s,
                         "time after which the bias stays inside the final ±3σ band"))  # fmt: skip
     if est.get("noise_ug") is not None:

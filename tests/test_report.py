@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import base64
+import json
+import math
 import re
 import shutil
 
@@ -115,3 +117,25 @@ def test_a_judged_measurement_without_a_value_fails():
 def test_a_directory_without_result_json_is_refused(tmp_path):
     with pytest.raises(ReportError, match="result.json: not found"):
         write_report(tmp_path)
+
+
+def _no_constant(name):
+    raise ValueError(f"result.json holds {name}, which is not JSON")
+
+
+def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
+    cfg = make_config(duration=60.0, rate=100.0, kind="static", errors=PAPER_ERRORS)
+    est = run_estimator(cfg, solve_period=1.0)
+    n = est.solution().samples
+    result = build_result("static", est, StreamCounts(n, n, n), PAPER_ERRORS["accel_bias_ug"])
+    assert result["estimate"]["gram_condition"] == math.inf  # not observable: a singular Gram matrix
+    result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
+    write_outputs(tmp_path, result, est.snapshots, figures=False)
+    loaded = json.loads((tmp_path / "result.json").read_text(), parse_constant=_no_constant)
+    assert loaded["estimate"]["gram_condition"] is None and loaded["estimate"]["observable"] is False
+    assert loaded["nested"] == {"values": [None, {"low": None}, 1.5]}
+
+    page = write_report(tmp_path, ReportLimits(bias_sigma_ug_max=10.0)).read_text()  # figures drawn from the series
+    outcomes = _outcomes(page)
+    assert outcomes["gram_condition"] == NOT_JUDGED and outcomes["accel_bias_sigma_x"] == FAIL
+    assert len(re.findall(r"src='data:image/png;base64,", page)) == len(FIGURES)
