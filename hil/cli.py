@@ -45,8 +45,9 @@ def _summary(result: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
-def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str) -> None:
-    """Write result.json, series.csv, config.yaml, the figures and report.html, and print the summary."""
+def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str) -> str:
+    """Write result.json, series.csv, config.yaml, the figures, report.html and junit.xml, and print the
+    summary; returns the outcome against output.limits (PASS or FAIL)."""
     from hil.results import write_outputs
 
     write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
@@ -54,8 +55,9 @@ def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: l
 
     write_report(out, cfg.output.limits)
     print(_summary(result, out))
-    print(f"  report: {overall(measurements(result, cfg.output.limits))} against output.limits "
-          f"({out / 'report.html'})")
+    outcome = overall(measurements(result, cfg.output.limits))
+    print(f"  report: {outcome} against output.limits ({out / 'report.html'})")
+    return outcome
 
 
 def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
@@ -177,6 +179,7 @@ def _stop(process) -> None:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.replay import open_recording, recording_path, replay
+    from hil.report import FAIL
 
     source_dir = recording_path(args.source).parent
     out = Path(args.out) if args.out else source_dir / "replay"
@@ -188,9 +191,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if recording.truncated:
         print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
               file=sys.stderr)
-    _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, recording.metadata["config"])
+    config_text = recording.metadata["config"]
+    outcome = _finish(args, cfg, out, processor.result(), processor.estimator.snapshots, config_text)
     _close_viewer(viewer)
-    return 0
+    return 3 if outcome == FAIL else 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:

@@ -1,4 +1,4 @@
-"""The trial report: ``report.html`` beside result.json, readable offline.
+"""The trial report: ``report.html`` beside result.json, readable offline, and ``junit.xml`` for CI.
 
 Each result is a measurement in the manner of OpenHTF: a name, a value, a unit, a limit and an
 outcome (PASS, FAIL, or not judged when the config sets no limit for it). The trial passes when no
@@ -129,7 +129,8 @@ def overall(results: list[Measurement]) -> str:
 
 
 def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
-    """Write ``out_dir/report.html`` from result.json, the figures and series.csv; returns its path.
+    """Write ``out_dir/report.html`` from result.json, the figures and series.csv, and junit.xml beside it
+    (:mod:`hil.junit`); returns the report's path.
 
     Without ``limits`` the limits come from ``out_dir/config.yaml`` (the trial config's copy);
     without that file nothing is judged.
@@ -157,6 +158,9 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     page = _render(result, results, _figures(out_dir, series, result), series, notes)
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
+    from hil.junit import write_junit  # it imports this module
+
+    write_junit(out_dir, result, results)
     return path
 
 

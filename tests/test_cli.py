@@ -29,7 +29,8 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
     assert result["estimate"]["gram_rank"] == 12
     assert result["truth"]["accel_bias_ug"] == [60.0, 150.0, 260.0]
     assert set(result["alignment_deg"]) == {"method1", "method2", "theoretical"}
-    for name in ("series.csv", "config.yaml", "report.html", "bias.png", "alignment.png", "observability.png"):
+    for name in ("series.csv", "config.yaml", "report.html", "junit.xml", "bias.png", "alignment.png",
+                 "observability.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
 
 
@@ -123,7 +124,9 @@ def test_report_rebuilds_the_html_and_names_a_missing_directory(tmp_path, capsys
     out = tmp_path / "out"
     assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(out), "--no-figures"]) == 0
     (out / "report.html").unlink()
+    (out / "junit.xml").unlink()
     assert main(["report", str(out)]) == 0
     assert "<html" in (out / "report.html").read_text().lower()
+    assert (out / "junit.xml").read_text().startswith("<?xml")
     assert main(["report", str(tmp_path / "nothing")]) == 2
     assert "nothing" in capsys.readouterr().err

@@ -7,6 +7,7 @@ import json
 import math
 import re
 import shutil
+import xml.etree.ElementTree as ET
 
 import pytest
 import yaml
@@ -95,6 +96,51 @@ def test_missing_figures_are_drawn_from_the_series(trial_dir, tmp_path):
     assert len(images) == len(FIGURES)
     assert all(base64.b64decode(b).startswith(b"\x89PNG") for b in images)
     assert not any((tmp_path / "run" / name).exists() for name in FIGURES)
+
+
+def _junit(out) -> dict[str, ET.Element]:
+    """testcase name -> element of out/junit.xml, after checking the JUnit elements, attributes and counts."""
+    root = ET.parse(out / "junit.xml").getroot()
+    assert root.tag == "testsuites"
+    (suite,) = root.findall("testsuite")
+    cases = suite.findall("testcase")
+    failures = [c.find("failure") for c in cases if c.find("failure") is not None]
+    skipped = [c for c in cases if c.find("skipped") is not None]
+    for element in (root, suite):
+        assert element.get("name") == "report-test"
+        assert int(element.get("tests")) == len(cases) and int(element.get("failures")) == len(failures)
+        assert int(element.get("errors")) == 0 and int(element.get("skipped")) == len(skipped)
+        assert float(element.get("time")) == pytest.approx(60.0)
+    assert all(c.get("name") and c.get("classname") == "hil.report-test" for c in cases)
+    assert all(f.get("message") and f.get("type") for f in failures)
+    return {c.get("name"): c for c in cases}
+
+
+def test_junit_xml_has_a_testcase_per_judged_measurement(trial_dir):
+    out, result = trial_dir
+    sigma = result["estimate"]["accel_bias_sigma_ug"]
+    write_report(out, ReportLimits(bias_sigma_ug_max=2 * max(sigma), dropped_max=5))
+    cases = _junit(out)
+    assert sorted(cases) == ["accel_bias_sigma_x", "accel_bias_sigma_y", "accel_bias_sigma_z", "frames_dropped"]
+    assert all(len(case) == 0 for case in cases.values())  # passed: no failure, no skipped
+
+    write_report(out, ReportLimits(bias_sigma_ug_max=min(sigma), dropped_max=2))
+    cases = _junit(out)
+    assert cases["frames_dropped"].find("failure").get("message") == "frames_dropped = 3 frames, limit ≤ 2 frames"
+    worst = "xyz"[sigma.index(max(sigma))]
+    message = cases[f"accel_bias_sigma_{worst}"].find("failure").get("message")
+    assert str(max(sigma)) in message and f"limit ≤ {min(sigma):.5g} µg" in message
+    assert len(cases["accel_bias_sigma_" + "xyz"[sigma.index(min(sigma))]]) == 0
+
+
+def test_junit_xml_skips_a_limit_that_does_not_apply(trial_dir, tmp_path):
+    out, result = trial_dir
+    shutil.copytree(out, tmp_path / "run")
+    no_truth = {key: value for key, value in result.items() if key != "truth"}
+    (tmp_path / "run" / "result.json").write_text(json.dumps(no_truth))
+    write_report(tmp_path / "run", ReportLimits(bias_error_ug_max=10.0))
+    (case,) = _junit(tmp_path / "run").values()
+    assert case.get("name") == "accel_bias_error" and "no truth" in case.find("skipped").get("message")
 
 
 def test_a_judged_measurement_without_a_value_fails():
