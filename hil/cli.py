@@ -261,9 +261,14 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    from drivers.capture import decode_capture
+    from drivers.capture import CaptureError, decode_capture
 
-    counters = decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    if args.dbc and args.protocol != "can-dbc":
+        raise UsageError(f"--dbc {args.dbc}: only for protocol can-dbc, not {args.protocol}")
+    try:
+        counters = decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    except CaptureError as exc:
+        raise UsageError(str(exc)) from None
     print(json.dumps(counters))
     return 0
 
