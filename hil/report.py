@@ -141,8 +141,10 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
         result = json.loads(result_path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ReportError(f"{result_path}: not found; is {out_dir} the output directory of a trial?") from None
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ReportError(f"{result_path}: not valid JSON ({exc}); run the trial again to rewrite it") from None
+    if not isinstance(result, dict):
+        raise ReportError(f"{result_path}: not a trial result (a JSON object is expected)")
     notes = []
     if limits is None:
         config = out_dir / "config.yaml"

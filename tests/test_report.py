@@ -165,6 +165,13 @@ def test_a_directory_without_result_json_is_refused(tmp_path):
         write_report(tmp_path)
 
 
+@pytest.mark.parametrize("content, reason", [(b"[1, 2]", "not a trial result"), (b"{\xff}", "not valid JSON")])
+def test_a_result_json_that_is_not_a_result_is_refused(tmp_path, content, reason):
+    (tmp_path / "result.json").write_bytes(content)
+    with pytest.raises(ReportError, match=reason):
+        write_report(tmp_path)
+
+
 def _no_constant(name):
     raise ValueError(f"result.json holds {name}, which is not JSON")
 
