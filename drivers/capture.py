@@ -1,21 +1,21 @@
-"""Decode a raw capture (a byte dump, or a python-can log for CAN) into a CSV of device-unit fields.
-
-``hil decode PROTOCOL FILE [--out CSV] [--dbc DBC]`` is :func:`main_decode`.
-"""
+"""Decode a raw capture (a byte dump, or a python-can log for CAN) into a CSV of device-unit fields
+(``hil decode``)."""
 
 from __future__ import annotations
 
-import argparse
+import contextlib
 import csv
 import inspect
-import json
 import math
-import sys
-from collections.abc import Iterator, Sequence
+import struct
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import can
+import cantools
+from can.io.blf import BLFParseError
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
@@ -25,53 +25,75 @@ from drivers.tap import message_to_chunk
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
 DEFAULT_DBC = "configs/imu_lab_highres.dbc"
 CHUNK = 1 << 16
+# what python-can's log readers raise on a file that is not the log its suffix says
+_LOG_ERRORS = (struct.error, zlib.error, ValueError, IndexError, BLFParseError, NotImplementedError)
 
 
-def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | TextIO | None = None,
+class CaptureError(ValueError):
+    """A capture that cannot be decoded as asked; the message names the file or argument and the reason."""
+
+
+def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None = None,
                    dbc: str | Path | None = None, rate_hz: float = 200.0,
                    **codec_options: Any) -> dict[str, int]:
     """Counters {"frames", "corrupt", "skipped_bytes", "gaps"} of a capture; its valid frames go to ``out_csv``.
 
     One CSV row per valid frame: ``sync_index`` then the frame's fields in device units (unit in each
     column name). ``rate_hz`` only matters for unwrapping counters; ``codec_options`` are the codec's
-    own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so).
+    own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so). Raises :class:`CaptureError`
+    when the capture, the protocol, the DBC or the CSV cannot be used.
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"capture {path} does not exist")
+        raise CaptureError(f"{path}: {'a directory, not a capture' if path.is_dir() else 'no such file'}")
+    if path.stat().st_size == 0:
+        raise CaptureError(f"{path}: empty file, nothing to decode")
     if protocol == "can-dbc":
-        codec = CanDbcCodec.for_dbc(dbc or DEFAULT_DBC, rate_hz, **codec_options)
+        codec = _can_codec(dbc or DEFAULT_DBC, rate_hz, codec_options)
+        if path.suffix.lower() not in CAN_LOG_SUFFIXES:
+            raise CaptureError(f"{path}: a can-dbc capture must be a python-can log ({', '.join(CAN_LOG_SUFFIXES)})")
         chunks = _can_log_chunks(path)
     else:
-        cls = codec_class(protocol)
-        if getattr(cls, "kind", None) not in ("imu", "table"):
-            raise ValueError(f"protocol {protocol!r} has no data frames to decode")
-        takes_rate = "rate_hz" in inspect.signature(cls).parameters
-        codec = cls(rate_hz=rate_hz, **codec_options) if takes_rate else cls(**codec_options)
+        codec = _byte_codec(protocol, rate_hz, codec_options)
         chunks = _byte_chunks(path)
     framer = codec.framer()
-    with _open_out(out_csv) as out:
-        writer = csv.writer(out) if out is not None else None
-        if writer:
-            writer.writerow(["sync_index", *codec.csv_header()])
-        for chunk in chunks:
-            for decoded in framer.feed_chunk(chunk):
-                if writer:
-                    writer.writerow([decoded.sync_index, *codec.csv_row(decoded.record)])
+    try:
+        with open(out_csv, "w", newline="", encoding="utf-8") if out_csv else contextlib.nullcontext() as out:
+            writer = csv.writer(out) if out is not None else None
+            if writer:
+                writer.writerow(["sync_index", *codec.csv_header()])
+            for chunk in chunks:
+                for decoded in framer.feed_chunk(chunk):
+                    if writer:
+                        writer.writerow([decoded.sync_index, *codec.csv_row(decoded.record)])
+    except OSError as exc:
+        raise CaptureError(f"{exc.filename or path}: {exc.strerror or exc}") from None
     return framer.counters.as_dict()
 
 
-def main_decode(argv: Sequence[str] | None = None) -> int:
-    """``hil decode``: CSV to --out (or stdout), then the counters as one JSON object on the last line."""
-    parser = argparse.ArgumentParser(prog="hil decode", description="Decode a raw capture into a CSV.")
-    parser.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1 or can-dbc")
-    parser.add_argument("file", help="raw byte dump, or a python-can log (.blf, .asc, ...) for can-dbc")
-    parser.add_argument("--out", help="CSV to write (default: stdout, before the counters)")
-    parser.add_argument("--dbc", help=f"DBC for can-dbc (default {DEFAULT_DBC})")
-    args = parser.parse_args(argv)
-    counters = decode_capture(args.protocol, args.file, args.out or sys.stdout, args.dbc)
-    print(json.dumps(counters), flush=True)
-    return 0
+def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
+    """The codec of a byte-stream protocol that has data frames."""
+    try:
+        cls = codec_class(protocol)
+    except KeyError as exc:
+        raise CaptureError(exc.args[0]) from None
+    kind = getattr(cls, "kind", None)
+    if kind not in ("imu", "table"):
+        raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")
+    takes_rate = "rate_hz" in inspect.signature(cls).parameters
+    return cls(rate_hz=rate_hz, **options) if takes_rate else cls(**options)
+
+
+def _can_codec(dbc: str | Path, rate_hz: float, signals: dict[str, Any]) -> CanDbcCodec:
+    """The can-dbc codec of a DBC file."""
+    try:
+        return CanDbcCodec.for_dbc(dbc, rate_hz, **signals)
+    except OSError as exc:
+        raise CaptureError(f"{dbc}: cannot read: {exc.strerror or exc}") from None
+    except cantools.database.Error as exc:
+        raise CaptureError(f"{dbc}: not a usable DBC ({exc})") from None
+    except ValueError as exc:  # a DBC without the signals
+        raise CaptureError(str(exc) if str(exc).startswith(str(dbc)) else f"{dbc}: {exc}") from None
 
 
 def _byte_chunks(path: Path) -> Iterator[RawChunk]:
@@ -81,26 +103,9 @@ def _byte_chunks(path: Path) -> Iterator[RawChunk]:
 
 
 def _can_log_chunks(path: Path) -> Iterator[RawChunk]:
-    if path.suffix.lower() not in CAN_LOG_SUFFIXES:
-        raise ValueError(f"{path}: a can-dbc capture must be a python-can log ({', '.join(CAN_LOG_SUFFIXES)})")
-    for message in can.LogReader(str(path)):
-        if not (message.is_error_frame or message.is_remote_frame):
-            yield message_to_chunk(message, "capture")
-
-
-class _open_out:
-    """A CSV destination: a path (opened and closed here), an open text stream, or nothing."""
-
-    def __init__(self, target: str | Path | TextIO | None) -> None:
-        self.target = target
-        self.owned: TextIO | None = None
-
-    def __enter__(self) -> TextIO | None:
-        if isinstance(self.target, (str, Path)):
-            self.owned = open(self.target, "w", newline="", encoding="utf-8")
-            return self.owned
-        return self.target
-
-    def __exit__(self, *exc: object) -> None:
-        if self.owned is not None:
-            self.owned.close()
+    try:
+        for message in can.LogReader(str(path)):
+            if not (message.is_error_frame or message.is_remote_frame):
+                yield message_to_chunk(message, "capture")
+    except _LOG_ERRORS as exc:
+        raise CaptureError(f"{path}: not a readable {path.suffix} CAN log ({exc})") from None

@@ -30,7 +30,7 @@ def codec_class(name: str) -> type:
         if ep.name == name:
             return ep.load()
     known = ", ".join(sorted(CODECS) + [ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)])
-    raise KeyError(f"unknown protocol {name!r}; known protocols: {known}")
+    raise KeyError(f"protocol {name!r}: unknown; known protocols: {known}")
 
 
 def make_codec(name: str, **options: Any) -> Any:

@@ -219,14 +219,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
     recording, cfg = open_recording(args.source)
     viewer = _viewer(args, cfg, out, blocking=True)
     processor = replay(recording, cfg, viewer)
-    if processor.estimator is None:
-        raise UsageError(f"{args.source}: the recording holds no IMU data")
     if recording.truncated:
         print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
               file=sys.stderr)
     ended = recording.ended or ("early: the recording was cut short" if recording.truncated else "completed")
-    outcome = _finish(args, cfg, out, processor.result(), processor.estimator.snapshots,
-                      recording.metadata["config"], ended)
+    snapshots = processor.estimator.snapshots if processor.estimator is not None else []
+    outcome = _finish(args, cfg, out, processor.result(), snapshots, recording.metadata["config"], ended)
     _close_viewer(viewer)
     return _exit_code(ended, outcome)
 
@@ -295,9 +293,14 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    from drivers.capture import decode_capture
+    from drivers.capture import CaptureError, decode_capture
 
-    counters = decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    if args.dbc and args.protocol != "can-dbc":
+        raise UsageError(f"--dbc {args.dbc}: only for protocol can-dbc, not {args.protocol}")
+    try:
+        counters = decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    except CaptureError as exc:
+        raise UsageError(str(exc)) from None
     print(json.dumps(counters))
     return 0
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, IndexType, Writer
@@ -183,7 +183,9 @@ def read_recording(path: str | Path) -> Recording:
                     items.append(_item(channels[record.channel_id], record))
         except (McapError, EOFError, struct.error, ValueError) as exc:
             if not metadata:
-                raise ValueError(f"{path}: not a turntable-hil recording ({exc})") from None
+                short = isinstance(exc, (EndOfFile, EOFError, struct.error))
+                reason = "the file ends before the trial metadata" if short else str(exc)
+                raise ValueError(f"{path}: not a turntable-hil recording ({reason})") from None
             truncated = True
     if metadata.get("format") != FORMAT:
         raise ValueError(f"{path}: not a turntable-hil recording (format {metadata.get('format')!r})")

@@ -7,6 +7,7 @@ from pathlib import Path
 import yaml
 
 from hil.config import Config, ConfigError, parse_config
+from hil.csv_input import DataError
 from hil.processing import TrialProcessor
 from hil.recording import Recording, read_recording
 from hil.sinks import Viewer, ViewerSinks, health
@@ -35,7 +36,9 @@ def open_recording(source: str | Path) -> tuple[Recording, Config]:
     try:
         recording = read_recording(path)
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except ValueError as exc:  # not a recording; the message names the file
+        raise DataError(str(exc)) from None
     return recording, recorded_config(recording, path)
 
 

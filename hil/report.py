@@ -1,4 +1,4 @@
-"""The trial report: ``report.html`` beside result.json, readable offline.
+"""The trial report: ``report.html`` beside result.json, readable offline, and ``junit.xml`` for CI.
 
 Each result is a measurement in the manner of OpenHTF: a name, a value, a unit, a limit and an
 outcome (PASS, FAIL, or not judged when the config sets no limit for it). The trial passes when no
@@ -86,8 +86,8 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
                                "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
     out.append(_info("bias_observable", est.get("observable"), "", "scaled Gram matrix of full rank"))
     out.append(_info("gram_rank", est.get("gram_rank"), "of 12", "rank of the scaled Gram matrix (2019 eq. 19)"))
-    if est.get("gram_condition") is not None:
-        out.append(_info("gram_condition", est.get("gram_condition"), "", "condition number of the scaled Gram matrix"))
+    if "gram_condition" in est:  # null when the matrix is singular
+        out.append(_info("gram_condition", est["gram_condition"], "", "condition number of the scaled Gram matrix"))
     out.append(_at_most("converged_at", est.get("converged_at_s"), "s", limits.converged_by_s,
                         "time after which the bias stays inside the final ±3σ band"))  # fmt: skip
     if est.get("noise_ug") is not None:
@@ -129,7 +129,8 @@ def overall(results: list[Measurement]) -> str:
 
 
 def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
-    """Write ``out_dir/report.html`` from result.json, the figures and series.csv; returns its path.
+    """Write ``out_dir/report.html`` from result.json, the figures and series.csv, and junit.xml beside it
+    (:mod:`hil.junit`); returns the report's path.
 
     Without ``limits`` the limits come from ``out_dir/config.yaml`` (the trial config's copy);
     without that file nothing is judged.
@@ -140,8 +141,10 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
         result = json.loads(result_path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ReportError(f"{result_path}: not found; is {out_dir} the output directory of a trial?") from None
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ReportError(f"{result_path}: not valid JSON ({exc}); run the trial again to rewrite it") from None
+    if not isinstance(result, dict):
+        raise ReportError(f"{result_path}: not a trial result (a JSON object is expected)")
     notes = []
     if limits is None:
         config = out_dir / "config.yaml"
@@ -157,6 +160,9 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     page = _render(result, results, _figures(out_dir, series, result), series, notes)
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
+    from hil.junit import write_junit  # it imports this module
+
+    write_junit(out_dir, result, results)
     return path
 
 

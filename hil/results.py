@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -125,13 +127,25 @@ def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
     return rows
 
 
+def _strict_json(value: Any) -> Any:
+    """``value`` with every non-finite float (at any depth) replaced by None: JSON has no NaN or Infinity."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict_json(v) for v in value]
+    return value
+
+
 def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: bool = True,
                   config_text: str | None = None) -> None:
-    """result.json, series.csv, the trial config as config.yaml and (optionally) the figures."""
+    """result.json (strict JSON: null for a non-finite number), series.csv, the trial config as config.yaml
+    and (optionally) the figures."""
     out.mkdir(parents=True, exist_ok=True)
     if config_text is not None:
         (out / "config.yaml").write_text(config_text)
-    (out / "result.json").write_text(json.dumps(result, indent=2) + "\n")
+    (out / "result.json").write_text(json.dumps(_strict_json(result), indent=2, allow_nan=False) + "\n")
     rows = series_rows(snapshots)
     with open(out / "series.csv", "w", newline="") as fh:
         writer = csv.writer(fh)

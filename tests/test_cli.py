@@ -29,7 +29,8 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
     assert result["estimate"]["gram_rank"] == 12
     assert result["truth"]["accel_bias_ug"] == [60.0, 150.0, 260.0]
     assert set(result["alignment_deg"]) == {"method1", "method2", "theoretical"}
-    for name in ("series.csv", "config.yaml", "report.html", "bias.png", "alignment.png", "observability.png"):
+    for name in ("series.csv", "config.yaml", "report.html", "junit.xml", "bias.png", "alignment.png",
+                 "observability.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
 
 
@@ -123,7 +124,53 @@ def test_report_rebuilds_the_html_and_names_a_missing_directory(tmp_path, capsys
     out = tmp_path / "out"
     assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(out), "--no-figures"]) == 0
     (out / "report.html").unlink()
+    (out / "junit.xml").unlink()
     assert main(["report", str(out)]) == 0
     assert "<html" in (out / "report.html").read_text().lower()
+    assert (out / "junit.xml").read_text().startswith("<?xml")
     assert main(["report", str(tmp_path / "nothing")]) == 2
     assert "nothing" in capsys.readouterr().err
+
+
+@pytest.fixture
+def bad_inputs(tmp_path):
+    """Files that ``hil decode`` and ``hil replay`` must refuse."""
+    (tmp_path / "cap.bin").write_bytes(bytes(64))
+    (tmp_path / "empty.bin").write_bytes(b"")
+    (tmp_path / "cap.asc").write_text("date Mon Jan 1 00:00:00 2024\nbase hex timestamps absolute\n")
+    (tmp_path / "cap.blf").write_bytes(b"not a BLF file")
+    (tmp_path / "bad.dbc").write_text("not a DBC\n")
+    (tmp_path / "other.dbc").write_text('VERSION ""\nBO_ 100 Other: 8 Vector__XXX\n'
+                                        ' SG_ Speed : 0|8@1+ (1,0) [0|255] "km/h" Vector__XXX\n')  # fmt: skip
+    (tmp_path / "text.mcap").write_text("hello, not a recording\n")
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    (tmp_path / "run").mkdir()
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    "args, named, reason",
+    [
+        (["decode", "kvh1750", "{d}/missing.bin"], "missing.bin", "no such file"),
+        (["decode", "kvh1750", "{d}/run"], "run", "a directory, not a capture"),
+        (["decode", "kvh1750", "{d}/empty.bin"], "empty.bin", "empty file, nothing to decode"),
+        (["decode", "nmea", "{d}/cap.bin"], "protocol 'nmea'", "unknown; known protocols: acl, can-dbc"),
+        (["decode", "acl", "{d}/cap.bin"], "protocol 'acl'", "a command protocol, no data frames"),
+        (["decode", "can-dbc", "{d}/cap.bin"], "cap.bin", "a can-dbc capture must be a python-can log (.blf"),
+        (["decode", "can-dbc", "{d}/cap.blf"], "cap.blf", "not a readable .blf CAN log"),
+        (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/missing.dbc"], "missing.dbc", "cannot read: No such file"),
+        (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/bad.dbc"], "bad.dbc", "not a usable DBC"),
+        (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/other.dbc"], "other.dbc", "none of the shipped signal"),
+        (["decode", "kvh1750", "{d}/cap.bin", "--dbc", "{d}/other.dbc"], "--dbc", "only for protocol can-dbc"),
+        (["decode", "kvh1750", "{d}/cap.bin", "--out", "{d}/no/out.csv"], "out.csv", "No such file"),
+        (["replay", "{d}/text.mcap"], "text.mcap", "not a turntable-hil recording (not a valid MCAP file"),
+        (["replay", "{d}/empty.mcap"], "empty.mcap", "the file ends before the trial metadata"),
+        (["replay", "{d}/run"], "recording.mcap", "cannot read: No such file"),
+    ],
+)
+def test_unusable_capture_or_recording_is_one_line_and_exit_2(bad_inputs, capsys, args, named, reason):
+    assert main([a.format(d=bad_inputs) for a in args]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith("hil: error: ") and captured.err.count("\n") == 1
+    assert named in captured.err and reason in captured.err
+    assert captured.out == ""

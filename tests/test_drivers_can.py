@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 import socket
@@ -14,12 +13,13 @@ import cantools
 import pytest
 
 from drivers.can_dbc import CanDbcCodec
-from drivers.capture import decode_capture, main_decode
+from drivers.capture import decode_capture
 from drivers.codec import RawChunk
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
 from drivers.session import DeviceSession
 from drivers.tap import CanLogTap, RawListener, SampleListener
 from drivers.transport import CanTransport, open_can_bus
+from hil.cli import main
 from hil.samples import ImuSample
 
 HIGHRES = "configs/imu_lab_highres.dbc"
@@ -150,10 +150,10 @@ def test_decode_command_prints_counters_as_json_on_the_last_line(tmp_path, capsy
     damaged[20] ^= 0x01
     dump = tmp_path / "kvh.bin"
     dump.write_bytes(b"\x00\x01" + b"".join(frames[:50]) + bytes(damaged) + b"".join(frames[51:]))
-    assert main_decode(["kvh1750", str(dump)]) == 0
+    assert main(["decode", "kvh1750", str(dump), "--out", str(tmp_path / "kvh.csv")]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert json.loads(lines[-1]) == {"frames": 129, "corrupt": 1, "skipped_bytes": 38, "gaps": 1}
-    rows = list(csv.reader(io.StringIO("\n".join(lines[:-1]))))
+    rows = list(csv.reader((tmp_path / "kvh.csv").open()))
     assert rows[0][:2] == ["sync_index", "gyro_x_rad"] and "accel_x_g" in rows[0]
     assert [int(r[0]) for r in rows[1:]][48:52] == [48, 49, 51, 52]
     assert int(rows[-1][0]) == 129  # the 7-bit sequence unwrapped past 127

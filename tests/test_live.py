@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hil.cli import main
-from hil.recording import read_recording
+from hil.recording import Recorder, read_recording
 from hil.replay import open_recording, replay
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,6 +47,24 @@ def test_replay_reproduces_the_result_exactly(live_run, tmp_path):
     again = json.loads((tmp_path / "result.json").read_text())
     assert again == live
     assert (tmp_path / "series.csv").read_text() == (live_run / "series.csv").read_text()
+
+
+def test_replay_of_a_trial_that_fails_its_limits_exits_3(live_run, tmp_path):
+    import xml.etree.ElementTree as ET
+
+    import yaml
+
+    rec = read_recording(live_run / "recording.mcap")
+    cfg = yaml.safe_load(rec.metadata["config"])
+    cfg["output"]["limits"] = {"bias_sigma_ug_max": 1e-6}
+    recorder = Recorder(tmp_path / "strict.mcap", yaml.safe_dump(cfg), duration=float(rec.metadata["duration_s"]),
+                        time_scale=None)  # as recorded at --speed max
+    for item in rec.items:
+        recorder.write(item)
+    recorder.close()
+    assert main(["replay", str(tmp_path / "strict.mcap"), "--out", str(tmp_path / "out"), "--no-figures"]) == 3
+    suite = ET.parse(tmp_path / "out" / "junit.xml").getroot().find("testsuite")
+    assert suite.get("tests") == suite.get("failures") == "3"
 
 
 def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import base64
+import json
+import math
 import re
 import shutil
+import xml.etree.ElementTree as ET
 
 import pytest
 import yaml
@@ -95,6 +98,62 @@ def test_missing_figures_are_drawn_from_the_series(trial_dir, tmp_path):
     assert not any((tmp_path / "run" / name).exists() for name in FIGURES)
 
 
+def _junit(out) -> dict[str, ET.Element]:
+    """testcase name -> element of out/junit.xml, after checking the JUnit elements, attributes and counts."""
+    root = ET.parse(out / "junit.xml").getroot()
+    assert root.tag == "testsuites"
+    (suite,) = root.findall("testsuite")
+    cases = suite.findall("testcase")
+    failures = [c.find("failure") for c in cases if c.find("failure") is not None]
+    skipped = [c for c in cases if c.find("skipped") is not None]
+    errors = [c for c in cases if c.find("error") is not None]
+    for element in (root, suite):
+        assert element.get("name") == "report-test"
+        assert int(element.get("tests")) == len(cases) and int(element.get("failures")) == len(failures)
+        assert int(element.get("errors")) == len(errors) and int(element.get("skipped")) == len(skipped)
+        assert float(element.get("time")) == pytest.approx(60.0)
+    assert all(c.get("name") and c.get("classname") == "hil.report-test" for c in cases)
+    assert all(f.get("message") and f.get("type") for f in failures)
+    return {c.get("name"): c for c in cases}
+
+
+def test_junit_xml_has_a_testcase_per_judged_measurement(trial_dir):
+    out, result = trial_dir
+    sigma = result["estimate"]["accel_bias_sigma_ug"]
+    write_report(out, ReportLimits(bias_sigma_ug_max=2 * max(sigma), dropped_max=5))
+    cases = _junit(out)
+    assert sorted(cases) == ["accel_bias_sigma_x", "accel_bias_sigma_y", "accel_bias_sigma_z", "frames_dropped"]
+    assert all(len(case) == 0 for case in cases.values())  # passed: no failure, no skipped
+
+    write_report(out, ReportLimits(bias_sigma_ug_max=min(sigma), dropped_max=2))
+    cases = _junit(out)
+    assert cases["frames_dropped"].find("failure").get("message") == "frames_dropped = 3 frames, limit ≤ 2 frames"
+    worst = "xyz"[sigma.index(max(sigma))]
+    message = cases[f"accel_bias_sigma_{worst}"].find("failure").get("message")
+    assert str(max(sigma)) in message and f"limit ≤ {min(sigma):.5g} µg" in message
+    assert len(cases["accel_bias_sigma_" + "xyz"[sigma.index(min(sigma))]]) == 0
+
+
+def test_junit_xml_skips_a_limit_that_does_not_apply(trial_dir, tmp_path):
+    out, result = trial_dir
+    shutil.copytree(out, tmp_path / "run")
+    no_truth = {key: value for key, value in result.items() if key != "truth"}
+    (tmp_path / "run" / "result.json").write_text(json.dumps(no_truth))
+    write_report(tmp_path / "run", ReportLimits(bias_error_ug_max=10.0))
+    (case,) = _junit(tmp_path / "run").values()
+    assert case.get("name") == "accel_bias_error" and "no truth" in case.find("skipped").get("message")
+
+
+def test_junit_xml_reports_a_trial_that_did_not_complete_as_an_error(trial_dir, tmp_path):
+    out, result = trial_dir
+    shutil.copytree(out, tmp_path / "run")
+    (tmp_path / "run" / "result.json").write_text(json.dumps({**result, "ended": "interrupted: SIGTERM"}))
+    write_report(tmp_path / "run", ReportLimits(dropped_max=5))
+    cases = _junit(tmp_path / "run")
+    assert cases["trial_completed"].find("error").get("message") == "trial interrupted: SIGTERM"
+    assert len(cases["frames_dropped"]) == 0
+
+
 def test_a_judged_measurement_without_a_value_fails():
     static = {
         "trial": {"name": "static", "duration_s": 60.0, "samples": 6000},
@@ -115,3 +174,32 @@ def test_a_judged_measurement_without_a_value_fails():
 def test_a_directory_without_result_json_is_refused(tmp_path):
     with pytest.raises(ReportError, match="result.json: not found"):
         write_report(tmp_path)
+
+
+@pytest.mark.parametrize("content, reason", [(b"[1, 2]", "not a trial result"), (b"{\xff}", "not valid JSON")])
+def test_a_result_json_that_is_not_a_result_is_refused(tmp_path, content, reason):
+    (tmp_path / "result.json").write_bytes(content)
+    with pytest.raises(ReportError, match=reason):
+        write_report(tmp_path)
+
+
+def _no_constant(name):
+    raise ValueError(f"result.json holds {name}, which is not JSON")
+
+
+def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
+    cfg = make_config(duration=60.0, rate=100.0, kind="static", errors=PAPER_ERRORS)
+    est = run_estimator(cfg, solve_period=1.0)
+    n = est.solution().samples
+    result = build_result("static", est, StreamCounts(n, n, n), PAPER_ERRORS["accel_bias_ug"])
+    assert result["estimate"]["gram_condition"] == math.inf  # not observable: a singular Gram matrix
+    result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
+    write_outputs(tmp_path, result, est.snapshots, figures=False)
+    loaded = json.loads((tmp_path / "result.json").read_text(), parse_constant=_no_constant)
+    assert loaded["estimate"]["gram_condition"] is None and loaded["estimate"]["observable"] is False
+    assert loaded["nested"] == {"values": [None, {"low": None}, 1.5]}
+
+    page = write_report(tmp_path, ReportLimits(bias_sigma_ug_max=10.0)).read_text()  # figures drawn from the series
+    outcomes = _outcomes(page)
+    assert outcomes["gram_condition"] == NOT_JUDGED and outcomes["accel_bias_sigma_x"] == FAIL
+    assert len(re.findall(r"src='data:image/png;base64,", page)) == len(FIGURES)

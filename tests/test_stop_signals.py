@@ -49,7 +49,7 @@ def test_a_signal_mid_trial_turns_the_table_off_and_keeps_replayable_outputs(tmp
     result = json.loads((out / "result.json").read_text())
     assert result["ended"] == f"interrupted: {sig.name}"
     assert 0 < result["trial"]["duration_s"] < 300
-    assert (out / "report.html").exists()
+    assert (out / "report.html").exists() and "trial_completed" in (out / "junit.xml").read_text()
     emulator = json.loads((out / "emulator.json").read_text())
     assert emulator["table_modes_off"] == 1 and emulator["table_modes"] == "O,O,O"
     assert "acl: :Mode ALL,Off -> OK" in (out / "emulator.log").read_text()

@@ -1,0 +1,54 @@
+"""``junit.xml`` beside report.html: the trial's limits as JUnit test cases for CI (Jenkins, GitLab,
+junitparser).
+
+One ``<testsuite>`` (the trial) in ``<testsuites>``; one ``<testcase>`` per measurement that has a
+limit in ``output.limits``. A FAIL carries ``<failure>`` whose message holds the value and the limit.
+A limit that does not apply to this trial (the bias error without truth) is ``<skipped>``: CI reads
+skipped as a test that exists but was not run. A measurement without a limit is informational, not a
+test, and is left out: reported as skipped, the dozens of them would bury the few judged cases (and
+CI would flag every run as having skipped tests). A trial that did not complete (``ended`` early or
+interrupted) adds a ``trial_completed`` case with an ``<error>`` holding the reason.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from hil.report import FAIL, NOT_JUDGED, Measurement
+
+JUNIT_NAME = "junit.xml"
+
+
+def write_junit(out_dir: Path, result: dict, results: list[Measurement]) -> Path:
+    """Write ``out_dir/junit.xml`` for the measurements of a result.json document; returns its path."""
+    trial = result.get("trial") or {}
+    name = str(trial.get("name", "trial"))
+    cases = [m for m in results if m.limit]
+    ended = result.get("ended", "completed")
+    counts = {
+        "tests": len(cases) + (ended != "completed"),
+        "failures": sum(m.outcome == FAIL for m in cases),
+        "errors": int(ended != "completed"),
+        "skipped": sum(m.outcome == NOT_JUDGED for m in cases),
+        "time": trial.get("duration_s") or 0.0,
+    }
+    attrs = {"name": name, **{k: str(v) for k, v in counts.items()}}
+    root = ET.Element("testsuites", attrs)
+    suite = ET.SubElement(root, "testsuite", attrs)
+    if ended != "completed":
+        case = ET.SubElement(suite, "testcase", name="trial_completed", classname=f"hil.{name}")
+        ET.SubElement(case, "error", message=f"trial {ended}", type="ended")
+    for m in cases:
+        case = ET.SubElement(suite, "testcase", name=m.name, classname=f"hil.{name}")
+        if m.outcome == FAIL:
+            value = "no value" if m.value is None else f"{m.value} {m.unit}".rstrip()
+            failure = ET.SubElement(case, "failure", message=f"{m.name} = {value}, limit {m.limit} {m.unit}".rstrip(),
+                                    type="limit")  # fmt: skip
+            failure.text = m.description
+        elif m.outcome == NOT_JUDGED:
+            ET.SubElement(case, "skipped", message=m.description)
+    ET.indent(root)
+    path = Path(out_dir) / JUNIT_NAME
+    path.write_bytes(ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n")
+    return path
