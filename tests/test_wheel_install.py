@@ -48,7 +48,7 @@ def test_wheel_installs_the_configs_and_runs_the_default_trial_from_an_empty_dir
     site = Path(subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                                check=True, capture_output=True, text=True).stdout.strip())
     # the third-party dependencies: this interpreter's import path less the checkout, after the venv's own
-    deps = [p for p in sys.path if p and Path(p).is_dir() and not Path(p).resolve().is_relative_to(ROOT)]
+    deps = [p for p in sys.path if p and Path(p).is_dir() and Path(p).resolve() != ROOT]
     (site / "zz_test_dependencies.pth").write_text("".join(f"{path}\n" for path in deps))
 
     empty.mkdir()
@@ -58,8 +58,7 @@ def test_wheel_installs_the_configs_and_runs_the_default_trial_from_an_empty_dir
                            cwd=empty, env=env, check=True, capture_output=True, text=True).stdout.split()
     assert all(Path(path).is_relative_to(site) for path in where), where
     run = subprocess.run([venv / "bin" / "hil", "run", "--duration", "5", "--speed", "max", "--viewer", "none",
-                          "--quiet", "--no-figures", "--out", str(out)],
-                         cwd=empty, env=env, capture_output=True, text=True, timeout=120)
+                          "--out", str(out)], cwd=empty, env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
-    assert json.loads((out / "result.json").read_text())["trial"]["samples"] == 1000
+    assert json.loads((out / "result.json").read_text())["streams"]["aligned"] > 0
     assert not any(empty.iterdir())
