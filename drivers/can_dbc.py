@@ -16,7 +16,7 @@ import cantools
 
 from drivers.codec import Codec, Decoded, Framer, RawChunk
 from drivers.framing import SequenceUnwrapper
-from hil.config import CanSignals
+from hil.config import CanSignals, resolve_path
 from hil.samples import ImuSample
 
 G0 = 9.80665
@@ -61,7 +61,8 @@ class CanDbcCodec(Codec[CanImuFrame]):
 
     def __init__(self, dbc: str | Path, rate_hz: float, gyro: tuple[str, str, str], accel: tuple[str, str, str],
                  sync: str | None = None, status: str | None = None) -> None:
-        self.db = cantools.database.load_file(str(dbc))
+        """``dbc`` is a path or a shipped DBC's name (:func:`hil.config.resolve_path`)."""
+        self.db = cantools.database.load_file(str(resolve_path(dbc)))
         self.rate_hz = rate_hz
         self.sync, self.status = sync, status
         self.quantities = [self._signal(name) for name in (*gyro, *accel)]  # (message, signal)

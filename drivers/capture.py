@@ -21,9 +21,10 @@ from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.registry import codec_class
 from drivers.tap import message_to_chunk
+from hil.config import CanConfig
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
-DEFAULT_DBC = "configs/imu_lab_highres.dbc"
+DEFAULT_DBC = CanConfig().dbc  # the shipped DBC the config defaults to
 CHUNK = 1 << 16
 # what python-can's log readers raise on a file that is not the log its suffix says
 _LOG_ERRORS = (struct.error, zlib.error, ValueError, IndexError, BLFParseError, NotImplementedError)

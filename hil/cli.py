@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from hil.config import ConfigError, load_config
+from hil.config import ConfigError, load_config, resolve_path
 
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
 
@@ -330,7 +330,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
-    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
     p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
@@ -347,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
-    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     _viewer_options(p, default="none")
@@ -361,7 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
-    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
     p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")

@@ -9,6 +9,7 @@ converts at the edges through the ``*_si`` helpers below. Unknown keys and bad v
 from __future__ import annotations
 
 import math
+from importlib.resources import files
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -20,6 +21,19 @@ DEG = math.pi / 180.0
 DEG_PER_H = DEG / 3600.0
 ARCSEC = DEG / 3600.0
 PPM = 1e-6
+
+
+SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
+
+
+def resolve_path(path: str | Path) -> Path:
+    """A config or DBC path as named in a config or a default: the path itself if it exists, else the shipped
+    file of that name (``configs/NAME`` or ``NAME``), else the path unchanged so that its error names it."""
+    path = Path(path)
+    if path.exists() or path.parent not in (Path("."), Path("configs")):
+        return path
+    shipped = Path(files(SHIPPED) / path.name)  # an installed package is a directory
+    return shipped if shipped.is_file() else path
 
 
 class ConfigError(ValueError):

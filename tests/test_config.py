@@ -1,6 +1,9 @@
+from importlib.resources import files
+from pathlib import Path
+
 import pytest
 
-from hil.config import ConfigError, load_config, parse_config
+from hil.config import ConfigError, load_config, parse_config, resolve_path
 
 MINIMAL = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
 
@@ -46,6 +49,18 @@ def test_yaml_tags_are_not_executed(tmp_path):
 def test_shipped_configs_validate(name):
     cfg = load_config(f"configs/{name}")
     assert cfg.turntable.motion.kind == "swing"
+
+
+def test_resolve_path_takes_an_existing_path_then_the_shipped_file_else_the_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    shipped = Path(files("hil.configs") / "emulated_swing.yaml")
+    assert shipped.is_file() and not shipped.is_relative_to(tmp_path)
+    assert resolve_path("configs/emulated_swing.yaml") == resolve_path("emulated_swing.yaml") == shipped
+    (tmp_path / "configs").mkdir()
+    (tmp_path / "configs" / "emulated_swing.yaml").write_text("trial: {}\n")
+    assert resolve_path("configs/emulated_swing.yaml") == Path("configs/emulated_swing.yaml")
+    for missing in ("configs/no_such_trial.yaml", "elsewhere/lab_swing.yaml"):
+        assert resolve_path(missing) == Path(missing)
 
 
 def test_faults_and_timing_are_off_by_default():

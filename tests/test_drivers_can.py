@@ -53,6 +53,12 @@ def test_highres_frame_layout_matches_the_dbc_by_hand():
     assert bytes(messages[0].data) == bytes.fromhex("E8030000 563412 00")
 
 
+def test_a_shipped_dbc_is_found_by_name_from_any_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for name in (J1939, "imu_j1939.dbc"):
+        assert [m.name for m in CanDbcCodec.for_dbc(name, 100.0).messages] == ["ARI", "ACCS"]
+
+
 def test_highres_resolution_is_within_the_design_bounds():
     db = cantools.database.load_file(HIGHRES)
     for message in db.messages:

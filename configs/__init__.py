@@ -1,0 +1,1 @@
+"""The shipped trial configs and DBC files, installed as the package ``hil.configs``."""
