@@ -396,7 +396,7 @@ class DeviceWriter:
                 self.latency.add(time.monotonic() - due)
         return True
 
-    def finish(self, timeout_s: float) -> None:
-        """Write what is queued, then return (the thread ends)."""
+    def finish(self, timeout_s: float | None) -> None:
+        """Write what is queued, then return (the thread ends); ``timeout_s`` None: however long it takes."""
         if self.put(None, None):
             self.thread.join(timeout_s)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
+import math
 import os
 import signal
 import subprocess
@@ -44,7 +45,7 @@ from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.timing import DeviceClock
-from hil.config import CanConfig, Config, ConfigError, load_config
+from hil.config import Config, ConfigError, load_config
 from hil.samples import ImuSample
 
 DRAIN_S = 5.0  # longest wait at the end for readers to take the bytes still queued
@@ -126,8 +127,6 @@ class _Devices:
         sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
             update={"duration_s": duration})}))
         imu_cfg = cfg.imu
-        if imu_cfg.protocol == "can-dbc" and imu_cfg.can is None:
-            imu_cfg = imu_cfg.model_copy(update={"can": CanConfig()})
         codec = imu_codec(imu_cfg, rate)
         imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
         table_clock = DeviceClock(rate, cfg.turntable.latch_delay_us * 1e-6, cfg.turntable.timing)
@@ -216,10 +215,11 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
             return _stats(devices, 0, 0.0, True)
         clock = SyncClock(speed)
         pulses = _pulse_loop(devices, clock, stop)
+        # held devices wait for their reader however slow it is: the stats file then means "all was read"
         for writer in devices.writers.values():
-            writer.finish(DRAIN_S)
+            writer.finish(None if hold else DRAIN_S)
         for port in devices.ports.values():
-            port.drain(stop, DRAIN_S)
+            port.drain(stop, math.inf if hold else DRAIN_S)
         elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
         if stats_file is not None:
             _write_json(stats_file, _stats(devices, pulses, elapsed, stopped).as_dict())

@@ -11,6 +11,12 @@ from pathlib import Path
 from hil.config import ConfigError, load_config, resolve_path
 
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
+EXIT_CODES = """exit codes:
+  0  done (and PASS against output.limits, or no limits judged)
+  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
+     or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept
+  2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
+  3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
 
 
 class UsageError(ValueError):
@@ -326,11 +332,13 @@ def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> N
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.")
+    parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
+                                     epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
-    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
+    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
     p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
@@ -347,7 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
-    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
+    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     _viewer_options(p, default="none")
@@ -355,13 +364,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
     p.add_argument("data", help="CSV: t_s, dtheta_[xyz]_rad, dv_[xyz]_mps[, outer_deg, middle_deg, inner_deg]")
-    p.add_argument("--config", required=True, help="trial YAML (trial and site are enough)")
+    p.add_argument("--config", required=True, type=resolve_path, help="trial YAML (trial and site are enough)")
     p.add_argument("--out")
     p.add_argument("--no-figures", action="store_true")
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
-    p.add_argument("config", nargs="?", default=resolve_path(DEFAULT_CONFIG))
+    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
     p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")

@@ -164,7 +164,7 @@ class TurntableConfig(_Model):
     azimuth_deg: float = 0.0  # azimuth of the outer axis zero, from north towards east
     tilt_deg: Vec2 = (0.0, 0.0)  # small tilt of the table base about east (x) and north (y)
     mounting_deg: Vec3 = ZERO3  # IMU mounting on the inner gimbal, yaw/pitch/roll (z, x, y)
-    latch_delay_us: float = Field(0.0, ge=0)
+    latch_delay_us: float = Field(0.0, ge=0)  # emulator only: what its tts1 frames report
     limits: LimitsConfig = LimitsConfig()
     timing: DeviceTiming = DeviceTiming()
     faults: FaultConfig = FaultConfig()
@@ -234,13 +234,22 @@ class ImuConfig(_Model):
     protocol: Literal["kvh1750", "xsens-mtdata2", "can-dbc"] = "kvh1750"
     port: str | None = None
     baudrate: int = Field(921600, gt=0)
-    can: CanConfig | None = None
+    can: CanConfig | None = None  # can-dbc: the default bus when left out
     kvh1750: Kvh1750Format = Kvh1750Format()
     rate_hz: float | None = Field(None, gt=0)  # defaults to trial.rate_hz
     latch_delay_us: float = Field(0.0, ge=0)  # from the pulse edge to the end of the increment interval
     timing: DeviceTiming = DeviceTiming()
     errors: ImuErrors = ImuErrors()
     faults: FaultConfig = FaultConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _can_bus_for_can_dbc(cls, data: Any) -> Any:
+        """An emulated ``can-dbc`` IMU without a ``can`` block is on the default bus (:class:`CanConfig`)."""
+        if isinstance(data, dict) and data.get("protocol") == "can-dbc" and data.get("can") is None \
+                and data.get("source", "emulator") == "emulator":
+            return {**data, "can": {}}
+        return data
 
     @model_validator(mode="after")
     def _transport_given(self) -> ImuConfig:

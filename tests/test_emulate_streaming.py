@@ -77,3 +77,18 @@ def test_python_can_logger_in_another_process_captures_the_default_emulated_can_
     per_sample = len({m.arbitration_id for m in messages})
     assert samples > 0 and per_sample >= 2
     assert len(messages) >= 0.9 * samples * per_sample  # multicast on loopback: next to nothing lost
+
+
+def test_hil_run_reads_the_default_emulated_can_imu_from_the_emulators_process(tmp_path):
+    from hil.cli import main
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "emulated_swing.yaml").read_text())
+    cfg["imu"] = {**cfg["imu"], "protocol": "can-dbc"}  # no imu.can block: the default bus
+    config = tmp_path / "can.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "out"
+    code = main(["run", str(config), "--duration", "6", "--quiet", "--viewer", "none", "--no-figures",
+                 "--out", str(out)])  # real time: UDP has no flow control, a reader far behind loses datagrams
+    result = json.loads((out / "result.json").read_text())
+    assert code == 3 and result["ended"] == "completed"  # 6 s cannot meet the default trial's 600 s limits
+    assert result["streams"]["imu_frames"] >= 0.95 * 1200 and result["estimate"]["gram_rank"] == 12
