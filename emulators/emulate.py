@@ -200,42 +200,77 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     if duration is None:
         raise ConfigError("trial.duration_s: required key is missing (or give --duration)")
     stop = stop_event or threading.Event()
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
-            previous[sig] = signal.signal(sig, lambda *_: stop.set())
     devices: _Devices | None = None
-    try:
-        devices = _Devices(cfg, duration, speed, stop, wait_readers)
-        print(json.dumps(devices.names()), flush=True)
-        if ports_file is not None:
-            _write_json(ports_file, devices.names())
-        ptys = [p for p in devices.ports.values() if isinstance(p, PtyPort)]
-        if wait_readers and not wait_for_readers(ptys, stop):
-            return _stats(devices, 0, 0.0, True)
-        clock = SyncClock(speed)
-        pulses = _pulse_loop(devices, clock, stop)
-        # held devices wait for their reader however slow it is: the stats file then means "all was read"
-        for writer in devices.writers.values():
-            writer.finish(None if hold else DRAIN_S)
-        for port in devices.ports.values():
-            port.drain(stop, math.inf if hold else DRAIN_S)
-        elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
-        if stats_file is not None:
-            _write_json(stats_file, _stats(devices, pulses, elapsed, stopped).as_dict())
-        if hold:
-            stop.wait()
-        stats = _stats(devices, pulses, elapsed, stopped)
-        if stats_file is not None:
-            _write_json(stats_file, stats.as_dict())
-        return stats
-    finally:
-        if devices is not None:
-            devices.close()
-        if ports_file is not None:
-            ports_file.unlink(missing_ok=True)
-        for sig, handler in previous.items():
+    with _SignalsStop(stop):
+        try:
+            devices = _Devices(cfg, duration, speed, stop, wait_readers)
+            print(json.dumps(devices.names()), flush=True)
+            if ports_file is not None:
+                _write_json(ports_file, devices.names())
+            ptys = [p for p in devices.ports.values() if isinstance(p, PtyPort)]
+            if wait_readers and not wait_for_readers(ptys, stop):
+                return _stats(devices, 0, 0.0, True)
+            clock = SyncClock(speed)
+            pulses = _pulse_loop(devices, clock, stop)
+            # held devices wait for their reader however slow: the stats file then means "all was read"
+            for writer in devices.writers.values():
+                writer.finish(None if hold else DRAIN_S)
+            for port in devices.ports.values():
+                port.drain(stop, math.inf if hold else DRAIN_S)
+            elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
+            if stats_file is not None:
+                _write_json(stats_file, _stats(devices, pulses, elapsed, stopped).as_dict())
+            if hold:
+                stop.wait()
+            stats = _stats(devices, pulses, elapsed, stopped)
+            if stats_file is not None:
+                _write_json(stats_file, stats.as_dict())
+            return stats
+        finally:
+            if devices is not None:
+                devices.close()
+            if ports_file is not None:
+                ports_file.unlink(missing_ok=True)
+
+
+class _SignalsStop:
+    """From the main thread, SIGTERM, SIGINT and SIGHUP set ``stop``. The handler itself does nothing: the
+    interpreter writes the signal to a wake-up pipe that a watcher thread turns into ``stop.set()``, since
+    a handler calling ``Event.set`` while the main thread is inside that Event's lock would deadlock."""
+
+    SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop = stop
+        self._previous: dict[int, object] = {}
+        self._pipe: tuple[int, int] | None = None
+        self._wakeup = -1
+
+    def __enter__(self) -> _SignalsStop:
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        self._pipe = os.pipe()
+        os.set_blocking(self._pipe[1], False)
+        self._wakeup = signal.set_wakeup_fd(self._pipe[1], warn_on_full_buffer=False)
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, lambda *_: None)
+        threading.Thread(target=self._watch, args=(self._pipe[0],), name="emulate-signals", daemon=True).start()
+        return self
+
+    def _watch(self, fd: int) -> None:
+        while data := os.read(fd, 64):
+            if any(b in self.SIGNALS for b in data):
+                self.stop.set()
+        os.close(fd)
+
+    def __exit__(self, *exc: object) -> None:
+        if self._pipe is None:
+            return
+        for sig, handler in self._previous.items():
             signal.signal(sig, handler)
+        signal.set_wakeup_fd(self._wakeup)
+        os.close(self._pipe[1])  # the watcher reads end-of-file and ends
+        self._pipe = None
 
 
 def _pulse_loop(devices: _Devices, clock: SyncClock, stop: threading.Event) -> int:

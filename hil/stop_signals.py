@@ -8,8 +8,8 @@ shutdown is only acknowledged, so the table is still sent Off first.
 
 from __future__ import annotations
 
+import os
 import signal
-import sys
 import threading
 from types import FrameType
 
@@ -17,11 +17,14 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class StopSignals:
-    """Context manager (main thread) turning the stop signals into :attr:`received`, the first one's name."""
+    """Context manager (main thread) turning the stop signals into :attr:`received`, the first one's name.
+
+    The handler only assigns and writes to stderr with one system call: it runs between two bytecodes of
+    the main thread, which may hold a lock (an Event's, a buffered stream's) the handler must not take.
+    """
 
     def __init__(self) -> None:
         self.received: str | None = None
-        self.event = threading.Event()
         self._previous: dict[int, object] = {}
 
     def __enter__(self) -> StopSignals:
@@ -39,8 +42,7 @@ class StopSignals:
         name = signal.Signals(signum).name
         if self.received is None:
             self.received = name
-            self.event.set()
-            print(f"hil: {name}: ending the trial (turntable off, outputs kept)", file=sys.stderr, flush=True)
+            note = f"hil: {name}: ending the trial (turntable off, outputs kept)\n"
         else:
-            print(f"hil: {name}: already ending the trial; the turntable is turned off first", file=sys.stderr,
-                  flush=True)
+            note = f"hil: {name}: already ending the trial; the turntable is turned off first\n"
+        os.write(2, note.encode())
