@@ -1,9 +1,11 @@
-"""When an emulated device latches, and what its own clock reads.
+"""When an emulated device latches, what its counter says, and what its own clock reads.
 
-A synchronised device ticks on the shared sync pulses, t = k / rate. A free-running one ticks on its
-own clock, which runs fast by ``clock_drift_ppm`` (delta = ppm * 1e-6): tick k of its period T falls
-at true time k T / (1 + delta). Either way it latches ``latch_delay`` after its tick, plus a Gaussian
-jitter of ``latch_jitter_us`` (1 sigma), and its clock reads t (1 + delta) at true time t.
+A synchronised device ticks on the shared sync pulses, t = k / rate; one that latches every n-th pulse
+of the train (a table under a faster IMU) ticks at rate = pulse rate / n and its counter is the pulse
+count, n k (``counts_per_tick``). A free-running one ticks on its own clock, which runs fast by
+``clock_drift_ppm`` (delta = ppm * 1e-6): tick k of its period T falls at true time k T / (1 + delta),
+and it counts its ticks. Either way it latches ``latch_delay`` after its tick, plus a Gaussian jitter
+of ``latch_jitter_us`` (1 sigma), and its clock reads t (1 + delta) at true time t.
 """
 
 from __future__ import annotations
@@ -19,9 +21,10 @@ from hil.config import PPM, DeviceTiming
 class DeviceClock:
     """Tick and latch instants (trial time, s) of one device, and its own time."""
 
-    rate_hz: float
+    rate_hz: float  # ticks per second
     latch_delay: float  # s
     timing: DeviceTiming
+    counts_per_tick: int = 1  # steps of the device's counter from one tick to the next
 
     @property
     def drift(self) -> float:
@@ -35,6 +38,10 @@ class DeviceClock:
     def ticks(self, duration: float) -> int:
         """Ticks within a trial of ``duration`` s (the last one at or before its end)."""
         return int(np.floor(duration / self.period + 1e-9))
+
+    def counters(self, k: np.ndarray) -> np.ndarray:
+        """The device's counter at ticks k."""
+        return np.asarray(k) * self.counts_per_tick
 
     def tick_times(self, k: np.ndarray) -> np.ndarray:
         return np.asarray(k, dtype=float) * self.period
