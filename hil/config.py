@@ -291,6 +291,12 @@ class Config(_Model):
         pulse train, 1 when it is free-running (it counts its own latches)."""
         return 1 if self.turntable.timing.free_running else self.table_divider
 
+    @property
+    def table_counter_rate_hz(self) -> float:
+        """Counts per second of the ``tts1`` sync counter: the pulse train's rate, or the table's own latch
+        rate when it is free-running."""
+        return self.trial.rate_hz if self.turntable.timing.free_running else self.imu_rate_hz
+
 
 def _describe(error: ValidationError) -> str:
     lines = []

@@ -66,11 +66,12 @@ def test_fault_rate_out_of_range_names_the_key_path():
 def test_an_imu_rate_that_is_a_multiple_of_the_table_rate_gives_the_divider(imu_rate, divider):
     cfg = parse_config({**MINIMAL, "imu": {"rate_hz": imu_rate}})
     assert cfg.table_divider == cfg.table_counts_per_frame == divider
+    assert cfg.table_counter_rate_hz == cfg.imu_rate_hz  # the table counts the pulse train
 
 
 def test_a_free_running_table_counts_its_own_frames():
     cfg = parse_config({**MINIMAL, "imu": {"rate_hz": 1000}, "turntable": {"timing": {"free_running": True}}})
-    assert (cfg.table_divider, cfg.table_counts_per_frame) == (5, 1)
+    assert (cfg.table_divider, cfg.table_counts_per_frame, cfg.table_counter_rate_hz) == (5, 1, 200.0)
 
 
 @pytest.mark.parametrize("imu_rate", [300, 100, 1000.001])

@@ -141,12 +141,21 @@ def test_imu_without_table_goes_out_after_the_wait():
     assert len(out + aligner.flush()) == len(imu)
 
 
-def test_table_counting_slower_than_the_imu():
-    sim, _, imu, table = _streams(duration=5.0)
-    imu_fast = Aligner(RATE, RATE / 5)
-    slow_table = [TableSample(s.sync_index // 5, s.angles, latch_delay=DELAY) for s in table if s.sync_index % 5 == 0]
-    samples = _run(imu_fast, imu, slow_table)
-    assert np.sqrt(np.mean(_attitude_error_deg(sim, samples[10:]) ** 2)) < 1e-4
+@pytest.mark.parametrize("n", [5, 10])
+def test_a_table_latching_every_nth_pulse_is_interpolated_at_every_imu_instant(n):
+    """IMU at n x 200 Hz; the table's counter is the pulse count, stepping by n from an odd phase, with a
+    frame lost. Its angles at the IMU instants match the analytic swing."""
+    imu_rate = n * RATE
+    amplitude, period, center = np.radians([8.0, 6.0, 13.0]), np.array([8.0, 10.0, 8.0]), np.radians([5, 2, 6])
+    swing = lambda t: amplitude * np.sin(2 * np.pi * np.asarray(t)[:, None] / period) + center  # noqa: E731
+    counters = [c for c in range(3, int(10 * imu_rate), n) if c != 3 + 100 * n]
+    table = [TableSample(c, tuple(a), latch_delay=DELAY) for c, a in
+             zip(counters, swing(np.array(counters) / imu_rate + DELAY).tolist())]
+    imu = [ImuSample(k, (0.0,) * 3, (0.0, 0.0, 0.05 / n)) for k in range(20, int(9 * imu_rate))]
+    samples = _run(Aligner(imu_rate, imu_rate, 20e-6), imu, table)
+    t = np.array([s.t for s in samples])
+    np.testing.assert_allclose(t, np.arange(20, int(9 * imu_rate)) / imu_rate + 20e-6, rtol=0, atol=1e-12)
+    assert np.max(np.abs(np.array([s.angles for s in samples]) - swing(t))) < 1e-9
 
 
 def test_free_running_devices_are_aligned_through_their_clock_models():
