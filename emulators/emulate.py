@@ -124,8 +124,8 @@ class _Devices:
             imu_cfg = imu_cfg.model_copy(update={"can": CanConfig()})
         codec = imu_codec(imu_cfg, rate)
         imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
-        table_clock = DeviceClock(cfg.trial.rate_hz, cfg.turntable.latch_delay_us * 1e-6, cfg.turntable.timing,
-                                  cfg.table_counts_per_frame)
+        table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
+                                  cfg.turntable.timing, cfg.table_counts_per_frame)
         seed = cfg.trial.seed
         imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
         table_source = TableSource(table_clock, seed)

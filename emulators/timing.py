@@ -1,11 +1,11 @@
 """When an emulated device latches, what its counter says, and what its own clock reads.
 
-A synchronised device ticks on the shared sync pulses, t = k / rate; one that latches every n-th pulse
-of the train (a table under a faster IMU) ticks at rate = pulse rate / n and its counter is the pulse
-count, n k (``counts_per_tick``). A free-running one ticks on its own clock, which runs fast by
-``clock_drift_ppm`` (delta = ppm * 1e-6): tick k of its period T falls at true time k T / (1 + delta),
-and it counts its ticks. Either way it latches ``latch_delay`` after its tick, plus a Gaussian jitter
-of ``latch_jitter_us`` (1 sigma), and its clock reads t (1 + delta) at true time t.
+A synchronised device counts the shared sync pulses, pulse p at t = p / rate, and ticks on every n-th
+of them (``counts_per_tick``; n = 1 but for a table under a faster IMU): tick k at t = n k / rate,
+with counter n k. A free-running one ticks on its own clock, which runs fast by ``clock_drift_ppm``
+(delta = ppm * 1e-6): tick k of its period T = n / rate falls at true time k T / (1 + delta), and it
+counts its ticks. Either way it latches ``latch_delay`` after its tick, plus a Gaussian jitter of
+``latch_jitter_us`` (1 sigma), and its clock reads t (1 + delta) at true time t.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from hil.config import PPM, DeviceTiming
 class DeviceClock:
     """Tick and latch instants (trial time, s) of one device, and its own time."""
 
-    rate_hz: float  # ticks per second
+    rate_hz: float  # counts per second of its counter: the pulse train's rate when synchronised
     latch_delay: float  # s
     timing: DeviceTiming
-    counts_per_tick: int = 1  # steps of the device's counter from one tick to the next
+    counts_per_tick: int = 1  # steps of the counter from one tick to the next
 
     @property
     def drift(self) -> float:
@@ -33,7 +33,8 @@ class DeviceClock:
     @property
     def period(self) -> float:
         """True time between ticks."""
-        return 1.0 / (self.rate_hz * (1.0 + self.drift)) if self.timing.free_running else 1.0 / self.rate_hz
+        rate = self.rate_hz * (1.0 + self.drift) if self.timing.free_running else self.rate_hz
+        return self.counts_per_tick / rate
 
     def ticks(self, duration: float) -> int:
         """Ticks within a trial of ``duration`` s (the last one at or before its end)."""

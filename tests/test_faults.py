@@ -227,7 +227,7 @@ def test_device_clock_jitter_drift_and_free_running():
 
 
 def test_a_clock_latching_every_fifth_pulse_counts_the_pulses():
-    table = DeviceClock(RATE, 50e-6, DeviceTiming(), counts_per_tick=5)  # a 1 kHz pulse train
+    table = DeviceClock(5 * RATE, 50e-6, DeviceTiming(), counts_per_tick=5)  # every fifth pulse of 1 kHz
     k = np.arange(1, 4)
     assert table.ticks(DURATION) == N and table.counters(k).tolist() == [5, 10, 15]
     np.testing.assert_allclose(table.latch_times(k, np.random.default_rng(0)), table.counters(k) / 1000.0 + 50e-6,
