@@ -18,24 +18,31 @@ class SequenceUnwrapper:
     """Unwraps a device counter that counts modulo ``modulus`` into a monotonic index.
 
     A counter that did not move is a repeated frame, and one that stepped back by at most
-    ``REORDER_WINDOW`` is a late (out-of-order) frame: neither moves the index, and :meth:`next`
+    ``REORDER_WINDOW`` frames is a late (out-of-order) frame: neither moves the index, and :meth:`next`
     marks them with a missing count of -1. Devices never repeat a number, so when the host receive
     times say that about a counter period or more has passed, the same readings are taken as wraps.
     With the device rate known, the host receive times also resolve wraps lost in an outage longer
     than the counter period (a 7-bit counter at 1 kHz wraps every 128 ms).
 
-    A wide counter (16 bits and more) that jumps ahead by more than ``JUMP_LIMIT`` counts, where the
+    A wide counter (16 bits and more) that jumps ahead by more than ``JUMP_LIMIT`` frames, where the
     host times do not explain the jump, is taken as damage a weak checksum let through: the frame is
     counted corrupt (missing -2) and the index stays, unless the next frame continues from it (a
     counter reset), which then moves the index.
+
+    A device may count ``counts_per_frame`` between frames (a table latching every n-th pulse of a
+    train it counts): the index stays in counts while the missing count is in frames. The first counter
+    may have any value.
     """
 
-    REORDER_WINDOW = 8  # counts; a backward step larger than this is taken as a wrap
-    JUMP_LIMIT = 1024  # counts; a wide counter jumping further needs the next frame to confirm it
+    REORDER_WINDOW = 8  # frames; a backward step larger than this is taken as a wrap
+    JUMP_LIMIT = 1024  # frames; a wide counter jumping further needs the next frame to confirm it
 
-    def __init__(self, modulus: int | None, rate_hz: float | None = None) -> None:
+    def __init__(self, modulus: int | None, rate_hz: float | None = None, counts_per_frame: int = 1) -> None:
+        if counts_per_frame < 1:
+            raise ValueError(f"counts_per_frame must be at least 1, got {counts_per_frame}")
         self.modulus = modulus
-        self.rate_hz = rate_hz
+        self.rate_hz = rate_hz  # frames per second
+        self.counts_per_frame = counts_per_frame
         self._index: int | None = None
         self._sequence = 0
         self._time = math.nan
@@ -44,26 +51,27 @@ class SequenceUnwrapper:
     def next(self, sequence: int | None, host_time: float) -> tuple[int, int]:
         """(index of this frame, frames missing since the previous one); missing is -1 for a repeated
         or late frame, whose index is then the earlier one it carries, and -2 for an implausible jump."""
+        n = self.counts_per_frame
         if self._index is None:
             step = 0
             self._index = sequence if sequence is not None else 0
         elif sequence is None or self.modulus is None:
-            step = 1
+            step = n
         else:
             step = (sequence - self._sequence) % self.modulus
-            elapsed = host_time - self._time
-            timed = bool(self.rate_hz) and math.isfinite(elapsed)
+            host_counts = (host_time - self._time) * (self.rate_hz or math.nan) * n  # counts by the host clock
+            timed = math.isfinite(host_counts)
             back = (self.modulus - step) % self.modulus
-            if back <= min(self.REORDER_WINDOW, self.modulus // 4) and not (
-                    timed and elapsed * self.rate_hz > self.modulus / 2):
+            if back <= min(self.REORDER_WINDOW * n, self.modulus // 4) and not (
+                    timed and host_counts > self.modulus / 2):
                 return self._index - back, -1
             step = step or self.modulus
             if timed:
-                wraps = round((elapsed * self.rate_hz - step) / self.modulus)
+                wraps = round((host_counts - step) / self.modulus)
                 step += self.modulus * max(wraps, 0)
-            if step > self.JUMP_LIMIT and self.modulus > 4 * self.JUMP_LIMIT and not (
-                    timed and abs(elapsed * self.rate_hz - step) < self.JUMP_LIMIT):
-                confirmed = self._suspect is not None and sequence == (self._suspect + 1) % self.modulus
+            limit = self.JUMP_LIMIT * n
+            if step > limit and self.modulus > 4 * limit and not (timed and abs(host_counts - step) < limit):
+                confirmed = self._suspect is not None and sequence == (self._suspect + n) % self.modulus
                 if not confirmed:  # a frame whose damage the checksum missed, or a counter reset
                     self._suspect = sequence
                     return self._index, -2
@@ -71,7 +79,7 @@ class SequenceUnwrapper:
         self._index += step
         self._sequence = sequence if sequence is not None else 0
         self._time = host_time
-        return self._index, max(step - 1, 0)
+        return self._index, max(round(step / n) - 1, 0)
 
     def count(self, counters: Counters, index: int, missing: int) -> bool:
         """Add a :meth:`next` outcome to ``counters``; False for a repeated, late or implausible frame
@@ -98,6 +106,7 @@ class ByteCodec(Codec[R]):
     sync: ClassVar[bytes]
     header_size: ClassVar[int]  # bytes from the sync word needed to know the frame length
     sequence_modulus: ClassVar[int | None] = None  # None: the frame carries no counter
+    sequence_step: int = 1  # counter steps between consecutive frames
     rate_hz: float | None = None
 
     @abstractmethod
@@ -122,7 +131,7 @@ class ByteFramer(Framer):
     def __init__(self, codec: ByteCodec) -> None:
         super().__init__()
         self.codec = codec
-        self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, codec.rate_hz)
+        self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, codec.rate_hz, codec.sequence_step)
         self._buf = bytearray()
 
     @property

@@ -59,13 +59,17 @@ class Tts1Frame:
 
 
 class Tts1Codec(ByteCodec[Tts1Frame]):
-    """Encode and decode ``tts1`` frames."""
+    """Encode and decode ``tts1`` frames; ``pulses_per_frame`` is n for a table that latches every n-th
+    pulse of the train it counts (its counter steps by n from frame to frame)."""
 
     name: ClassVar[str] = "tts1"
     kind: ClassVar[str] = "table"
     sync: ClassVar[bytes] = SYNC
     header_size: ClassVar[int] = len(SYNC)
     sequence_modulus: ClassVar[int] = 1 << 32
+
+    def __init__(self, pulses_per_frame: int = 1) -> None:
+        self.sequence_step = pulses_per_frame
 
     def frame_length(self, buf: bytearray, start: int) -> int:
         return FRAME_SIZE

@@ -2,7 +2,8 @@
 
 Each device ticks on its :class:`emulators.timing.DeviceClock` (the shared sync pulses, or its own
 clock when free-running); tick k of the IMU reports the increments over its latch interval, tick k of
-the table the gimbal angles at its latch instant; both carry k as their counter. Frames are encoded by
+the table the gimbal angles at its latch instant; both carry their clock's counter (k, or n k for a
+table latching every n-th pulse). Frames are encoded by
 the drivers' codecs, so the emulator speaks exactly what the drivers read. The table's motion is the
 servo's (:mod:`emulators.servo`): a :class:`DeviceStream` computes its frames a chunk ahead and
 recomputes the chunk when the servo's plan changes, from a snapshot of its random state, so a command
@@ -244,7 +245,8 @@ class ImuSource(FrameSource):
 
 
 class TableSource(FrameSource):
-    """``tts1`` frames: the gimbal angles and the servo's status at each latch instant."""
+    """``tts1`` frames: the gimbal angles and the servo's status at each latch instant, the clock's counter
+    as their sync counter and emission tick."""
 
     def __init__(self, clock: DeviceClock, seed: int) -> None:
         super().__init__(clock, seed, 1)
@@ -256,9 +258,9 @@ class TableSource(FrameSource):
         angles = truth.angles(latch)
         status = servo.motion.status(latch, servo.limits) | self.flags
         ticks, codec, delay = self.clock.tick_times(k), self.codec, self.clock.latch_delay
-        return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    TableSample(int(i), tuple(a), latch_delay=delay, status=int(st)))))
-                for i, t, end, a, st in zip(k, ticks, latch, angles.tolist(), status)]
+        return [Emission(int(c), float(t), float(end), codec.encode(codec.from_sample(
+                    TableSample(int(c), tuple(a), latch_delay=delay, status=int(st)))))
+                for c, t, end, a, st in zip(self.clock.counters(k), ticks, latch, angles.tolist(), status)]
 
 
 class DeviceStream:

@@ -129,14 +129,15 @@ class _Devices:
         imu_cfg = cfg.imu
         codec = imu_codec(imu_cfg, rate)
         imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
-        table_clock = DeviceClock(rate, cfg.turntable.latch_delay_us * 1e-6, cfg.turntable.timing)
+        table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
+                                  cfg.turntable.timing, cfg.table_counts_per_frame)
         seed = cfg.trial.seed
         imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
         table_source = TableSource(table_clock, seed)
         self.servo = Servo(cfg.turntable, rate, sim.truth.motion)
-        chunk = max(1, round(CHUNK_S * rate))
-        self.streams = {"imu": DeviceStream(imu_source, sim.truth, imu_clock.ticks(duration), chunk),
-                        "turntable_data": DeviceStream(table_source, sim.truth, table_clock.ticks(duration), chunk)}
+        self.streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
+                                           max(1, round(CHUNK_S / source.clock.period)))
+                        for name, source in (("imu", imu_source), ("turntable_data", table_source))}
         self.synced = [n for n, c in (("imu", imu_clock), ("turntable_data", table_clock))
                        if not c.timing.free_running] or ["imu"]
         self.ports: dict = {}
@@ -155,7 +156,7 @@ class _Devices:
                 check_baudrate("imu", len(codec.encode(codec.from_sample(PROBE))), rate, imu_cfg.baudrate)
                 imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
-            check_baudrate("turntable", 24, rate, cfg.turntable.baudrate)
+            check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)
             self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
             self.server = AclServer(self.servo)
             for k, (name, damage, baud, faults) in enumerate((

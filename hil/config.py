@@ -21,6 +21,7 @@ DEG = math.pi / 180.0
 DEG_PER_H = DEG / 3600.0
 ARCSEC = DEG / 3600.0
 PPM = 1e-6
+RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 
 
 SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
@@ -291,9 +292,36 @@ class Config(_Model):
     estimator: EstimatorConfig = EstimatorConfig()
     output: OutputConfig = OutputConfig()
 
+    @model_validator(mode="after")
+    def _imu_rate_divides_into_table_latches(self) -> Config:
+        ratio = self.imu_rate_hz / self.trial.rate_hz
+        if round(ratio) < 1 or abs(ratio - round(ratio)) > RATE_RATIO_TOLERANCE * ratio:
+            raise ValueError(f"imu.rate_hz: {self.imu_rate_hz:g} Hz is not an integer multiple of trial.rate_hz "
+                             f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
+                             "table latches every n-th pulse")
+        return self
+
     @property
     def imu_rate_hz(self) -> float:
+        """The rate of the sync pulse train (and of the IMU's samples)."""
         return self.imu.rate_hz or self.trial.rate_hz
+
+    @property
+    def table_divider(self) -> int:
+        """n: the table latches every n-th pulse of the train, ``imu_rate_hz / trial.rate_hz``."""
+        return round(self.imu_rate_hz / self.trial.rate_hz)
+
+    @property
+    def table_counts_per_frame(self) -> int:
+        """Steps of the ``tts1`` sync counter between consecutive table frames: n when the table counts the
+        pulse train, 1 when it is free-running (it counts its own latches)."""
+        return 1 if self.turntable.timing.free_running else self.table_divider
+
+    @property
+    def table_counter_rate_hz(self) -> float:
+        """Counts per second of the ``tts1`` sync counter: the pulse train's rate, or the table's own latch
+        rate when it is free-running."""
+        return self.trial.rate_hz if self.turntable.timing.free_running else self.imu_rate_hz
 
 
 def _describe(error: ValidationError) -> str:

@@ -84,9 +84,10 @@ class TrialProcessor:
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
         self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale),
-                         TABLE: StreamDecoder(make_codec("tts1"), time_scale)}
+                         TABLE: StreamDecoder(make_codec("tts1", pulses_per_frame=cfg.table_counts_per_frame),
+                                              time_scale)}
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
-        self.aligner = Aligner(cfg.imu_rate_hz, cfg.trial.rate_hz, cfg.imu.latch_delay_us * 1e-6,
+        self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
                                free_running=free_running)
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)

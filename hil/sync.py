@@ -1,10 +1,11 @@
 """Sync alignment: IMU and turntable samples paired by their sync pulse count on one time line.
 
-Both devices count the same external pulse train, so a sample's time is its count over its
-stream's rate plus its latch delay:
+Both devices count the same external pulse train, so a sample's time is its count over the train's
+rate plus its latch delay:
 
 - IMU sample k describes the increments over ``(t_k - 1/rate, t_k]`` with ``t_k = k / rate + delay``;
-- table sample j holds the gimbal angles at ``tau_j = j / rate + latch_delay``.
+- the table sample with counter c holds the gimbal angles at ``tau = c / rate + latch_delay`` (a table
+  that latches every n-th pulse counts in steps of n).
 
 The aligner places the unwrapped gimbal angles at every IMU instant by cubic Lagrange
 interpolation on the four table samples that end at the first one at or after the instant (the
@@ -123,17 +124,17 @@ class _TableKnots:
 class Aligner:
     """Pairs IMU and table samples by sync count and yields :class:`AlignedSample` / :class:`ImuGap` in order.
 
-    ``imu_rate_hz`` and ``table_rate_hz`` are the counters' rates (they may differ, e.g. an IMU
-    counting at 1000 Hz and a table latching every fifth pulse at 200 Hz). ``table_wait`` (s) is how far
-    the IMU may run ahead of a silent table before its samples go out without angles; ``with_table``
-    False aligns the IMU alone.
+    ``imu_rate_hz`` and ``table_counter_rate_hz`` are the counters' rates: both the pulse train's when
+    the table is synchronised (a table latching every fifth pulse of 1000 Hz counts 5, 10, 15 ...), the
+    table's own latch rate when it is free-running. ``table_wait`` (s) is how far the IMU may run ahead
+    of a silent table before its samples go out without angles; ``with_table`` False aligns the IMU alone.
     """
 
-    def __init__(self, imu_rate_hz: float, table_rate_hz: float, imu_delay_s: float = 0.0, *,
+    def __init__(self, imu_rate_hz: float, table_counter_rate_hz: float, imu_delay_s: float = 0.0, *,
                  with_table: bool = True, max_fill: int = 10, reorder_window: int = 4,
                  max_angle_gap_s: float = 0.1, table_wait_s: float = 5.0, free_running: bool = False) -> None:
         self.imu_period = 1.0 / imu_rate_hz
-        self.table_period = 1.0 / table_rate_hz
+        self.table_count_period = 1.0 / table_counter_rate_hz
         self.imu_delay = imu_delay_s
         self.with_table = with_table
         self.max_fill = max_fill
@@ -148,7 +149,7 @@ class Aligner:
         self._table = _TableKnots()
         self._out: list[AlignedSample | ImuGap] = []
         self._last_angles: Vec3 | None = None
-        self.clocks = (AffineClock(imu_rate_hz), AffineClock(table_rate_hz)) if free_running else None
+        self.clocks = (AffineClock(imu_rate_hz), AffineClock(table_counter_rate_hz)) if free_running else None
 
     def imu_time(self, index: int) -> float:
         return index * self.imu_period + self.imu_delay
@@ -175,7 +176,7 @@ class Aligner:
 
     def add_table(self, sample: TableSample) -> list[AlignedSample | ImuGap]:
         """Take one table sample; returns what became ready."""
-        t = sample.sync_index * self.table_period + sample.latch_delay
+        t = sample.sync_index * self.table_count_period + sample.latch_delay
         if self.clocks is not None:
             imu, table = self.clocks
             table.add(sample.sync_index, sample.host_time)

@@ -11,6 +11,7 @@ cannot be confirmed.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -70,7 +71,10 @@ class TableControl:
 
 
 class MotionCheck:
-    """Compares the reported gimbal angles with the commanded motion; :attr:`failure` says what is wrong."""
+    """Compares the reported gimbal angles with the commanded motion; :attr:`failure` says what is wrong.
+
+    The angles come interpolated at every IMU instant; one per period of the table's ``rate_hz`` is kept.
+    """
 
     def __init__(self, table: TurntableConfig, rate_hz: float) -> None:
         motion = table.motion
@@ -79,17 +83,21 @@ class MotionCheck:
         periods = [a.period_s for a in self.axes if a.period_s and a.amplitude_deg]
         self.window = max(periods, default=2.0)
         self.settle = self.window + SETTLE_S
+        self.rate_hz = rate_hz
         self._samples: deque[tuple[float, np.ndarray]] = deque(maxlen=int(self.window * rate_hz) + 1)
+        self._tick: int | None = None  # table period of the last sample kept
         self._start: float | None = None
         self.checked_at: float | None = None
         self.failure: str | None = None
 
     def add(self, samples: list[AlignedSample]) -> None:
         for s in samples:
-            if s.angles is None:
+            tick = math.floor(s.t * self.rate_hz + 1e-9)  # an instant on a tick belongs to it
+            if s.angles is None or tick == self._tick:
                 continue
             if self._start is None:
                 self._start = s.t
+            self._tick = tick
             self._samples.append((s.t, np.asarray(s.angles)))
         if self._samples and self._samples[-1][0] - self._start >= self.settle:
             t = self._samples[-1][0]

@@ -75,3 +75,21 @@ def test_fault_rate_out_of_range_names_the_key_path():
     data = {**MINIMAL, "imu": {"faults": {"drop_rate": 1.5}}}
     with pytest.raises(ConfigError, match=r"imu\.faults\.drop_rate: Input should be less than or equal to 1"):
         parse_config(data)
+
+
+@pytest.mark.parametrize("imu_rate, divider", [(200, 1), (1000, 5), (2000, 10), (600.0000000001, 3)])
+def test_an_imu_rate_that_is_a_multiple_of_the_table_rate_gives_the_divider(imu_rate, divider):
+    cfg = parse_config({**MINIMAL, "imu": {"rate_hz": imu_rate}})
+    assert cfg.table_divider == cfg.table_counts_per_frame == divider
+    assert cfg.table_counter_rate_hz == cfg.imu_rate_hz  # the table counts the pulse train
+
+
+def test_a_free_running_table_counts_its_own_frames():
+    cfg = parse_config({**MINIMAL, "imu": {"rate_hz": 1000}, "turntable": {"timing": {"free_running": True}}})
+    assert (cfg.table_divider, cfg.table_counts_per_frame, cfg.table_counter_rate_hz) == (5, 1, 200.0)
+
+
+@pytest.mark.parametrize("imu_rate", [300, 100, 1000.001])
+def test_an_imu_rate_that_is_not_a_multiple_of_the_table_rate_is_rejected(imu_rate):
+    with pytest.raises(ConfigError, match=r"imu\.rate_hz: .* not an integer multiple of trial\.rate_hz"):
+        parse_config({**MINIMAL, "imu": {"rate_hz": imu_rate}})

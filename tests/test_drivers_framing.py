@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.can_dbc import CanDbcCodec
-from drivers.codec import RawChunk
+from drivers.codec import Counters, RawChunk
 from drivers.framing import SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec, KvhFrame
 from drivers.tts1 import Tts1Codec, Tts1Frame
@@ -89,6 +89,22 @@ def test_every_intact_frame_is_recovered_and_counters_add_up(name, plan, cuts):
     assert framer.counters.missing == sum(b - a - 1 for a, b in zip(intact, intact[1:]))
 
 
+@DETERMINISTIC
+@given(plan=st.lists(ELEMENT, max_size=40), first=st.one_of(st.integers(0, (1 << 32) - 1), st.just((1 << 32) - 7)),
+       n=st.sampled_from([5, 10]))
+def test_a_table_counter_stepping_by_n_misses_only_the_lost_frames(plan, first, n):
+    """A table latching every n-th pulse: its counter steps by n from any first value, across the uint32
+    wrap; the index follows the counter and the missing count is in frames."""
+    codec = Tts1Codec(pulses_per_frame=n)
+    stream, intact = build_stream(codec, lambda c, i: tts1_frame(c, (first + n * i) % (1 << 32)), plan)
+    framer = codec.framer()
+    decoded = framer.feed(stream, math.nan)
+    start = intact[0] if intact else 0
+    assert [d.sync_index for d in decoded] == [(first + n * start) % (1 << 32) + n * (i - start) for i in intact]
+    assert framer.counters.gaps == sum(1 for a, b in zip(intact, intact[1:]) if b != a + 1)
+    assert framer.counters.missing == sum(b - a - 1 for a, b in zip(intact, intact[1:]))
+
+
 @pytest.mark.parametrize("name", CODECS)
 @DETERMINISTIC
 @given(data=st.binary(max_size=2000))
@@ -122,6 +138,19 @@ def test_seven_bit_sequence_unwraps_monotonically_across_wraps():
     unwrapper = SequenceUnwrapper(128)
     indices = [unwrapper.next(i % 128, math.nan)[0] for i in range(120, 400)]
     assert indices == list(range(120, 400))
+
+
+def test_a_counter_stepping_by_n_counts_frames_not_pulses():
+    unwrapper, counters = SequenceUnwrapper(1 << 32, rate_hz=200.0, counts_per_frame=5), Counters()
+    got = []
+    for seq, t in ((3, 0.0), (8, 0.005), (13, 0.01), (23, 0.02), (18, 0.02), (23, 0.02), (28, 0.025),
+                   (48, 0.045)):  # 18 lost, then late; 23 repeated; 33, 38 and 43 lost
+        index, missing = unwrapper.next(seq, t)
+        got.append((index, missing, unwrapper.count(counters, index, missing)))
+    assert got == [(3, 0, True), (8, 0, True), (13, 0, True), (23, 1, True), (18, -1, False), (23, -1, False),
+                   (28, 0, True), (48, 3, True)]
+    assert (counters.frames, counters.gaps, counters.missing) == (6, 2, 4)
+    assert (counters.out_of_order, counters.duplicates) == (1, 1)
 
 
 def test_host_time_resolves_an_outage_longer_than_the_counter_period():
@@ -178,9 +207,6 @@ def test_can_framer_recovers_every_complete_sample(plan):
 
 
 def test_wide_counter_ignores_a_far_jump_the_next_frame_does_not_confirm():
-    from drivers.codec import Counters
-    from drivers.framing import SequenceUnwrapper
-
     unwrapper, counters = SequenceUnwrapper(1 << 16), Counters()
     delivered = []
     for seq in (100, 101, 40000, 102, 103, 5000, 5001, 5002):  # a damaged counter, then a counter reset

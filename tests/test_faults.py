@@ -226,6 +226,31 @@ def test_device_clock_jitter_drift_and_free_running():
     assert synced.ticks(60.0) == 12000 and synced.device_time(np.array([1.0]))[0] == pytest.approx(1.0001)
 
 
+def test_a_clock_latching_every_fifth_pulse_counts_the_pulses():
+    table = DeviceClock(5 * RATE, 50e-6, DeviceTiming(), counts_per_tick=5)  # every fifth pulse of 1 kHz
+    k = np.arange(1, 4)
+    assert table.ticks(DURATION) == N and table.counters(k).tolist() == [5, 10, 15]
+    np.testing.assert_allclose(table.latch_times(k, np.random.default_rng(0)), table.counters(k) / 1000.0 + 50e-6,
+                               rtol=0, atol=1e-15)
+
+
+def test_a_table_under_a_faster_imu_latches_every_nth_pulse_and_counts_them():
+    stats, out = capture(trial(imu={"rate_hz": 5 * RATE}, turntable={"faults": {"drop_rate": 0.02}}))
+    counters, decoded = framed(Tts1Codec(pulses_per_frame=5), out["turntable_data"])
+    sent = [d.sync_index for d in decoded]
+    assert set(sent) < set(range(5, 5 * N + 1, 5))  # the pulse count at every fifth pulse of 1 kHz
+    ends = (sent[0] - 5 + 5 * N - sent[-1]) // 5  # frames lost at either end leave no gap
+    assert counters.missing + ends == stats.devices["turntable_data"].faults["dropped"] > 0
+    assert stats.devices["imu"].frames == stats.pulses == 5 * N
+
+
+def test_a_free_running_table_under_a_faster_imu_counts_its_own_latches():
+    stats, out = capture(trial(imu={"rate_hz": 5 * RATE}, turntable={"timing": {"free_running": True}}))
+    _, decoded = framed(Tts1Codec(), out["turntable_data"])
+    assert [d.sync_index for d in decoded] == list(range(1, N + 1))
+    assert stats.devices["imu"].frames == stats.pulses == 5 * N
+
+
 def test_write_jitter_delays_every_paced_frame_by_up_to_jitter_ms():
     stats, _ = capture(trial(duration=0.5, imu={"faults": {"jitter_ms": 3.0}}), speed=1.0)
     imu = stats.devices["imu"]

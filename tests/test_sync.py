@@ -141,33 +141,43 @@ def test_imu_without_table_goes_out_after_the_wait():
     assert len(out + aligner.flush()) == len(imu)
 
 
-def test_table_counting_slower_than_the_imu():
-    sim, _, imu, table = _streams(duration=5.0)
-    imu_fast = Aligner(RATE, RATE / 5)
-    slow_table = [TableSample(s.sync_index // 5, s.angles, latch_delay=DELAY) for s in table if s.sync_index % 5 == 0]
-    samples = _run(imu_fast, imu, slow_table)
-    assert np.sqrt(np.mean(_attitude_error_deg(sim, samples[10:]) ** 2)) < 1e-4
+@pytest.mark.parametrize("n", [5, 10])
+def test_a_table_latching_every_nth_pulse_is_interpolated_at_every_imu_instant(n):
+    """IMU at n x 200 Hz; the table's counter is the pulse count, stepping by n from an odd phase, with a
+    frame lost. Its angles at the IMU instants match the analytic swing."""
+    imu_rate = n * RATE
+    amplitude, period, center = np.radians([8.0, 6.0, 13.0]), np.array([8.0, 10.0, 8.0]), np.radians([5, 2, 6])
+    swing = lambda t: amplitude * np.sin(2 * np.pi * np.asarray(t)[:, None] / period) + center  # noqa: E731
+    counters = [c for c in range(3, int(10 * imu_rate), n) if c != 3 + 100 * n]
+    table = [TableSample(c, tuple(a), latch_delay=DELAY) for c, a in
+             zip(counters, swing(np.array(counters) / imu_rate + DELAY).tolist())]
+    imu = [ImuSample(k, (0.0,) * 3, (0.0, 0.0, 0.05 / n)) for k in range(20, int(9 * imu_rate))]
+    samples = _run(Aligner(imu_rate, imu_rate, 20e-6), imu, table)
+    t = np.array([s.t for s in samples])
+    np.testing.assert_allclose(t, np.arange(20, int(9 * imu_rate)) / imu_rate + 20e-6, rtol=0, atol=1e-12)
+    assert np.max(np.abs(np.array([s.angles for s in samples]) - swing(t))) < 1e-9
 
 
-def test_free_running_devices_are_aligned_through_their_clock_models():
-    """No common sync: the IMU counts on a +30 ppm clock, the table on its own -20 ppm clock from another
-    origin; host receive times are late by 0.3 ms plus exponential jitter (mean 0.5 ms)."""
-    cfg = make_config(duration=120.0, rate=RATE)
-    sim = Simulation.from_config(cfg)
+@pytest.mark.parametrize("imu_rate, step, duration", [(RATE, 1, 120.0), (2 * RATE, 1, 60.0), (2 * RATE, 2, 60.0)])
+def test_free_running_devices_are_aligned_through_their_clock_models(imu_rate, step, duration):
+    """No common sync: the IMU counts on a +30 ppm clock, the table latches at 200 Hz on its own -20 ppm clock
+    from another origin, counting in steps of ``step``; host receive times are late by 0.3 ms plus
+    exponential jitter (mean 0.5 ms)."""
+    sim = Simulation.from_config(make_config(duration=duration, rate=RATE))
     rng = np.random.default_rng(4)
-    n = int(120 * RATE)
+    n, m = int(duration * imu_rate), int(duration * RATE)
     k = np.arange(1, n + 1)
-    t_imu = k / RATE * (1 + 30e-6)  # true end of each IMU interval
-    j = np.arange(5000, 5000 + n)
-    t_table = 0.0123 + (j - 5000) / RATE * (1 - 20e-6) + DELAY  # true latch instants
+    t_imu = k / imu_rate * (1 + 30e-6)  # true end of each IMU interval
+    j = np.arange(m)
+    t_table = 0.0123 + j / RATE * (1 - 20e-6) + DELAY  # true latch instants
     imu_host = 100.0 + t_imu + 3e-4 + rng.exponential(5e-4, n)
-    table_host = 100.0 + t_table + 3e-4 + rng.exponential(5e-4, n)
+    table_host = 100.0 + t_table + 3e-4 + rng.exponential(5e-4, m)
     dtheta = np.zeros((n, 3))
     imu = [ImuSample(int(a), tuple(d), (0.0, 0.0, 0.05), host_time=float(h)) for a, d, h in zip(k, dtheta, imu_host)]
-    table = [TableSample(int(a), tuple(x), host_time=float(h), latch_delay=DELAY)
+    table = [TableSample(5000 + step * int(a), tuple(x), host_time=float(h), latch_delay=DELAY)
              for a, x, h in zip(j, sim.truth.angles(t_table).tolist(), table_host)]
     events = sorted([(s.host_time, 0, s) for s in imu] + [(s.host_time, 1, s) for s in table], key=lambda e: e[:2])
-    aligner = Aligner(RATE, RATE, free_running=True)
+    aligner = Aligner(imu_rate, RATE * step, free_running=True)
     out = []
     for _, kind, s in events:
         out += aligner.add_table(s) if kind else aligner.add_imu(s)
