@@ -13,6 +13,7 @@ from typing import Any
 import serial
 
 from drivers.acl import AXIS_NUMBER, AclCodec, AclCommand, AclError, AclReply
+from drivers.transport import TransportError, open_serial
 
 GIMBALS = ("outer", "middle", "inner")  # index order of LimitsConfig
 
@@ -30,7 +31,7 @@ class TableError(RuntimeError):
 
 
 class TableCommandClient:
-    """Commands to a turntable over a pyserial URL (``socket://host:9878`` or a serial port)."""
+    """Commands to a turntable over a pyserial URL (``socket://host:9878``, ``rfc2217://host:port``, a serial port)."""
 
     def __init__(self, url: str, limits: Any, baudrate: int = 115200, timeout_s: float = 2.0) -> None:
         self.url, self.limits, self.baudrate, self.timeout_s = url, limits, baudrate, timeout_s
@@ -40,9 +41,9 @@ class TableCommandClient:
 
     def open(self) -> TableCommandClient:
         try:
-            self.port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=self.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise TableError(f"turntable: cannot open command port {self.url}: {exc}") from exc
+            self.port = open_serial(self.url, "turntable command port", baudrate=self.baudrate, timeout=self.timeout_s)
+        except TransportError as exc:
+            raise TableError(str(exc)) from exc
         return self
 
     def close(self) -> None:

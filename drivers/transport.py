@@ -1,13 +1,18 @@
 """Transports: a byte port chosen by a pyserial URL, and a CAN bus through python-can.
 
 Both return whatever has arrived as :class:`RawChunk` records and never wait for a whole frame.
+:func:`open_serial` opens every pyserial URL of the harness (device streams and the table's command
+port), so that both speak to lab serial servers (ser2net) alike and fail with the same one-line message.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import time
 from abc import ABC, abstractmethod
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import can
 import serial
@@ -20,6 +25,45 @@ POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request
 
 class TransportError(OSError):
     """The transport cannot be opened or has gone away (unplugged, remote closed)."""
+
+
+def serial_url(url: str) -> str:
+    """``url`` as pyserial needs it: an ``rfc2217://`` URL gets ``ign_set_control`` unless it says so already.
+
+    pyserial waits for the server to echo each SET_CONTROL it sends while opening (flow control, DTR, RTS);
+    ser2net 4.3 does not answer the DTR one ("timeout while waiting for option 'control'" after 3 s), other
+    servers answer with other values ("remote rejected value for option 'control'").
+    """
+    if not url.startswith("rfc2217://"):
+        return url
+    parts = urlsplit(url)
+    if "ign_set_control" in parse_qs(parts.query, keep_blank_values=True):
+        return url
+    return parts._replace(query="&".join(filter(None, (parts.query, "ign_set_control")))).geturl()
+
+
+def open_serial(url: str, name: str, **settings: Any) -> serial.SerialBase:
+    """``serial.serial_for_url`` on :func:`serial_url` (``url``); raises :class:`TransportError` with one line:
+    ``"<name>: cannot open <url>: <reason>"``."""
+    try:
+        return serial.serial_for_url(serial_url(url), **settings)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise TransportError(f"{name}: cannot open {url}: {_open_failure(exc)}") from exc
+
+
+def _open_failure(exc: BaseException) -> str:
+    """Why an open failed, in a few words: the operating system's reason when pyserial's exception wraps
+    one (pyserial repeats the port around it), else pyserial's own first line without the port."""
+    error: BaseException | None = exc
+    while error is not None:
+        if isinstance(error, BlockingIOError):  # the non-blocking flock of exclusive=True
+            return "in use by another program (locked)"
+        match error.args:
+            case (int(), str(text)) if not isinstance(error, serial.SerialException):  # OSError, termios.error
+                return text[:1].lower() + text[1:]
+        error = error.__cause__ or error.__context__
+    text = (str(exc).splitlines() or [type(exc).__name__])[0]
+    return re.sub(r"^could not open port \S+: ", "", text, flags=re.IGNORECASE)
 
 
 class Transport(ABC):
@@ -50,12 +94,9 @@ class SerialTransport(Transport):
 
     def open(self) -> None:
         self._check_same_pty()
-        try:
-            # exclusive: an advisory lock, so a second reader (a stale session of another process
-            # reconnecting to a reused pty number) cannot share the port and split its bytes
-            port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=POLL_S, exclusive=True)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"{self.stream}: cannot open {self.url}: {exc}") from exc
+        # exclusive: an advisory lock, so a second reader (a stale session of another process
+        # reconnecting to a reused pty number) cannot share the port and split its bytes
+        port = open_serial(self.url, self.stream, baudrate=self.baudrate, timeout=POLL_S, exclusive=True)
         try:
             port.set_low_latency_mode(True)  # FTDI and similar USB adapters: no 16 ms batching
         except (AttributeError, NotImplementedError, OSError, ValueError):
