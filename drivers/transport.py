@@ -44,11 +44,19 @@ def serial_url(url: str) -> str:
 
 def open_serial(url: str, name: str, **settings: Any) -> serial.SerialBase:
     """``serial.serial_for_url`` on :func:`serial_url` (``url``); raises :class:`TransportError` with one line:
-    ``"<name>: cannot open <url>: <reason>"``."""
+    ``"<name>: cannot open <url>: <reason>"``.
+
+    An RFC 2217 port starts with what arrives after pyserial's open. That open empties its input, then has
+    the server purge its transmit buffer, which ser2net does by dropping bytes already on their way: kept,
+    the first frames would be followed by a gap of a few.
+    """
     try:
-        return serial.serial_for_url(serial_url(url), **settings)
+        port = serial.serial_for_url(serial_url(url), **settings)
+        if url.startswith("rfc2217://"):
+            port.read(port.in_waiting)  # what came before the purge was answered
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"{name}: cannot open {url}: {_open_failure(exc)}") from exc
+    return port
 
 
 def _open_failure(exc: BaseException) -> str:

@@ -136,7 +136,8 @@ def test_a_lab_trial_through_ser2net_raw_tcp_and_plain_rfc2217(ser2net, tmp_path
     streams = result["streams"]
     assert streams["imu_frames"] == streams["aligned"] == result["trial"]["samples"]
     assert streams["table_frames"] > 0 and streams["sync_offset_ms"] is not None  # matched by sync counter
-    assert streams["corrupt"] == streams["dropped"] == streams["imu_outages"] == streams["table_outages"] == 0
+    # raw TCP loses nothing; over RFC 2217 ser2net's purge at connect may, rarely, still take a table frame
+    assert streams["corrupt"] == streams["imu_missing"] == streams["imu_outages"] == streams["table_outages"] == 0
 
 
 @pytest.fixture
