@@ -64,3 +64,18 @@ def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_k
     assert "imu.kvh1750.accel_unit" in err and "rejected" in err
     result = yaml.safe_load((out / "result.json").read_text())
     assert result["ended"].startswith("early: every IMU sample") and result["trial"]["duration_s"] < 10
+
+
+def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(tmp_path, capsys, monkeypatch):
+    import hil.viz
+
+    def broken(*args, **kwargs):
+        raise OSError("rerun: address already in use")
+
+    monkeypatch.setattr(hil.viz, "TrialViewer", broken)
+    out = tmp_path / "out"
+    code = main(["run", str(ROOT / "configs" / "emulated_swing.yaml"), "--duration", "5", "--speed", "max",
+                 "--quiet", "--viewer", "save", "--no-figures", "--out", str(out)])
+    assert code == 2
+    assert "--viewer save: the viewer did not start: rerun: address already in use" in _one_line(capsys.readouterr().err)
+    assert (out / "emulator.log").exists() and not (out / "ports.json").exists()  # spawned, then stopped

@@ -129,9 +129,10 @@ def test_a_lab_trial_through_ser2net_raw_tcp_and_plain_rfc2217(ser2net, tmp_path
     cfg["turntable"].update(source="serial", data_port=f"rfc2217://127.0.0.1:{table_tcp}")  # no query
     config, out = tmp_path / "lab.yaml", tmp_path / "run"
     config.write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(config), "--duration", "5", "--quiet", "--viewer", "none", "--no-figures",
-                 "--out", str(out)]) == 0
+    code = main(["run", str(config), "--duration", "5", "--quiet", "--viewer", "none", "--no-figures",
+                 "--out", str(out)])
     result = json.loads((out / "result.json").read_text())
+    assert code == 3 and result["ended"] == "completed"  # 5 s cannot meet the default trial's 600 s limits
     assert result["trial"]["samples"] == 5 * cfg["trial"]["rate_hz"]
     streams = result["streams"]
     assert streams["imu_frames"] == streams["aligned"] == result["trial"]["samples"]
