@@ -171,6 +171,7 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, out: Path, durati
             trial = LiveTrial(cfg, config_path.read_text(), out, duration, ports, viewer=viewer,
                               time_scale=parse_speed(args.speed) if emulated else 1.0, motion_check=check,
                               on_progress=progress.update, stop_requested=stop_requested,
+                              on_end=control.stop if control is not None else None,
                               source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
                               if emulator else None)
             return trial, trial.run()

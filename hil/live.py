@@ -126,7 +126,9 @@ class LiveTrial:
     harness commands the table) the trial ends when the table does not move as commanded or its data
     stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off. ``stop_requested`` (optional)
     is polled every step: a signal name ends the trial as interrupted. A trial whose IMU samples are
-    all rejected for ``STALL_S`` ends early with the processor's diagnosis.
+    all rejected for ``STALL_S`` ends early with the processor's diagnosis. ``on_end`` (optional) is
+    called the moment acquisition ends, however it ends, before the backlog is processed: where the
+    table is turned off.
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
@@ -134,7 +136,8 @@ class LiveTrial:
                  motion_check: MotionCheck | None = None,
                  on_progress: Callable[[TrialProcessor, dict], None] | None = None,
                  source_done: Callable[[], bool] | None = None,
-                 stop_requested: Callable[[], str | None] | None = None) -> None:
+                 stop_requested: Callable[[], str | None] | None = None,
+                 on_end: Callable[[], None] | None = None) -> None:
         self.cfg = cfg
         self.out = out
         self.duration = duration
@@ -142,6 +145,7 @@ class LiveTrial:
         self.on_progress = on_progress
         self.source_done = source_done or (lambda: False)
         self.stop_requested = stop_requested or (lambda: None)
+        self.on_end = on_end or (lambda: None)
         self.interrupted: str | None = None
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale)
         self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
@@ -174,6 +178,7 @@ class LiveTrial:
                 ended = f"interrupted: {self.interrupted}" if self.interrupted else COMPLETED
             return ended
         finally:
+            self.on_end()
             for session in self.sessions:
                 session.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
