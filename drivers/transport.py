@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import re
+import socket
+import sys
 import time
 from abc import ABC, abstractmethod
 from typing import Any
@@ -155,14 +157,23 @@ class SerialTransport(Transport):
             self.port = None
 
 
+IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)  # Linux; not exported by every Python
+
+
 def open_can_bus(interface: str, channel: str, bitrate: int | None = None) -> can.BusABC:
-    """A python-can bus; ``udp_multicast`` always with hop_limit=0 so frames never leave this host."""
+    """A python-can bus; ``udp_multicast`` always with hop_limit=0 so frames never leave this host, and
+    (Linux, IPv4) receiving only its own group: all groups share python-can's UDP port, and by default a
+    socket gets every group any socket on the host joined, so two rigs on one host would mix."""
     kwargs: dict = {"interface": interface, "channel": channel}
     if interface == "udp_multicast":
         kwargs["hop_limit"] = 0
     elif bitrate is not None and interface not in ("virtual",):
         kwargs["bitrate"] = bitrate
-    return can.Bus(**kwargs)
+    bus = can.Bus(**kwargs)
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sys.platform == "linux" and sock is not None and sock.family == socket.AF_INET:
+        sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+    return bus
 
 
 class CanTransport(Transport):

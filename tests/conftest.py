@@ -1,4 +1,6 @@
 
+import pytest
+
 from hil.config import Config, parse_config
 from hil.estimation.online import OnlineEstimator
 from emulators.simulation import Simulation
@@ -36,3 +38,16 @@ def run_estimator(cfg: Config, solve_period=10.0, geometry=None) -> OnlineEstima
         est.update_many(batch)
     est.solution()
     return est
+
+
+@pytest.fixture
+def udp_multicast_alone():
+    """Holds a host-wide lock for the test: python-can's logger (a third-party process) hears every
+    multicast group on python-can's UDP port, so two tests on different groups would hear each other."""
+    import fcntl
+    import tempfile
+    from pathlib import Path
+
+    with open(Path(tempfile.gettempdir()) / "turntable-hil-udp-multicast.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield

@@ -189,3 +189,20 @@ def test_cantools_decode_command_reads_our_frames():
     )  # fmt: skip
     assert "DThetaX: 5e-06 rad" in proc.stdout
     assert proc.stdout.count("SyncCounter: 5") == len(lines)
+
+
+def test_a_udp_multicast_bus_receives_only_its_own_group():
+    import can
+
+    first, second = open_can_bus("udp_multicast", "239.74.163.78"), open_can_bus("udp_multicast", "239.74.163.79")
+    try:
+        first.send(can.Message(arbitration_id=0x78, data=b"\x01", is_extended_id=False))
+        second.send(can.Message(arbitration_id=0x79, data=b"\x02", is_extended_id=False))
+        got = {bus: [] for bus in (first, second)}
+        for bus in (first, second):
+            while (message := bus.recv(timeout=0.5)) is not None:
+                got[bus].append(message.arbitration_id)
+        assert got[first] == [0x78] and got[second] == [0x79]
+    finally:
+        first.shutdown()
+        second.shutdown()

@@ -127,6 +127,7 @@ def test_can_imu_on_the_in_process_virtual_bus_is_logged_to_blf(tmp_path):
     check_log(log, cfg)
 
 
+@pytest.mark.usefixtures("udp_multicast_alone")
 def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger(tmp_path):
     group = "239.74.163.91"
     config = tmp_path / "can.yaml"
