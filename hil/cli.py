@@ -323,7 +323,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> None:
-    from hil.viz import VIEWER_MODES, default_viewer_mode
+    from hil.viewer_modes import VIEWER_MODES, default_viewer_mode
 
     default = default or default_viewer_mode()
     p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
@@ -394,10 +394,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from drivers.transport import TransportError
+    args = build_parser().parse_args(argv)
+    from drivers.transport import TransportError  # after parsing: --help needs neither
     from hil.csv_input import DataError
 
-    args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except (ConfigError, DataError, UsageError, TransportError) as exc:
