@@ -8,8 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-from hil.config import ConfigError, load_config, resolve_path
-
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
@@ -21,6 +19,13 @@ EXIT_CODES = """exit codes:
 
 class UsageError(ValueError):
     """A command that cannot be carried out as asked."""
+
+
+def _config_path(text: str) -> Path:
+    """:func:`hil.config.resolve_path`, imported when an argument is converted: ``--help`` needs no pydantic."""
+    from hil.config import resolve_path
+
+    return resolve_path(text)
 
 
 def _out_dir(args: argparse.Namespace, name: str, configured: str | None) -> Path:
@@ -114,6 +119,7 @@ def _close_viewer(viewer) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``hil run``: exit 0 done, 1 ended early or interrupted (outputs kept), 2 bad input, 3 FAILs its limits."""
+    from hil.config import load_config
     from hil.stop_signals import StopSignals
 
     config_path = Path(args.config)
@@ -249,6 +255,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from emulators.simulation import Simulation
+    from hil.config import load_config
     from hil.estimation.online import OnlineEstimator
     from hil.results import StreamCounts, build_result
 
@@ -276,6 +283,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
+    from hil.config import load_config
     from hil.csv_input import read_increments_csv
     from hil.estimation.online import OnlineEstimator
     from hil.frames import Earth, TableGeometry
@@ -314,6 +322,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 def cmd_emulate(args: argparse.Namespace) -> int:
     from emulators.emulate import parse_speed, run_emulator
+    from hil.config import load_config
 
     try:
         speed = parse_speed(args.speed)
@@ -324,7 +333,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> None:
-    from hil.viz import VIEWER_MODES, default_viewer_mode
+    from hil.viewer_modes import VIEWER_MODES, default_viewer_mode
 
     default = default or default_viewer_mode()
     p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
@@ -338,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
-    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
                    help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
@@ -356,7 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
-    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
                    help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -365,13 +374,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
     p.add_argument("data", help="CSV: t_s, dtheta_[xyz]_rad, dv_[xyz]_mps[, outer_deg, middle_deg, inner_deg]")
-    p.add_argument("--config", required=True, type=resolve_path, help="trial YAML (trial and site are enough)")
+    p.add_argument("--config", required=True, type=_config_path, help="trial YAML (trial and site are enough)")
     p.add_argument("--out")
     p.add_argument("--no-figures", action="store_true")
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
-    p.add_argument("config", nargs="?", type=resolve_path, default=DEFAULT_CONFIG,
+    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
                    help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
     p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
@@ -395,10 +404,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    # imported after parsing: --help needs none of them
     from drivers.transport import TransportError
+    from hil.config import ConfigError
     from hil.csv_input import DataError
 
-    args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except (ConfigError, DataError, UsageError, TransportError) as exc:

@@ -1,16 +1,15 @@
-"""PNG figures in the style of the 2019 paper: Fig. 2 (Gram rank), Fig. 3 (bias), Fig. 4 (alignment)."""
+"""PNG figures in the style of the 2019 paper: Fig. 2 (Gram rank), Fig. 3 (bias), Fig. 4 (alignment).
+
+matplotlib is imported when figures are drawn, not with this module.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from hil.results import SERIES_COLUMNS  # noqa: E402
+from hil.results import SERIES_COLUMNS
 
 FIGURES = ("observability.png", "bias.png", "alignment.png")
 
@@ -20,6 +19,11 @@ def _col(series: np.ndarray, name: str) -> np.ndarray:
 
 
 def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     t = _col(series, "t_s")
     truth = (result.get("truth") or {}).get("accel_bias_ug")
 

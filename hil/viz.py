@@ -42,10 +42,10 @@ import rerun.blueprint as rrb
 from hil.config import DEG, UG
 from hil.estimation.online import Snapshot
 from hil.frames import EARTH_RATE, TableGeometry
+from hil.viewer_modes import VIEWER_MODES
 
 log = logging.getLogger(__name__)
 
-VIEWER_MODES = ("spawn", "serve", "save", "none")
 APPLICATION_ID = "turntable-hil"
 TIMELINE = "trial_time"
 RRD_NAME = "recording.rrd"
@@ -70,13 +70,6 @@ _TRUTH = (255, 170, 0)
 _METHOD_COLORS = {"method1": (230, 85, 13), "method2": (49, 163, 84), "theoretical": (170, 170, 170)}
 _METHOD_NAMES = {"method1": "method 1", "method2": "method 2", "theoretical": "theoretical"}
 _STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (255, 127, 0))
-
-
-def default_viewer_mode() -> str:
-    """``spawn`` when a display exists (DISPLAY or WAYLAND_DISPLAY), otherwise ``save``."""
-    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
-        return "spawn"
-    return "save"
 
 
 def telemetry_requested() -> bool:

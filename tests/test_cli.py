@@ -1,5 +1,6 @@
 import csv
 import json
+import re
 import subprocess
 import sys
 
@@ -32,6 +33,26 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
     for name in ("series.csv", "config.yaml", "report.html", "junit.xml", "bias.png", "alignment.png",
                  "observability.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize("flags", [[], ["--no-figures"]])
+def test_simulate_draws_each_figure_once(tmp_path, monkeypatch, flags):
+    import hil.figures
+
+    draw, drawn = hil.figures.write_figures, []
+    monkeypatch.setattr(hil.figures, "write_figures", lambda out, *args: drawn.append(out) or draw(out, *args))
+    write_config(tmp_path / "c.yaml", duration=60, errors=PAPER_ERRORS)
+    assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "out"), *flags]) == 0
+    assert len(drawn) == 1
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert len(re.findall(r"src='data:image/png;base64,", page)) == len(hil.figures.FIGURES)
+
+
+def test_the_parser_imports_neither_rerun_nor_matplotlib():
+    code = ("import sys; from hil.cli import build_parser; build_parser(); "
+            "print('rerun' in sys.modules, 'matplotlib' in sys.modules)")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
 
 
 def test_estimate_on_exported_csv_matches_simulate(tmp_path):

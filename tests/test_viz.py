@@ -18,7 +18,8 @@ from emulators.simulation import Simulation
 from hil import viz
 from hil.config import DEG, UG
 from hil.estimation.online import OnlineEstimator
-from hil.viz import TrialViewer, default_viewer_mode
+from hil.viewer_modes import default_viewer_mode
+from hil.viz import TrialViewer
 
 HEALTH = {
     "imu": {"rate_hz": 199.5, "frames": 12000, "dropped": 2, "corrupt": 1, "latency_ms": 3.25},
