@@ -10,12 +10,12 @@ from typing import Any, ClassVar
 from drivers.codec import Decoded, DecodeError
 from drivers.crc import crc32_mpeg2
 from drivers.framing import ByteCodec
+from hil.config import G0
 from hil.samples import ImuSample
 
 HEADER = b"\xfe\x81\xff\x55"
 FRAME_SIZE = 36
 STATUS_ALL_VALID = 0x77  # gyro x/y/z 0x01/0x02/0x04, accel x/y/z 0x10/0x20/0x40
-G0 = 9.80665  # m/s^2 per g
 _BODY = struct.Struct(">4s6fBBh")
 _CRC = struct.Struct(">I")
 

@@ -30,18 +30,12 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from drivers.acl import AclCommand
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
-from emulators.devices import (
-    CanPort,
-    DeviceStream,
-    DeviceWriter,
-    ImuSource,
-    PtyPort,
-    TableSource,
-    wait_for_readers,
-)
+from emulators.devices import DeviceStream, DeviceWriter, ImuSource, TableSource
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
+from emulators.ports import CanPort, PtyPort, wait_for_readers
 from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.timing import DeviceClock
@@ -219,11 +213,12 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
             for port in devices.ports.values():
                 port.drain(stop, math.inf if hold else DRAIN_S)
             elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
-            if stats_file is not None:
-                _write_json(stats_file, _stats(devices, pulses, elapsed, stopped).as_dict())
-            if hold:
-                stop.wait()
             stats = _stats(devices, pulses, elapsed, stopped)
+            if hold:
+                if stats_file is not None:
+                    _write_json(stats_file, stats.as_dict())  # tells that the pulse train has ended
+                stop.wait()
+                stats = _stats(devices, pulses, elapsed, stopped)  # with the commands received meanwhile
             if stats_file is not None:
                 _write_json(stats_file, stats.as_dict())
             return stats
@@ -303,7 +298,7 @@ def _stats(devices: _Devices, pulses: int, elapsed: float, stopped: bool) -> Emu
         name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50), w.latency.percentile_ms(99),
                           w.lost_unread)
         for name, w in devices.writers.items()},
-        dict(server.received), server.modes_off, ",".join(d.mode for d in reversed(devices.servo.demands)))
+        dict(server.received), server.modes_off, devices.servo.handle(AclCommand(":Mode?", ("ALL",))).text)
 
 
 def parse_speed(text: str) -> float | None:
@@ -365,6 +360,17 @@ def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration:
                                     f"the emulator did not open its ports (exit code {proc.returncode})")
             time.sleep(0.02)
     return proc, json.loads(ports_file.read_text())
+
+
+def stop_emulator(process: subprocess.Popen) -> None:
+    """End a spawned emulator: SIGTERM, then SIGKILL if it has not gone within 5 s."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
 
 
 def main(argv: list[str] | None = None) -> int:

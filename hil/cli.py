@@ -34,39 +34,18 @@ def _out_dir(args: argparse.Namespace, name: str, configured: str | None) -> Pat
     return Path(configured) if configured else Path("runs") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-def _summary(result: dict, out: Path) -> str:
-    est = result["estimate"]
-    lines = [f"{result['trial']['name']}: {result['trial']['samples']} samples, {result['trial']['duration_s']:.1f} s"]
-    if est["observable"]:
-        bias = ", ".join(f"{b:.3f} +- {s:.3f}" for b, s in zip(est["accel_bias_ug"], est["accel_bias_sigma_ug"]))
-        lines.append(f"  accelerometer bias (ug): {bias}")
-        lines.append(f"  converged at {est['converged_at_s']:.0f} s, Gram rank {est['gram_rank']}")
-    else:
-        lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
-    table = result["table_reference"]["accel_bias_ug"]
-    if table is not None:
-        lines.append("  table-referenced bias (ug): " + ", ".join(f"{b:.3f}" for b in table))
-    if "truth" in result:
-        lines.append("  truth (ug): " + ", ".join(f"{b:.3f}" for b in result["truth"]["accel_bias_ug"]))
-    m2 = result["alignment_deg"]["method2"]
-    if m2:
-        lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
-    lines.append(f"  outputs in {out}")
-    return "\n".join(lines)
-
-
 def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: list, config_text: str,
-            ended: str = "completed") -> str:
+            ended: str) -> str:
     """Write result.json (with how the trial ``ended``), series.csv, config.yaml, the figures, report.html
     and junit.xml, and print the summary; returns the overall outcome against ``output.limits``."""
     from hil.report import measurements, overall, write_report
-    from hil.results import write_outputs
+    from hil.results import summary_text, write_outputs
 
     result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
     write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
     write_report(out, cfg.output.limits)
     outcome = overall(measurements(result, cfg.output.limits))
-    print(_summary(result, out))
+    print(summary_text(result, out))
     print(f"  report: {outcome} against output.limits ({out / 'report.html'})")
     return outcome
 
@@ -74,8 +53,9 @@ def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: l
 def _exit_code(ended: str, outcome: str) -> int:
     """DESIGN.md's exit codes: 1 a trial that ended early or was interrupted, 3 one that FAILs its limits."""
     from hil.report import FAIL
+    from hil.results import COMPLETED
 
-    if ended != "completed":
+    if ended != COMPLETED:
         print(f"hil: trial {ended}", file=sys.stderr)
         return 1
     return 3 if outcome == FAIL else 0
@@ -120,11 +100,12 @@ def _close_viewer(viewer) -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     """``hil run``: exit 0 done, 1 ended early or interrupted (outputs kept), 2 bad input, 3 FAILs its limits."""
     from hil.config import load_config
+    from hil.results import COMPLETED
     from hil.stop_signals import StopSignals
 
     config_path = Path(args.config)
     cfg = load_config(config_path)
-    _check_speed(args.speed)
+    speed = _speed(args.speed)
     emulated = {cfg.imu.source, cfg.turntable.source} == {"emulator"}
     if not emulated and "emulator" in {cfg.imu.source, cfg.turntable.source}:
         raise UsageError("imu.source and turntable.source: emulate both devices or neither")
@@ -136,26 +117,30 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "in theirs; use udp_multicast (the default without an imu.can block)")
     out = _out_dir(args, cfg.trial.name, cfg.output.dir)
     out.mkdir(parents=True, exist_ok=True)
+    config_text = config_path.read_text()
     with StopSignals() as signals:
-        trial, ended = _acquire(args, cfg, config_path, out, duration, emulated, lambda: signals.received)
+        trial, ended = _acquire(args, cfg, config_path, config_text, out, duration, speed if emulated else 1.0,
+                                lambda: signals.received)
         processor = trial.processor
         snapshots = processor.estimator.snapshots if processor.estimator is not None else []
-        outcome = _finish(args, cfg, out, processor.result(), snapshots, config_path.read_text(), ended)
-    if ended == "completed":
+        outcome = _finish(args, cfg, out, processor.result(), snapshots, config_text, ended)
+    if ended == COMPLETED:
         _close_viewer(trial.viewer)
     return _exit_code(ended, outcome)
 
 
-def _acquire(args: argparse.Namespace, cfg, config_path: Path, out: Path, duration: float | None, emulated: bool,
-             stop_requested):
+def _acquire(args: argparse.Namespace, cfg, config_path: Path, config_text: str, out: Path, duration: float | None,
+             time_scale: float | None, stop_requested):
     """The live part of ``hil run``: emulator (if emulated), viewer, table control and the trial; the table
-    is sent Off and the emulator reaped on every way out. Returns the finished trial and how it ended."""
-    from emulators.emulate import EmulatorError, parse_speed, spawn_emulator
+    is sent Off, the viewer closed and the emulator reaped on every way out. Returns the finished trial and
+    how it ended."""
+    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
     from drivers.table_client import InterlockError, LimitError, TableError
     from hil.live import LiveTrial
     from hil.progress import ConsoleProgress
     from hil.table_control import MotionCheck, TableControl
 
+    emulated = {cfg.imu.source, cfg.turntable.source} == {"emulator"}
     emulator, ports, control, viewer = None, None, None, None
     try:
         if emulated:
@@ -171,34 +156,35 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, out: Path, durati
             check = None
             if command_url is not None:
                 control = TableControl(command_url, cfg.turntable)
-                control.client.open()
+                control.open()
                 control.arm()
                 check = MotionCheck(cfg.turntable, cfg.trial.rate_hz)
-            trial = LiveTrial(cfg, config_path.read_text(), out, duration, ports, viewer=viewer,
-                              time_scale=parse_speed(args.speed) if emulated else 1.0, motion_check=check,
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
+                              motion_check=check,
                               on_progress=progress.update, stop_requested=stop_requested,
                               on_end=control.stop if control is not None else None,
                               source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
                               if emulator else None)
             return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
-        if viewer is not None:
-            viewer.close()
         raise UsageError(str(exc)) from None
     finally:
+        if viewer is not None:
+            viewer.close()  # the trial closes it too; closing twice is harmless
         if control is not None:
             control.stop()
             if control.stop_error:
                 print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
         if emulator is not None:
-            _stop(emulator)
+            stop_emulator(emulator)
 
 
-def _check_speed(text: str) -> None:
+def _speed(text: str) -> float | None:
+    """``--speed``: a multiple of real time, None for ``max``."""
     from emulators.emulate import parse_speed
 
     try:
-        parse_speed(text)
+        return parse_speed(text)
     except ValueError as exc:
         raise UsageError(f"--speed: {exc}") from None
 
@@ -213,19 +199,9 @@ def _command_url(cfg, ports: dict | None) -> str | None:
     return url
 
 
-def _stop(process) -> None:
-    """End a child process: SIGTERM, then SIGKILL if it has not gone within 5 s."""
-    if process.poll() is None:
-        process.terminate()
-        try:
-            process.wait(5.0)
-        except Exception:  # noqa: BLE001 - any failure to stop politely ends in a kill
-            process.kill()
-            process.wait()
-
-
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.replay import open_recording, recording_path, replay
+    from hil.results import COMPLETED
 
     source_dir = recording_path(args.source).parent
     out = Path(args.out) if args.out else source_dir / "replay"
@@ -235,7 +211,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if recording.truncated:
         print(f"hil: {args.source}: the recording ends inside a record (cut short); replayed up to it",
               file=sys.stderr)
-    ended = recording.ended or ("early: the recording was cut short" if recording.truncated else "completed")
+    ended = recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
     snapshots = processor.estimator.snapshots if processor.estimator is not None else []
     outcome = _finish(args, cfg, out, processor.result(), snapshots, recording.metadata["config"], ended)
     _close_viewer(viewer)
@@ -257,7 +233,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from emulators.simulation import Simulation
     from hil.config import load_config
     from hil.estimation.online import OnlineEstimator
-    from hil.results import StreamCounts, build_result
+    from hil.results import COMPLETED, StreamCounts, build_result
 
     cfg = load_config(args.config)
     sim = Simulation.from_config(cfg)
@@ -275,11 +251,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             viewer.log_table(batch.t, batch.angles)
     n = sim.samples
     result = build_result(cfg.trial.name, est, StreamCounts(n, n, n), list(cfg.imu.errors.accel_bias_ug))
-    outcome = _finish(args, cfg, out, result, est.snapshots, Path(args.config).read_text())
+    outcome = _finish(args, cfg, out, result, est.snapshots, Path(args.config).read_text(), COMPLETED)
     if viewer is not None:
         viewer.log_snapshots(est.snapshots)
     _close_viewer(viewer)
-    return _exit_code("completed", outcome)
+    return _exit_code(COMPLETED, outcome)
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
@@ -287,7 +263,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from hil.csv_input import read_increments_csv
     from hil.estimation.online import OnlineEstimator
     from hil.frames import Earth, TableGeometry
-    from hil.results import StreamCounts, build_result
+    from hil.results import COMPLETED, StreamCounts, build_result
 
     cfg = load_config(args.config)
     batch = read_increments_csv(args.data)
@@ -303,8 +279,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     n = len(batch)
     result = build_result(cfg.trial.name, est, StreamCounts(n, n if batch.angles is not None else 0, n))
     outcome = _finish(args, cfg, _out_dir(args, cfg.trial.name, cfg.output.dir), result, est.snapshots,
-                      Path(args.config).read_text())
-    return _exit_code("completed", outcome)
+                      Path(args.config).read_text(), COMPLETED)
+    return _exit_code(COMPLETED, outcome)
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -321,15 +297,17 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    from emulators.emulate import parse_speed, run_emulator
+    from emulators.emulate import run_emulator
     from hil.config import load_config
 
-    try:
-        speed = parse_speed(args.speed)
-    except ValueError as exc:
-        raise UsageError(f"--speed: {exc}") from None
-    run_emulator(load_config(args.config), args.ports_file, speed, args.duration, wait_readers=args.wait_readers)
+    run_emulator(load_config(args.config), args.ports_file, _speed(args.speed), args.duration,
+                 wait_readers=args.wait_readers)
     return 0
+
+
+def _config_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
+                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
 
 
 def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> None:
@@ -347,8 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
-    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
-                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
+    _config_argument(p)
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
     p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
@@ -365,8 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
-    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
-                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
+    _config_argument(p)
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     _viewer_options(p, default="none")
@@ -380,8 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
-    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
-                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
+    _config_argument(p)
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
     p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")

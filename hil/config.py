@@ -16,7 +16,8 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-UG = 9.80665e-6  # m/s^2 per micro-g (standard gravity)
+G0 = 9.80665  # m/s^2 per g (standard gravity)
+UG = 9.80665e-6  # m/s^2 per micro-g
 DEG = math.pi / 180.0
 DEG_PER_H = DEG / 3600.0
 ARCSEC = DEG / 3600.0

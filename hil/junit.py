@@ -16,6 +16,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from hil.report import FAIL, NOT_JUDGED, Measurement
+from hil.results import COMPLETED
 
 JUNIT_NAME = "junit.xml"
 
@@ -25,18 +26,18 @@ def write_junit(out_dir: Path, result: dict, results: list[Measurement]) -> Path
     trial = result.get("trial") or {}
     name = str(trial.get("name", "trial"))
     cases = [m for m in results if m.limit]
-    ended = result.get("ended", "completed")
+    ended = result.get("ended", COMPLETED)
     counts = {
-        "tests": len(cases) + (ended != "completed"),
+        "tests": len(cases) + (ended != COMPLETED),
         "failures": sum(m.outcome == FAIL for m in cases),
-        "errors": int(ended != "completed"),
+        "errors": int(ended != COMPLETED),
         "skipped": sum(m.outcome == NOT_JUDGED for m in cases),
         "time": trial.get("duration_s") or 0.0,
     }
     attrs = {"name": name, **{k: str(v) for k, v in counts.items()}}
     root = ET.Element("testsuites", attrs)
     suite = ET.SubElement(root, "testsuite", attrs)
-    if ended != "completed":
+    if ended != COMPLETED:
         case = ET.SubElement(suite, "testcase", name="trial_completed", classname=f"hil.{name}")
         ET.SubElement(case, "error", message=f"trial {ended}", type="ended")
     for m in cases:

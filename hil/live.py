@@ -30,6 +30,7 @@ from drivers.transport import CanTransport, SerialTransport, Transport
 from hil.config import Config
 from hil.processing import IMU, TABLE, TrialProcessor
 from hil.recording import Recorder, to_ns
+from hil.results import COMPLETED
 from hil.samples import AlignedSample
 from hil.sinks import Viewer, ViewerSinks, health
 from hil.table_control import MotionCheck
@@ -111,9 +112,6 @@ def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Tr
     if not table_port:
         raise TrialAborted("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
     return {IMU: imu, TABLE: SerialTransport(table_port, cfg.turntable.baudrate, TABLE)}
-
-
-COMPLETED = "completed"
 
 
 class LiveTrial:

@@ -10,12 +10,12 @@ Damage to low bits of the increments is caught by comparing the gyro with the ta
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from hil.config import DEG, G0, ImuConfig
 from hil.frames import Earth, TableGeometry, table_body_rotation
-
-UG_PER_MPS2 = 9.80665  # a reading in m/s^2 taken as g (or the reverse) is off by this factor
 from hil.samples import ImuSample
 
 RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
@@ -46,17 +46,33 @@ class ImuPlausibility:
             self.last_rejected = (force / self.gravity, angle / self.max_angle)
         return good
 
-    def diagnosis(self, unit_key: str) -> str:
-        """What the last rejected samples say about the config, naming the key most likely wrong."""
+    def diagnosis(self, keys: UnitKeys) -> str:
+        """What the last rejected samples say about the config, naming the key most likely wrong (a
+        reading in m/s^2 taken as g, or the reverse, is off by G0)."""
         force_g, rate = self.last_rejected or (math.nan, math.nan)
-        if any(abs(force_g - r) < 0.05 * r for r in (UG_PER_MPS2, 1.0 / UG_PER_MPS2)):
+        if any(abs(force_g - r) < 0.05 * r for r in (G0, 1.0 / G0)):
             return (f"the specific force reads {force_g:.3g} g at rest or swinging: the accelerometer unit is "
-                    f"wrong (check {unit_key}: g or m/s^2)")
+                    f"wrong (check {keys.accel_unit}: g or m/s^2)")
         if rate > 1.0:
             return (f"the gyros read {rate:.3g} times the table's fastest rate limit: check the gyro unit and output "
-                    f"({unit_key.rsplit('.', 1)[0]}.gyro_unit, gyro_output), imu.rate_hz and turntable.limits")
+                    f"({keys.gyro_unit}, {keys.gyro_output}), imu.rate_hz and turntable.limits")
         return (f"the specific force reads {force_g:.3g} g, not 1 g: check imu.rate_hz (the increments are per "
-                f"sample), imu.protocol and {unit_key}")
+                f"sample), imu.protocol and {keys.accel_unit}")
+
+
+@dataclass(frozen=True)
+class UnitKeys:
+    """The config keys that set the IMU's output units: the KVH 1750's own settings, else its protocol."""
+
+    accel_unit: str
+    gyro_unit: str
+    gyro_output: str
+
+    @classmethod
+    def of(cls, imu: ImuConfig) -> UnitKeys:
+        if imu.protocol == "kvh1750":
+            return cls("imu.kvh1750.accel_unit", "imu.kvh1750.gyro_unit", "imu.kvh1750.gyro_output")
+        return cls(*(f"imu.protocol ({imu.protocol})",) * 3)
 
 
 def small_rotation_vectors(c: np.ndarray) -> np.ndarray:
@@ -100,15 +116,15 @@ class GyroTableGate:
             self.last_ratio = float(np.median(np.linalg.norm(dtheta, axis=1)) / max(np.median(size), 1e-300))
         return good
 
-    def diagnosis(self, unit_key: str) -> str:
+    def diagnosis(self, keys: UnitKeys) -> str:
         """What the disagreement says about the config, naming the key most likely wrong."""
         ratio = self.last_ratio
-        if abs(ratio - 180.0 / math.pi) < 0.05 * 180.0 / math.pi or abs(ratio - math.pi / 180.0) < 0.05 * math.pi / 180:
+        if any(abs(ratio - r) < 0.05 * r for r in (1.0 / DEG, DEG)):
             return (f"the gyro increments are {ratio:.3g} times the table's rotation: the gyro unit is wrong "
-                    f"(check {unit_key.rsplit('.', 1)[0]}.gyro_unit: rad or deg)")
+                    f"(check {keys.gyro_unit}: rad or deg)")
         return (f"the gyro increments are {ratio:.3g} times the rotation the table angles show: check imu.rate_hz "
-                f"and trial.rate_hz (which pulse latches the table), the gyro output "
-                f"({unit_key.rsplit('.', 1)[0]}.gyro_output) and turntable.mounting_deg")
+                f"and trial.rate_hz (which pulse latches the table), the gyro output ({keys.gyro_output}) and "
+                f"turntable.mounting_deg")
 
 
 class RejectionWatch:

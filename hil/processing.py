@@ -17,7 +17,7 @@ from drivers.registry import imu_codec, make_codec
 from hil.config import DEG, Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
-from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility, RejectionWatch
+from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility, RejectionWatch, UnitKeys
 from hil.results import StreamCounts, build_result, empty_result
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner
@@ -135,9 +135,8 @@ class TrialProcessor:
         or None while samples reach the estimator."""
         if not self.watch.stalled or self._stalled_by is None:
             return None
-        unit_key = "imu.kvh1750.accel_unit" if self.cfg.imu.protocol == "kvh1750" else f"imu.protocol ({self.cfg.imu.protocol}) units"
         return (f"every IMU sample for {self.watch.run / self.cfg.imu_rate_hz:.1f} s was rejected: "
-                f"{self._stalled_by.diagnosis(unit_key)}")
+                f"{self._stalled_by.diagnosis(UnitKeys.of(self.cfg.imu))}")
 
     def _rejected(self, by: ImuPlausibility | GyroTableGate, n: int = 1) -> None:
         self.watch.rejected(n)

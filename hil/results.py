@@ -14,6 +14,8 @@ import numpy as np
 from hil.config import DEG, UG
 from hil.estimation.online import OnlineEstimator, Snapshot, convergence_time
 
+COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
+
 SERIES_COLUMNS = (
     "t_s", "samples",
     "bias_x_ug", "bias_y_ug", "bias_z_ug", "sigma_x_ug", "sigma_y_ug", "sigma_z_ug",
@@ -155,3 +157,25 @@ def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: b
         from hil.figures import write_figures
 
         write_figures(out, np.array(rows, dtype=float), result)
+
+
+def summary_text(result: dict, out: Path) -> str:
+    """The console summary of a result.json document."""
+    est = result["estimate"]
+    lines = [f"{result['trial']['name']}: {result['trial']['samples']} samples, {result['trial']['duration_s']:.1f} s"]
+    if est["observable"]:
+        bias = ", ".join(f"{b:.3f} +- {s:.3f}" for b, s in zip(est["accel_bias_ug"], est["accel_bias_sigma_ug"]))
+        lines.append(f"  accelerometer bias (ug): {bias}")
+        lines.append(f"  converged at {est['converged_at_s']:.0f} s, Gram rank {est['gram_rank']}")
+    else:
+        lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
+    table = result["table_reference"]["accel_bias_ug"]
+    if table is not None:
+        lines.append("  table-referenced bias (ug): " + ", ".join(f"{b:.3f}" for b in table))
+    if "truth" in result:
+        lines.append("  truth (ug): " + ", ".join(f"{b:.3f}" for b in result["truth"]["accel_bias_ug"]))
+    m2 = result["alignment_deg"]["method2"]
+    if m2:
+        lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
+    lines.append(f"  outputs in {out}")
+    return "\n".join(lines)

@@ -37,9 +37,13 @@ class TableControl:
         self.client = TableCommandClient(url, table.limits, table.baudrate)
         self.stop_error: str | None = None
 
-    def __enter__(self) -> TableControl:
+    def open(self) -> TableControl:
+        """Open the command port; raises :class:`TableError`."""
         self.client.open()
         return self
+
+    def __enter__(self) -> TableControl:
+        return self.open()
 
     def __exit__(self, *exc: object) -> None:
         self.stop()

@@ -191,6 +191,7 @@ def test_cantools_decode_command_reads_our_frames():
     assert proc.stdout.count("SyncCounter: 5") == len(lines)
 
 
+@pytest.mark.usefixtures("udp_multicast_alone")
 def test_a_udp_multicast_bus_receives_only_its_own_group():
     import can
 

@@ -20,7 +20,7 @@ from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture
 from drivers.transport import open_can_bus
-from emulators.devices import CanPort
+from emulators.ports import CanPort
 from emulators.emulate import spawn_emulator
 from emulators.harness import EmulatorThread
 from emulators.simulation import Simulation

@@ -2,7 +2,7 @@
 
 import math
 
-from hil.plausibility import ImuPlausibility
+from hil.plausibility import ImuPlausibility, UnitKeys
 from hil.samples import ImuSample
 
 G = 9.79
@@ -53,10 +53,11 @@ def test_a_wrong_accelerometer_unit_is_named_in_the_diagnosis():
     check = ImuPlausibility(200.0, G, max_rate=math.radians(200))
     in_mps2_read_as_g = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, G * 9.80665 / 200))
     assert not check.ok(in_mps2_read_as_g)
-    assert "imu.kvh1750.accel_unit" in check.diagnosis("imu.kvh1750.accel_unit")
+    keys = UnitKeys("imu.kvh1750.accel_unit", "imu.kvh1750.gyro_unit", "imu.kvh1750.gyro_output")
+    assert "imu.kvh1750.accel_unit" in check.diagnosis(keys)
     in_g_read_as_mps2 = ImuSample(2, (0.0, 0.0, 0.0), (0.0, 0.0, G / 9.80665 / 200))
     assert not check.ok(in_g_read_as_mps2)
-    assert "accelerometer unit is wrong" in check.diagnosis("imu.kvh1750.accel_unit")
+    assert "accelerometer unit is wrong" in check.diagnosis(keys)
 
 
 def test_the_rejection_watch_stalls_after_five_seconds_of_samples_and_resets_on_a_taken_one():

@@ -1,0 +1,178 @@
+"""The emulated devices' ports: a pseudo-terminal per serial device, a python-can bus for a CAN IMU.
+
+Both offer the same small interface to the device writers: ``path`` (what clients open), ``write``,
+``has_reader`` / ``accepting`` / ``configured`` (what a UART's far end would show), ``drain``, and
+``unplug`` / ``replug`` / ``close``.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import select
+import struct
+import termios
+import threading
+import time
+import tty
+from pathlib import Path
+
+from drivers.transport import open_can_bus
+
+WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
+PROBE_SPEED = termios.B50  # a fresh pty's line speed, so the reader's own settings show when it configures it
+
+
+class PtyPort:
+    """One pseudo-terminal: the emulator writes the master side; clients open :attr:`path` (the slave).
+
+    With ``link`` the port is published as that symbolic link to the slave, like a udev by-id name:
+    :meth:`unplug` closes the master, as pulling a USB adapter removes its device (readers get an
+    error, the link dangles), and :meth:`replug` opens a new pty and points the link at it, so a
+    reader that reopens the link finds the device again, never another program's pty that took the
+    old number.
+    """
+
+    def __init__(self, link: Path | None = None) -> None:
+        self.link = link
+        self._open()
+
+    def _open(self) -> None:
+        self.master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no newline translation: bytes pass unchanged
+        self.tty = os.ttyname(slave)
+        os.close(slave)  # the slave stays valid while the master is open
+        os.set_blocking(self.master, False)
+        self.plugged = True
+        attrs = termios.tcgetattr(self.master)  # on a pty master: the slave's settings
+        attrs[4] = attrs[5] = PROBE_SPEED
+        termios.tcsetattr(self.master, termios.TCSANOW, attrs)
+        if self.link is not None:
+            tmp = self.link.with_name(self.link.name + ".new")
+            tmp.unlink(missing_ok=True)
+            tmp.symlink_to(self.tty)
+            os.replace(tmp, self.link)
+
+    @property
+    def path(self) -> str:
+        return str(self.link) if self.link is not None else self.tty
+
+    def _events(self, timeout_ms: float) -> list[int]:
+        """The master's poll events (a poll object per call: the writer thread and the drain may ask at once)."""
+        poll = select.poll()
+        poll.register(self.master, select.POLLOUT)
+        return [events for _, events in poll.poll(timeout_ms)]
+
+    def has_reader(self) -> bool:
+        """True while some client holds the slave side open (the master reports no hang-up)."""
+        return not any(events & select.POLLHUP for events in self._events(0))
+
+    def accepting(self) -> bool:
+        """True when a reader holds the port and its input queue has room: a UART's bytes would arrive."""
+        return any(e & select.POLLOUT and not e & select.POLLHUP for e in self._events(0))
+
+    def configured(self) -> bool:
+        """True once a reader has set the line up (a serial library does, and then flushes its input)."""
+        return termios.tcgetattr(self.master)[5] != PROBE_SPEED
+
+    def write(self, data: bytes, stop: threading.Event) -> bool:
+        """Write all of ``data``, waiting while the kernel buffer is full; False if stopped first."""
+        view = memoryview(data)
+        while view:
+            if stop.is_set():
+                return False
+            if not self._events(WAIT_S * 1000):
+                continue
+            try:
+                view = view[os.write(self.master, view):]
+            except BlockingIOError:
+                continue
+        return True
+
+    def unread(self) -> int:
+        """Bytes written but not yet read by the client (the slave's input queue)."""
+        fd = os.open(self.tty, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0" * 4))[0]
+        finally:
+            os.close(fd)
+
+    def drain(self, stop: threading.Event, timeout_s: float) -> bool:
+        """Wait until the client has read everything or left (closing the master discards unread bytes).
+
+        The queue must read empty on two checks in a row: bytes still in the kernel's flip buffer are
+        not counted yet.
+        """
+        deadline = time.monotonic() + timeout_s
+        empty = 0
+        while self.plugged and self.has_reader() and empty < 2:
+            empty = empty + 1 if self.unread() == 0 else 0
+            if time.monotonic() > deadline or stop.wait(WAIT_S / 5):
+                return False
+        return True
+
+    def unplug(self) -> None:
+        """Close the master; clients then read end-of-file/EIO and the slave disappears."""
+        if self.plugged:
+            os.close(self.master)
+            self.plugged = False
+
+    def replug(self) -> None:
+        self._open()
+
+    def close(self) -> None:
+        """Unplug for good: the link goes too."""
+        self.unplug()
+        if self.link is not None:
+            self.link.unlink(missing_ok=True)
+
+
+class CanPort:
+    """A python-can bus the IMU sends on; "unplugged" it is silent."""
+
+    def __init__(self, interface: str, channel: str) -> None:
+        self.interface, self.channel = interface, channel
+        self.bus = open_can_bus(interface, channel)
+        self.plugged = True
+
+    @property
+    def path(self) -> dict[str, str]:
+        return {"interface": self.interface, "channel": self.channel}
+
+    def has_reader(self) -> bool:
+        return True  # a bus does not know its listeners
+
+    def accepting(self) -> bool:
+        return True
+
+    def configured(self) -> bool:
+        return True
+
+    def write(self, messages: list, stop: threading.Event) -> bool:
+        """Send one sample's messages; False if stopped first (a sample sent is always counted as written)."""
+        if stop.is_set():
+            return False
+        for m in messages:
+            self.bus.send(m)
+        return True
+
+    def drain(self, stop: threading.Event, timeout_s: float) -> bool:
+        return True
+
+    def unplug(self) -> None:
+        self.plugged = False
+
+    def replug(self) -> None:
+        self.plugged = True
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+def wait_for_readers(ports: list, stop: threading.Event, settle_s: float = 0.2) -> bool:
+    """Wait until every port has a reader, then ``settle_s`` more (a client flushes its input while it
+    opens the port); False if stopped first."""
+    while not all(p.has_reader() for p in ports):
+        if stop.wait(WAIT_S / 5):
+            return False
+    return not stop.wait(settle_s)
