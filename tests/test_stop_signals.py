@@ -20,6 +20,9 @@ ROOT = Path(__file__).resolve().parents[1]
 def _commanded_config(tmp_path: Path) -> Path:
     cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
     cfg["turntable"]["command_port"] = "emulator"
+    # a 16-bit packet counter: a host stall of the loaded test machine is never taken for counter wraps
+    # (the KVH's 7-bit counter wraps every 160 ms at --speed 4; see docs/harness.md)
+    cfg["imu"]["protocol"] = "xsens-mtdata2"
     path = tmp_path / "commanded.yaml"
     path.write_text(yaml.safe_dump(cfg))
     return path
