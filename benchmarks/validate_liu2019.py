@@ -13,8 +13,9 @@ import argparse
 import numpy as np
 
 from emulators.simulation import Simulation
-from hil.config import DEG, UG, load_config
+from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
+from hil.units import DEG, UG
 
 TABLE3 = {"theoretical": (0.008594, -0.003437), "method1": (0.008687, -0.003398), "method2": (0.000069, -0.000218)}
 

@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from emulators.simulation import Simulation
-from hil.config import UG, load_config
+from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
+from hil.units import UG
 from hil.viz import TABLE_RATE_HZ, TrialViewer
 
 HEALTH = {

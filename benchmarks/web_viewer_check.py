@@ -27,8 +27,9 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from emulators.simulation import Simulation
-from hil.config import UG, load_config
+from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
+from hil.units import UG
 from hil.viz import TrialViewer
 
 CHROMIUM = "/usr/bin/chromium"

@@ -16,8 +16,9 @@ import cantools
 
 from drivers.codec import Codec, Decoded, Framer, RawChunk
 from drivers.framing import SequenceUnwrapper
-from hil.config import G0, CanSignals, resolve_path
+from hil.config import CanSignals, resolve_path
 from hil.samples import ImuSample
+from hil.units import G0
 
 DEG = math.pi / 180.0
 # DBC unit -> (what it measures, factor to SI)

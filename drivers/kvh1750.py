@@ -10,8 +10,8 @@ from typing import Any, ClassVar
 from drivers.codec import Decoded, DecodeError
 from drivers.crc import crc32_mpeg2
 from drivers.framing import ByteCodec
-from hil.config import G0
 from hil.samples import ImuSample
+from hil.units import G0
 
 HEADER = b"\xfe\x81\xff\x55"
 FRAME_SIZE = 36

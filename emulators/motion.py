@@ -15,8 +15,9 @@ from typing import Protocol
 
 import numpy as np
 
-from hil.config import DEG, MotionConfig
+from hil.config import MotionConfig
 from hil.samples import GIMBAL_AXES
+from hil.units import DEG
 
 
 class MotionProfile(Protocol):

@@ -34,7 +34,8 @@ import math
 
 import numpy as np
 
-from hil.config import ARCSEC, DEG_PER_H, PPM, UG, ImuErrors
+from hil.config import ImuErrors
+from hil.units import ARCSEC, DEG_PER_H, PPM, UG
 
 _SECONDS_PER_HOUR = 3600.0
 # Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the

@@ -48,8 +48,9 @@ from emulators.motion import (
     Swing,
     motion_breaks,
 )
-from hil.config import DEG, LimitsConfig, MotionConfig, TurntableConfig
+from hil.config import LimitsConfig, MotionConfig, TurntableConfig
 from hil.samples import GIMBAL_AXES
+from hil.units import DEG
 
 IDN = "turntable-hil,emulated three-axis table,0,1"
 _AXIS_INDEX = {AXIS_NUMBER[g]: k for k, g in enumerate(GIMBAL_AXES)}  # acl axis "1".."3" -> column

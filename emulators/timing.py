@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.config import PPM, DeviceTiming
+from hil.config import DeviceTiming
+from hil.units import PPM
 
 
 @dataclass(frozen=True)

@@ -67,8 +67,8 @@ def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
         return None
     import numpy as np
 
-    from hil.config import UG
     from hil.frames import TableGeometry
+    from hil.units import UG
     from hil.viz import TrialViewer
 
     truth = np.array(cfg.imu.errors.accel_bias_ug) * UG if cfg.imu.source == "emulator" else None
@@ -134,8 +134,8 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, config_text: str,
     """The live part of ``hil run``: emulator (if emulated), viewer, table control and the trial; the table
     is sent Off, the viewer closed and the emulator reaped on every way out. Returns the finished trial and
     how it ended."""
-    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
     from drivers.table_client import InterlockError, LimitError, TableError
+    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
     from hil.live import LiveTrial
     from hil.progress import ConsoleProgress
     from hil.table_control import MotionCheck, TableControl

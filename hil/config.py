@@ -14,14 +14,15 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
-G0 = 9.80665  # m/s^2 per g (standard gravity)
-UG = 9.80665e-6  # m/s^2 per micro-g
-DEG = math.pi / 180.0
-DEG_PER_H = DEG / 3600.0
-ARCSEC = DEG / 3600.0
-PPM = 1e-6
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 
 

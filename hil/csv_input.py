@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import DEG
 from hil.samples import AlignedBatch
+from hil.units import DEG
 
 INCREMENT_COLUMNS = ("t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_x_mps", "dv_y_mps", "dv_z_mps")
 ANGLE_COLUMNS = ("outer_deg", "middle_deg", "inner_deg")

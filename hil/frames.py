@@ -8,13 +8,14 @@ i.e. scipy's intrinsic ``"ZXY"`` sequence. Gimbal angle arrays are ordered (oute
 from __future__ import annotations
 
 import math
-from functools import cached_property
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hil.config import DEG, TurntableConfig
+from hil.config import TurntableConfig
+from hil.units import DEG
 
 EARTH_RATE = 7.2921151467e-5  # rad/s, WGS-84
 WGS84_A = 6378137.0  # m, semi-major axis

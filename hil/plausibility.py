@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.config import DEG, G0, ImuConfig
+from hil.config import ImuConfig
 from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.samples import ImuSample
+from hil.units import DEG, G0
 
 RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
 STALL_S = 5.0  # every IMU sample rejected for this long (of samples) ends a live trial

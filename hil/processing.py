@@ -14,14 +14,21 @@ import numpy as np
 
 from drivers.codec import Codec, DecodeError, Framer, RawChunk, StreamEvent
 from drivers.registry import imu_codec, make_codec
-from hil.config import DEG, Config
+from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
-from hil.plausibility import RATE_MARGIN, GyroTableGate, ImuPlausibility, RejectionWatch, UnitKeys
+from hil.plausibility import (
+    RATE_MARGIN,
+    GyroTableGate,
+    ImuPlausibility,
+    RejectionWatch,
+    UnitKeys,
+)
 from hil.results import StreamCounts, build_result, empty_result
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner
 from hil.time_offset import TimeOffsetEstimator
+from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
 

@@ -7,8 +7,8 @@ import time
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from hil.config import UG
 from hil.processing import TrialProcessor
+from hil.units import UG
 
 
 class ConsoleProgress:

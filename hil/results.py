@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from hil.config import DEG, UG
 from hil.estimation.online import OnlineEstimator, Snapshot, convergence_time
+from hil.units import DEG, UG
 
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
 

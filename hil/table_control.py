@@ -17,8 +17,9 @@ from collections import deque
 import numpy as np
 
 from drivers.table_client import GIMBALS, TableCommandClient, TableError
-from hil.config import DEG, TurntableConfig
+from hil.config import TurntableConfig
 from hil.samples import AlignedSample
+from hil.units import DEG
 
 SETTLE_S = 2.0  # beyond the longest period, for the table to reach the commanded motion
 STATIC_TOLERANCE_DEG = 0.5

@@ -39,9 +39,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from hil.config import DEG, UG
 from hil.estimation.online import Snapshot
 from hil.frames import EARTH_RATE, TableGeometry
+from hil.units import DEG, UG
 from hil.viewer_modes import VIEWER_MODES
 
 log = logging.getLogger(__name__)

@@ -9,7 +9,7 @@ import pytest
 
 from emulators.simulation import Simulation
 from hil.cli import main
-from hil.config import DEG
+from hil.units import DEG
 from tests.conftest import PAPER_ERRORS, make_config
 
 

@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hil.config import DEG, UG
 from hil.estimation.alignment import attitude_error, dual_vector, theoretical_error
 from hil.estimation.apparent_gravity import ApparentGravityEstimator
 from hil.estimation.strapdown import cumulative_product
 from hil.frames import EARTH_RATE, TableGeometry, euler_rotation
+from hil.units import DEG, UG
 from tests.conftest import PAPER_ERRORS, make_config, run_estimator
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from emulators.sensor_errors import SensorErrorModel
-from hil.config import ARCSEC, DEG_PER_H, PPM, UG, ImuErrors
+from hil.config import ImuErrors
+from hil.units import ARCSEC, DEG_PER_H, PPM, UG
 
 RATE = 200.0
 T = 1.0 / RATE

@@ -2,14 +2,14 @@
 
 import numpy as np
 import pytest
+from conftest import make_config
 from scipy.spatial.transform import Rotation
 
-from conftest import make_config
 from emulators.simulation import Simulation
-from hil.config import DEG
 from hil.estimation.online import OnlineEstimator
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 from hil.sync import Aligner, cumulative_cubic, lagrange_weights
+from hil.units import DEG
 
 RATE = 200.0
 DELAY = 50e-6

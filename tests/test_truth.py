@@ -6,9 +6,9 @@ from scipy.spatial.transform import Rotation
 
 from emulators.motion import Positions, motion_from_config
 from emulators.truth import Truth
-from hil.config import DEG
 from hil.estimation.strapdown import Strapdown
 from hil.frames import EARTH_RATE, Earth, TableGeometry
+from hil.units import DEG
 from tests.conftest import make_config
 
 

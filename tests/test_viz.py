@@ -16,8 +16,8 @@ from rerun.chunk import RrdReader
 
 from emulators.simulation import Simulation
 from hil import viz
-from hil.config import DEG, UG
 from hil.estimation.online import OnlineEstimator
+from hil.units import DEG, UG
 from hil.viewer_modes import default_viewer_mode
 from hil.viz import TrialViewer
 

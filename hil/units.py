@@ -1,0 +1,12 @@
+"""Unit constants: multiply a value in the named unit to get SI (m/s^2, rad, rad/s, dimensionless)."""
+
+from __future__ import annotations
+
+import math
+
+G0 = 9.80665  # m/s^2 per g (standard gravity)
+UG = 9.80665e-6  # m/s^2 per micro-g (G0 * 1e-6, written out: the product rounds differently)
+DEG = math.pi / 180.0  # rad per degree
+DEG_PER_H = DEG / 3600.0  # rad/s per deg/h
+ARCSEC = DEG / 3600.0  # rad per arc second
+PPM = 1e-6
