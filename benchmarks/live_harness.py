@@ -18,7 +18,7 @@ from pathlib import Path
 
 from emulators.emulate import spawn_emulator
 from hil.config import load_config
-from hil.live import LiveTrial
+from hil.trial.live import LiveTrial
 
 
 def rss_mib() -> float:

@@ -38,8 +38,8 @@ def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: l
             ended: str) -> str:
     """Write result.json (with how the trial ``ended``), series.csv, config.yaml, the figures, report.html
     and junit.xml, and print the summary; returns the overall outcome against ``output.limits``."""
-    from hil.report import measurements, overall, write_report
-    from hil.results import summary_text, write_outputs
+    from hil.outputs.report import measurements, overall, write_report
+    from hil.outputs.result import summary_text, write_outputs
 
     result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
     write_outputs(out, result, snapshots, figures=cfg.output.figures and not args.no_figures, config_text=config_text)
@@ -52,8 +52,8 @@ def _finish(args: argparse.Namespace, cfg, out: Path, result: dict, snapshots: l
 
 def _exit_code(ended: str, outcome: str) -> int:
     """DESIGN.md's exit codes: 1 a trial that ended early or was interrupted, 3 one that FAILs its limits."""
-    from hil.report import FAIL
-    from hil.results import COMPLETED
+    from hil.outputs.report import FAIL
+    from hil.outputs.result import COMPLETED
 
     if ended != COMPLETED:
         print(f"hil: trial {ended}", file=sys.stderr)
@@ -69,7 +69,7 @@ def _viewer(args: argparse.Namespace, cfg, out: Path, blocking: bool):
 
     from hil.frames import TableGeometry
     from hil.units import UG
-    from hil.viz import TrialViewer
+    from hil.viewer.rerun_viewer import TrialViewer
 
     truth = np.array(cfg.imu.errors.accel_bias_ug) * UG if cfg.imu.source == "emulator" else None
     try:
@@ -100,8 +100,8 @@ def _close_viewer(viewer) -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     """``hil run``: exit 0 done, 1 ended early or interrupted (outputs kept), 2 bad input, 3 FAILs its limits."""
     from hil.config import load_config
-    from hil.results import COMPLETED
-    from hil.stop_signals import StopSignals
+    from hil.outputs.result import COMPLETED
+    from hil.trial.stop_signals import StopSignals
 
     config_path = Path(args.config)
     cfg = load_config(config_path)
@@ -136,9 +136,9 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, config_text: str,
     how it ended."""
     from drivers.table_client import InterlockError, LimitError, TableError
     from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
-    from hil.live import LiveTrial
-    from hil.progress import ConsoleProgress
-    from hil.table_control import MotionCheck, TableControl
+    from hil.trial.live import LiveTrial
+    from hil.trial.table_control import MotionCheck, TableControl
+    from hil.viewer.progress import ConsoleProgress
 
     emulated = {cfg.imu.source, cfg.turntable.source} == {"emulator"}
     emulator, ports, control, viewer = None, None, None, None
@@ -200,8 +200,8 @@ def _command_url(cfg, ports: dict | None) -> str | None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from hil.replay import open_recording, recording_path, replay
-    from hil.results import COMPLETED
+    from hil.outputs.result import COMPLETED
+    from hil.recording.replay import open_recording, recording_path, replay
 
     source_dir = recording_path(args.source).parent
     out = Path(args.out) if args.out else source_dir / "replay"
@@ -219,7 +219,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from hil.report import ReportError, write_report
+    from hil.outputs.report import ReportError, write_report
 
     try:
         path = write_report(Path(args.dir))
@@ -233,7 +233,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from emulators.simulation import Simulation
     from hil.config import load_config
     from hil.estimation.online import OnlineEstimator
-    from hil.results import COMPLETED, StreamCounts, build_result
+    from hil.outputs.result import COMPLETED, StreamCounts, build_result
 
     cfg = load_config(args.config)
     sim = Simulation.from_config(cfg)
@@ -260,10 +260,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from hil.config import load_config
-    from hil.csv_input import read_increments_csv
     from hil.estimation.online import OnlineEstimator
     from hil.frames import Earth, TableGeometry
-    from hil.results import COMPLETED, StreamCounts, build_result
+    from hil.outputs.result import COMPLETED, StreamCounts, build_result
+    from hil.recording.csv_input import read_increments_csv
 
     cfg = load_config(args.config)
     batch = read_increments_csv(args.data)
@@ -311,7 +311,7 @@ def _config_argument(p: argparse.ArgumentParser) -> None:
 
 
 def _viewer_options(p: argparse.ArgumentParser, default: str | None = None) -> None:
-    from hil.viewer_modes import VIEWER_MODES, default_viewer_mode
+    from hil.viewer.modes import VIEWER_MODES, default_viewer_mode
 
     default = default or default_viewer_mode()
     p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
@@ -383,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     # imported after parsing: --help needs none of them
     from drivers.transport import TransportError
     from hil.config import ConfigError
-    from hil.csv_input import DataError
+    from hil.recording.csv_input import DataError
 
     try:
         return args.func(args)

@@ -1,9 +1,9 @@
 
 import pytest
 
+from emulators.simulation import Simulation
 from hil.config import Config, parse_config
 from hil.estimation.online import OnlineEstimator
-from emulators.simulation import Simulation
 
 SWING = {
     "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},

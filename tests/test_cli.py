@@ -37,15 +37,15 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
 
 @pytest.mark.parametrize("flags", [[], ["--no-figures"]])
 def test_simulate_draws_each_figure_once(tmp_path, monkeypatch, flags):
-    import hil.figures
+    import hil.outputs.figures
 
-    draw, drawn = hil.figures.write_figures, []
-    monkeypatch.setattr(hil.figures, "write_figures", lambda out, *args: drawn.append(out) or draw(out, *args))
+    draw, drawn = hil.outputs.figures.write_figures, []
+    monkeypatch.setattr(hil.outputs.figures, "write_figures", lambda out, *args: drawn.append(out) or draw(out, *args))
     write_config(tmp_path / "c.yaml", duration=60, errors=PAPER_ERRORS)
     assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "out"), *flags]) == 0
     assert len(drawn) == 1
     page = (tmp_path / "out" / "report.html").read_text()
-    assert len(re.findall(r"src='data:image/png;base64,", page)) == len(hil.figures.FIGURES)
+    assert len(re.findall(r"src='data:image/png;base64,", page)) == len(hil.outputs.figures.FIGURES)
 
 
 def test_the_parser_imports_neither_rerun_nor_matplotlib():

@@ -16,7 +16,7 @@ from drivers.can_dbc import CanDbcCodec
 from drivers.capture import decode_capture
 from drivers.codec import RawChunk
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
-from drivers.session import DeviceSession
+from drivers.reader import DeviceSession
 from drivers.tap import CanLogTap, RawListener, SampleListener
 from drivers.transport import CanTransport, open_can_bus
 from hil.cli import main

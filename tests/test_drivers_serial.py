@@ -13,8 +13,13 @@ import pytest
 
 from drivers.acl import AclCodec, AclReply
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
-from drivers.session import DeviceSession
-from drivers.table_client import InterlockError, LimitError, TableCommandClient, TableError
+from drivers.reader import DeviceSession
+from drivers.table_client import (
+    InterlockError,
+    LimitError,
+    TableCommandClient,
+    TableError,
+)
 from drivers.tap import RawListener, SampleListener
 from drivers.transport import SerialTransport
 from hil.config import LimitsConfig

@@ -13,7 +13,6 @@ import can
 import pytest
 import serial
 import yaml
-
 from test_emulated_shutdown import CONFIG
 
 KVH_HEADER = b"\xfe\x81\xff\x55"

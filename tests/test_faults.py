@@ -15,7 +15,7 @@ from test_emulated_devices import read_raw
 
 from drivers.framing import SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec, KvhFrame
-from drivers.session import DeviceSession
+from drivers.reader import DeviceSession
 from drivers.tap import SampleListener
 from drivers.transport import SerialTransport
 from drivers.tts1 import Status, Tts1Codec

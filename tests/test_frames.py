@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_angles, euler_from_matrix, euler_rotation, normal_gravity
+from hil.frames import (
+    EARTH_RATE,
+    Earth,
+    TableGeometry,
+    euler_angles,
+    euler_from_matrix,
+    euler_rotation,
+    normal_gravity,
+)
 
 
 def rx(a):

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hil.recording.recorder import Recorder, read_recording
+from hil.recording.replay import open_recording, replay
 
 from hil.cli import main
-from hil.recording import Recorder, read_recording
-from hil.replay import open_recording, replay
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -2,7 +2,7 @@
 
 import math
 
-from hil.plausibility import ImuPlausibility, UnitKeys
+from hil.pipeline.plausibility import ImuPlausibility, UnitKeys
 from hil.samples import ImuSample
 
 G = 9.79
@@ -24,7 +24,7 @@ def test_small_rotation_vectors_match_scipy():
     import numpy as np
     from scipy.spatial.transform import Rotation
 
-    from hil.plausibility import small_rotation_vectors
+    from hil.pipeline.plausibility import small_rotation_vectors
 
     v = np.random.default_rng(2).normal(size=(20, 3)) * np.array([[1e-9], [1e-4], [0.5]]).repeat(7, axis=0)[:20]
     np.testing.assert_allclose(small_rotation_vectors(Rotation.from_rotvec(v).as_matrix()), v, atol=1e-15)
@@ -32,10 +32,10 @@ def test_small_rotation_vectors_match_scipy():
 
 def test_gyro_table_gate_passes_clean_increments_and_catches_a_damaged_one():
     import numpy as np
-
     from conftest import make_config
+
     from emulators.simulation import Simulation
-    from hil.plausibility import GyroTableGate
+    from hil.pipeline.plausibility import GyroTableGate
 
     sim = Simulation.from_config(make_config(duration=10, rate=200.0, errors={"gyro_bias_dph": [0.01] * 3,
                                                                               "gyro_noise_dph": [0.01] * 3}))
@@ -61,7 +61,7 @@ def test_a_wrong_accelerometer_unit_is_named_in_the_diagnosis():
 
 
 def test_the_rejection_watch_stalls_after_five_seconds_of_samples_and_resets_on_a_taken_one():
-    from hil.plausibility import RejectionWatch
+    from hil.pipeline.plausibility import RejectionWatch
 
     watch = RejectionWatch(200.0)
     watch.rejected(999)

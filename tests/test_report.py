@@ -14,8 +14,8 @@ import yaml
 from conftest import PAPER_ERRORS, make_config, run_estimator
 
 from hil.config import ReportLimits
-from hil.figures import FIGURES
-from hil.report import (
+from hil.outputs.figures import FIGURES
+from hil.outputs.report import (
     FAIL,
     NOT_JUDGED,
     PASS,
@@ -24,7 +24,7 @@ from hil.report import (
     overall,
     write_report,
 )
-from hil.results import StreamCounts, build_result, write_outputs
+from hil.outputs.result import StreamCounts, build_result, write_outputs
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from emulators.simulation import Simulation
 from hil.estimation.online import OnlineEstimator
+from hil.pipeline.aligner import Aligner, cumulative_cubic, lagrange_weights
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
-from hil.sync import Aligner, cumulative_cubic, lagrange_weights
 from hil.units import DEG
 
 RATE = 200.0

@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 import yaml
-
 from conftest import make_config
+
 from hil.cli import main
 from hil.samples import AlignedSample
-from hil.table_control import MotionCheck
+from hil.trial.table_control import MotionCheck
 
 ROOT_CONFIG = "configs/emulated_swing.yaml"
 

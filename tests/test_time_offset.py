@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-
 from conftest import make_config
+
 from emulators.simulation import Simulation
+from hil.pipeline.time_offset import TimeOffsetEstimator
 from hil.samples import AlignedSample
-from hil.time_offset import TimeOffsetEstimator
 
 
 # at 2000 Hz 13 ms lies beyond the cross-correlation's 20 samples: Gauss-Newton takes it from there

@@ -15,11 +15,11 @@ from conftest import PAPER_ERRORS, make_config
 from rerun.chunk import RrdReader
 
 from emulators.simulation import Simulation
-from hil import viz
+from hil.viewer import rerun_viewer as viz
 from hil.estimation.online import OnlineEstimator
 from hil.units import DEG, UG
-from hil.viewer_modes import default_viewer_mode
-from hil.viz import TrialViewer
+from hil.viewer.modes import default_viewer_mode
+from hil.viewer.rerun_viewer import TrialViewer
 
 HEALTH = {
     "imu": {"rate_hz": 199.5, "frames": 12000, "dropped": 2, "corrupt": 1, "latency_ms": 3.25},

@@ -14,13 +14,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from hil.estimation.alignment import alignment_matrix, attitude_error, body_attitude, theoretical_error
+from hil.estimation.alignment import (
+    alignment_matrix,
+    attitude_error,
+    body_attitude,
+    theoretical_error,
+)
 from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
 from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.samples import AlignedBatch, AlignedSample, ImuGap
-
 
 MAX_SNAPSHOTS = 7200  # 2 h at 1 Hz, ~40 MB; older history is thinned beyond
 OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neighbours is left out

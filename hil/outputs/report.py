@@ -130,7 +130,7 @@ def overall(results: list[Measurement]) -> str:
 
 def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     """Write ``out_dir/report.html`` from result.json, the figures and series.csv, and junit.xml beside it
-    (:mod:`hil.junit`); returns the report's path.
+    (:mod:`hil.outputs.junit`); returns the report's path.
 
     Without ``limits`` the limits come from ``out_dir/config.yaml`` (the trial config's copy);
     without that file nothing is judged.
@@ -160,7 +160,7 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     page = _render(result, results, _figures(out_dir, series, result), series, notes)
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
-    from hil.junit import write_junit  # it imports this module
+    from hil.outputs.junit import write_junit  # it imports this module
 
     write_junit(out_dir, result, results)
     return path
@@ -197,12 +197,12 @@ def _read_series(path: Path) -> dict[str, np.ndarray] | None:
 
 def _figures(out_dir: Path, series: dict[str, np.ndarray] | None, result: dict) -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the trial's figures; drawn from series.csv when the PNGs are missing."""
-    from hil.figures import FIGURES
+    from hil.outputs.figures import FIGURES
 
     names = list(FIGURES) + sorted(p.name for p in out_dir.glob("*.png") if p.name not in FIGURES)
     if series is not None and not all((out_dir / n).exists() for n in FIGURES):
-        from hil.figures import write_figures
-        from hil.results import SERIES_COLUMNS
+        from hil.outputs.figures import write_figures
+        from hil.outputs.result import SERIES_COLUMNS
 
         if all(c in series for c in SERIES_COLUMNS):
             with tempfile.TemporaryDirectory() as tmp:

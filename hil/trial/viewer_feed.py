@@ -8,12 +8,12 @@ from typing import Protocol
 import numpy as np
 
 from hil.estimation.online import Snapshot
-from hil.processing import IMU, TABLE, TrialProcessor
+from hil.pipeline.processor import IMU, TABLE, TrialProcessor
 from hil.samples import AlignedSample
 
 
 class Viewer(Protocol):
-    """What a trial needs of a viewer (see :class:`hil.viz.TrialViewer`)."""
+    """What a trial needs of a viewer (see :class:`hil.viewer.rerun_viewer.TrialViewer`)."""
 
     def log_snapshot(self, snap: Snapshot) -> None: ...
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...

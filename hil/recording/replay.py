@@ -7,10 +7,10 @@ from pathlib import Path
 import yaml
 
 from hil.config import Config, ConfigError, parse_config
-from hil.csv_input import DataError
-from hil.processing import TrialProcessor
-from hil.recording import Recording, read_recording
-from hil.sinks import Viewer, ViewerSinks, health
+from hil.pipeline.processor import TrialProcessor
+from hil.recording.csv_input import DataError
+from hil.recording.recorder import Recording, read_recording
+from hil.trial.viewer_feed import Viewer, ViewerSinks, health
 
 RECORDING_NAME = "recording.mcap"
 

@@ -23,7 +23,7 @@ Decisions depend only on the order in which samples arrive, never on wall-clock 
 replay of the same frames gives bit-identical output.
 
 Fallback for devices without a sync input (``free_running``): each counter is mapped to host time by
-an :class:`~hil.clock_model.AffineClock` fitted to the receive times, and the table's latch instants are
+an :class:`~hil.pipeline.clock_model.AffineClock` fitted to the receive times, and the table's latch instants are
 placed on the IMU's time line through both fits (accuracy set by the host's receive-time jitter).
 """
 
@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hil.clock_model import AffineClock
+from hil.pipeline.clock_model import AffineClock
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
 
 Vec3 = tuple[float, float, float]

@@ -7,7 +7,7 @@ import time
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from hil.processing import TrialProcessor
+from hil.pipeline.processor import TrialProcessor
 from hil.units import UG
 
 

@@ -2,7 +2,7 @@
 
 It is deterministic: the same sequence of chunks and events (a live run, or its recording) gives
 the same samples, the same estimator batches and so a bit-identical result. Live acquisition
-(:mod:`hil.live`) and replay (:mod:`hil.replay`) differ only in where the chunks come from.
+(:mod:`hil.trial.live`) and replay (:mod:`hil.recording.replay`) differ only in where the chunks come from.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ from drivers.registry import imu_codec, make_codec
 from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
-from hil.plausibility import (
+from hil.outputs.result import StreamCounts, build_result, empty_result
+from hil.pipeline.aligner import Aligner
+from hil.pipeline.plausibility import (
     RATE_MARGIN,
     GyroTableGate,
     ImuPlausibility,
     RejectionWatch,
     UnitKeys,
 )
-from hil.results import StreamCounts, build_result, empty_result
+from hil.pipeline.time_offset import TimeOffsetEstimator
 from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
-from hil.sync import Aligner
-from hil.time_offset import TimeOffsetEstimator
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"

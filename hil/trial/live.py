@@ -1,9 +1,9 @@
 """A live trial: device readers, the recorder, and the processing loop with its sinks.
 
-Threads: one reader per device (:class:`drivers.session.DeviceSession`) hands every raw chunk to a
+Threads: one reader per device (:class:`drivers.reader.DeviceSession`) hands every raw chunk to a
 :class:`Fanout`, which stamps it with the host time rounded to the recording's nanoseconds and puts
 it, in one global order, into the recorder's queue (unbounded: the recording never drops) and into
-the bounded processing queue. The caller's thread runs the :class:`~hil.processing.TrialProcessor`
+the bounded processing queue. The caller's thread runs the :class:`~hil.pipeline.processor.TrialProcessor`
 on that queue and the sinks (console progress, viewer) at display rate, so neither the viewer nor
 the disk can hold up acquisition. A full processing queue makes the readers wait (the serial
 driver's buffers hold the bytes): nothing is lost, and the live result stays equal to the replay's.
@@ -24,16 +24,16 @@ from typing import Any
 import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent
-from drivers.session import DeviceSession
+from drivers.reader import DeviceSession
 from drivers.tap import RawListener
 from drivers.transport import CanTransport, SerialTransport, Transport
 from hil.config import Config
-from hil.processing import IMU, TABLE, TrialProcessor
-from hil.recording import Recorder, to_ns
-from hil.results import COMPLETED
+from hil.outputs.result import COMPLETED
+from hil.pipeline.processor import IMU, TABLE, TrialProcessor
+from hil.recording.recorder import Recorder, to_ns
 from hil.samples import AlignedSample
-from hil.sinks import Viewer, ViewerSinks, health
-from hil.table_control import MotionCheck
+from hil.trial.table_control import MotionCheck
+from hil.trial.viewer_feed import Viewer, ViewerSinks, health
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial

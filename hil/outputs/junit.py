@@ -15,8 +15,8 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from hil.report import FAIL, NOT_JUDGED, Measurement
-from hil.results import COMPLETED
+from hil.outputs.report import FAIL, NOT_JUDGED, Measurement
+from hil.outputs.result import COMPLETED
 
 JUNIT_NAME = "junit.xml"
 

@@ -154,7 +154,7 @@ def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: b
         writer.writerow(SERIES_COLUMNS)
         writer.writerows(["" if isinstance(v, float) and np.isnan(v) else v for v in row] for row in rows)
     if figures and rows:
-        from hil.figures import write_figures
+        from hil.outputs.figures import write_figures
 
         write_figures(out, np.array(rows, dtype=float), result)
 

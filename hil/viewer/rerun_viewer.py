@@ -42,7 +42,7 @@ import rerun.blueprint as rrb
 from hil.estimation.online import Snapshot
 from hil.frames import EARTH_RATE, TableGeometry
 from hil.units import DEG, UG
-from hil.viewer_modes import VIEWER_MODES
+from hil.viewer.modes import VIEWER_MODES
 
 log = logging.getLogger(__name__)
 
