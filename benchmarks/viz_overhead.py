@@ -28,7 +28,7 @@ from emulators.simulation import Simulation
 from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
 from hil.units import UG
-from hil.viewer.rerun_viewer import TABLE_RATE_HZ, TrialViewer
+from hil.viewer.trial_viewer import TABLE_RATE_HZ, TrialViewer
 
 HEALTH = {
     "imu": {"rate_hz": 200.0, "frames": 0, "dropped": 0, "corrupt": 0, "latency_ms": 2.0},

@@ -30,7 +30,7 @@ from emulators.simulation import Simulation
 from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
 from hil.units import UG
-from hil.viewer.rerun_viewer import TrialViewer
+from hil.viewer.trial_viewer import TrialViewer
 
 CHROMIUM = "/usr/bin/chromium"
 GL_ARGS = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]

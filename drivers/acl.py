@@ -136,9 +136,6 @@ class AclCodec:
             raise AclError(f"acl: malformed error reply {text!r}")
         return AclReply(message, int(code))
 
-    def line_framer(self) -> LineFramer:
-        return LineFramer()
-
 
 class LineFramer:
     """Splits a byte stream into lines (CR LF or LF); over-long lines are dropped and counted."""

@@ -15,7 +15,7 @@ import can
 import cantools
 
 from drivers.codec import Codec, Decoded, Framer, RawChunk
-from drivers.framing import SequenceUnwrapper
+from drivers.framing import SequenceUnwrapper, host_rate
 from hil.config import CanSignals, resolve_path
 from hil.samples import ImuSample
 from hil.units import G0
@@ -136,8 +136,8 @@ class CanDbcCodec(Codec[CanImuFrame]):
                                    data=message.encode(data, padding=True)))
         return out
 
-    def framer(self) -> CanFramer:
-        return CanFramer(self)
+    def framer(self, time_scale: float | None = 1.0) -> CanFramer:
+        return CanFramer(self, time_scale)
 
     def to_sample(self, decoded: Decoded[CanImuFrame]) -> ImuSample:
         r, s = decoded.record, self.scales
@@ -163,10 +163,10 @@ class CanDbcCodec(Codec[CanImuFrame]):
 class CanFramer(Framer):
     """Collects the configured messages of one sample; ignores other traffic (counted as skipped bytes)."""
 
-    def __init__(self, codec: CanDbcCodec) -> None:
+    def __init__(self, codec: CanDbcCodec, time_scale: float | None = 1.0) -> None:
         super().__init__()
         self.codec = codec
-        self.unwrapper = SequenceUnwrapper(codec.sync_modulus, codec.rate_hz)
+        self.unwrapper = SequenceUnwrapper(codec.sync_modulus, host_rate(codec.rate_hz, time_scale))
         self._pending: dict[str, dict[str, float]] = {}
         self._pending_bytes = 0
         self._counter: int | None = None

@@ -19,6 +19,7 @@ from can.io.blf import BLFParseError
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
+from drivers.decoder import StreamDecoder
 from drivers.registry import codec_class
 from drivers.tap import message_to_chunk
 from hil.config import CanConfig
@@ -57,19 +58,19 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     else:
         codec = _byte_codec(protocol, rate_hz, codec_options)
         chunks = _byte_chunks(path)
-    framer = codec.framer()
+    decoder = StreamDecoder(codec)
     try:
         with open(out_csv, "w", newline="", encoding="utf-8") if out_csv else contextlib.nullcontext() as out:
             writer = csv.writer(out) if out is not None else None
             if writer:
                 writer.writerow(["sync_index", *codec.csv_header()])
             for chunk in chunks:
-                for decoded in framer.feed_chunk(chunk):
+                for decoded in decoder.frames(chunk):
                     if writer:
                         writer.writerow([decoded.sync_index, *codec.csv_row(decoded.record)])
     except OSError as exc:
         raise CaptureError(f"{exc.filename or path}: {exc.strerror or exc}") from None
-    return framer.counters.as_dict()
+    return decoder.counters.as_dict()
 
 
 def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:

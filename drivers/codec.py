@@ -95,8 +95,8 @@ class Codec(ABC, Generic[R]):
         """The record on the wire (bytes, or CAN messages)."""
 
     @abstractmethod
-    def framer(self) -> Framer:
-        """A fresh stream framer for this codec."""
+    def framer(self, time_scale: float | None = 1.0) -> Framer:
+        """A fresh stream framer for this codec; ``time_scale``: see :func:`drivers.framing.host_rate`."""
 
     @abstractmethod
     def to_sample(self, decoded: Decoded[R]) -> Sample:

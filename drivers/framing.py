@@ -14,6 +14,13 @@ from typing import ClassVar
 from drivers.codec import Codec, Counters, Decoded, DecodeError, Framer, R, RawChunk
 
 
+def host_rate(rate_hz: float | None, time_scale: float | None) -> float | None:
+    """Frames per host second of a device at ``rate_hz`` running ``time_scale`` times faster than real
+    time (an emulator at ``--speed X``); None when the host times say nothing of the device's (``--speed
+    max``, or no known rate), so that only the counters are used."""
+    return None if not rate_hz or time_scale is None else rate_hz * time_scale
+
+
 class SequenceUnwrapper:
     """Unwraps a device counter that counts modulo ``modulus`` into a monotonic index.
 
@@ -121,17 +128,18 @@ class ByteCodec(Codec[R]):
         """The frame's own counter, or None."""
         return None
 
-    def framer(self) -> ByteFramer:
-        return ByteFramer(self)
+    def framer(self, time_scale: float | None = 1.0) -> ByteFramer:
+        return ByteFramer(self, time_scale)
 
 
 class ByteFramer(Framer):
     """Splits a byte stream into valid frames of one :class:`ByteCodec`."""
 
-    def __init__(self, codec: ByteCodec) -> None:
+    def __init__(self, codec: ByteCodec, time_scale: float | None = 1.0) -> None:
         super().__init__()
         self.codec = codec
-        self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, codec.rate_hz, codec.sequence_step)
+        self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, host_rate(codec.rate_hz, time_scale),
+                                           codec.sequence_step)
         self._buf = bytearray()
 
     @property

@@ -95,14 +95,6 @@ class TableCommandClient:
     def interlocks_closed(self, gimbal: str) -> bool:
         return self.send(AclCommand(":Interlock?", (_axis(gimbal),))).text.strip().lower() == "closed"
 
-    def read_position(self, gimbal: str) -> float:
-        """The gimbal's position, deg."""
-        text = self.send(AclCommand(":Read:Position?", (_axis(gimbal),))).text
-        try:
-            return float(text)
-        except ValueError:
-            raise TableError(f"turntable: position reply {text!r} is not a number") from None
-
     # Commands
 
     def apply_limits(self) -> None:

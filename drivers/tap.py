@@ -1,4 +1,4 @@
-"""Listeners: the raw tap (every chunk before parsing) and sample consumers, as python-can's Listener."""
+"""Listeners on a device reader: the raw tap (every chunk before parsing), as python-can's Listener."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import can
 
-from drivers.codec import RawChunk, Sample, StreamEvent
+from drivers.codec import RawChunk, StreamEvent
 
 
 class RawListener(ABC):
@@ -22,17 +22,6 @@ class RawListener(ABC):
 
     def stop(self) -> None:
         """The session has ended; flush and release resources."""
-
-
-class SampleListener(ABC):
-    """Receives the SI samples a device session decodes."""
-
-    @abstractmethod
-    def on_sample(self, sample: Sample) -> None:
-        """Called from the session's reader thread; keep it short."""
-
-    def stop(self) -> None:
-        """The session has ended."""
 
 
 class CanLogTap(RawListener):

@@ -13,6 +13,7 @@ import socket
 import sys
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -210,3 +211,29 @@ class CanTransport(Transport):
         if self.bus is not None:
             self.bus.shutdown()
             self.bus = None
+
+
+CAN_SCHEME = "can"
+
+
+def open_transport(port: str | Mapping[str, Any], stream: str, baudrate: int = 115200) -> Transport:
+    """The (not yet opened) transport of a port, named the way the config and ports.json name it.
+
+    - a CAN port: a mapping ``{"interface": ..., "channel": ...[, "bitrate": N]}`` as python-can takes it
+      (ports.json's form), or the URL ``can://INTERFACE/CHANNEL[?bitrate=N]``;
+    - anything else is a pyserial URL (a device path, ``socket://``, ``rfc2217://``, ...) at ``baudrate``.
+    """
+    if isinstance(port, Mapping):
+        bitrate = port.get("bitrate")
+        return CanTransport(port["interface"], port["channel"], stream, None if bitrate is None else int(bitrate))
+    parts = urlsplit(port)
+    if parts.scheme == CAN_SCHEME:
+        channel = parts.path.lstrip("/")
+        if not parts.netloc or not channel:
+            raise TransportError(f"{stream}: {port}: a CAN URL is can://INTERFACE/CHANNEL[?bitrate=N]")
+        bitrate = parse_qs(parts.query).get("bitrate", [None])[0]
+        try:
+            return CanTransport(parts.netloc, channel, stream, None if bitrate is None else int(bitrate))
+        except ValueError:
+            raise TransportError(f"{stream}: {port}: bitrate must be a whole number") from None
+    return SerialTransport(port, baudrate, stream)

@@ -223,6 +223,11 @@ class CanConfig(_Model):
     bitrate: int = Field(1_000_000, gt=0)
     signals: CanSignals = CanSignals()
 
+    @property
+    def port(self) -> dict[str, str | int]:
+        """The bus as :func:`drivers.transport.open_transport` takes it."""
+        return {"interface": self.interface, "channel": self.channel, "bitrate": self.bitrate}
+
 
 class Kvh1750Format(_Model):
     """How the KVH 1750 itself is configured to output (its own settings, mirrored here)."""

@@ -99,3 +99,25 @@ class AlignedBatch:
         has_angles = bool(samples) and all(s.angles is not None for s in samples)
         angles = np.array([s.angles for s in samples], dtype=float) if has_angles else None
         return cls(t, dtheta, dv, angles, t0)
+
+
+@dataclass
+class StreamCounts:
+    """A trial's stream counters: result.json's ``streams`` (``extra``: the detailed counts, in order)."""
+
+    imu_frames: int = 0
+    table_frames: int = 0
+    aligned: int = 0
+    dropped: int = 0
+    corrupt: int = 0
+    extra: dict[str, int | float | None] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, int | float | None]:
+        return {
+            "imu_frames": self.imu_frames,
+            "table_frames": self.table_frames,
+            "aligned": self.aligned,
+            "dropped": self.dropped,
+            "corrupt": self.corrupt,
+            **self.extra,
+        }

@@ -1,6 +1,8 @@
 
 import pytest
 
+from drivers.decoder import StreamDecoder
+from drivers.tap import RawListener
 from emulators.simulation import Simulation
 from hil.config import Config, parse_config
 from hil.estimation.online import OnlineEstimator
@@ -51,3 +53,29 @@ def udp_multicast_alone():
     with open(Path(tempfile.gettempdir()) / "turntable-hil-udp-multicast.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         yield
+
+
+class Decoding(RawListener):
+    """A device reader's raw listener that keeps every chunk and decodes them as the processor does."""
+
+    def __init__(self, codec) -> None:
+        self.decoder = StreamDecoder(codec)
+        self.raw: list = []
+        self.samples: list = []
+        self.events: list = []
+        self.stopped = False
+
+    @property
+    def counters(self):
+        return self.decoder.counters
+
+    def on_raw(self, chunk) -> None:
+        self.raw.append(chunk)
+        self.samples += self.decoder.feed(chunk)
+
+    def on_event(self, event) -> None:
+        self.events.append(event)
+        self.decoder.event(event)
+
+    def stop(self) -> None:
+        self.stopped = True

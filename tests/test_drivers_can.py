@@ -11,30 +11,20 @@ import time
 import can
 import cantools
 import pytest
+from conftest import Decoding
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.capture import decode_capture
 from drivers.codec import RawChunk
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
-from drivers.reader import DeviceSession
-from drivers.tap import CanLogTap, RawListener, SampleListener
+from drivers.reader import DeviceReader
+from drivers.tap import CanLogTap
 from drivers.transport import CanTransport, open_can_bus
 from hil.cli import main
 from hil.samples import ImuSample
 
 HIGHRES = "configs/imu_lab_highres.dbc"
 J1939 = "configs/imu_j1939.dbc"
-
-
-class Collect(RawListener, SampleListener):
-    def __init__(self) -> None:
-        self.raw, self.samples = [], []
-
-    def on_raw(self, chunk) -> None:
-        self.raw.append(chunk)
-
-    def on_sample(self, sample) -> None:
-        self.samples.append(sample)
 
 
 def sample(i: int) -> ImuSample:
@@ -93,9 +83,9 @@ def test_j1939_rates_become_increments_with_the_imu_rate():
 def test_session_on_a_virtual_bus_decodes_samples_and_logs_what_python_can_reads(tmp_path):
     codec = CanDbcCodec.for_dbc(HIGHRES, 200.0)
     log = tmp_path / "imu.blf"
-    sink = Collect()
+    sink = Decoding(codec)
     channel = "drivers-test-virtual"
-    session = DeviceSession(CanTransport("virtual", channel, "imu"), codec, [sink, CanLogTap(log)], [sink]).start()
+    session = DeviceReader(CanTransport("virtual", channel, "imu"), [sink, CanLogTap(log)]).start()
     sender = open_can_bus("virtual", channel)
     sent = []
     try:
@@ -113,7 +103,7 @@ def test_session_on_a_virtual_bus_decodes_samples_and_logs_what_python_can_reads
     assert [s.sync_index for s in sink.samples] == list(range(20))
     assert sink.samples[7].dtheta == pytest.approx((7e-6, -2e-6, 3.5e-7), abs=1e-9)
     assert sink.samples[7].dv == pytest.approx((1e-4, -2e-4, 0.0490333), abs=1e-8)
-    assert len(sink.raw) == 121 and session.counters.skipped_bytes == 1
+    assert len(sink.raw) == 121 and sink.counters.skipped_bytes == 1
 
     logged = [m for m in can.LogReader(str(log))]
     assert [(m.arbitration_id, bytes(m.data)) for m in logged[1:]] == [(m.arbitration_id, bytes(m.data)) for m in sent]

@@ -10,17 +10,17 @@ import tty
 from pathlib import Path
 
 import pytest
+from conftest import Decoding
 
-from drivers.acl import AclCodec, AclReply
+from drivers.acl import AclCodec, AclReply, LineFramer
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
-from drivers.reader import DeviceSession
+from drivers.reader import DeviceReader
 from drivers.table_client import (
     InterlockError,
     LimitError,
     TableCommandClient,
     TableError,
 )
-from drivers.tap import RawListener, SampleListener
 from drivers.transport import SerialTransport
 from hil.config import LimitsConfig
 from hil.samples import ImuSample
@@ -39,22 +39,6 @@ class Pty:
     def unplug(self) -> None:
         os.close(self.master)
         os.close(self.slave)
-
-
-class Collect(RawListener, SampleListener):
-    def __init__(self) -> None:
-        self.raw: list = []
-        self.samples: list = []
-        self.stopped = False
-
-    def on_raw(self, chunk) -> None:
-        self.raw.append(chunk)
-
-    def on_sample(self, sample) -> None:
-        self.samples.append(sample)
-
-    def stop(self) -> None:
-        self.stopped = True
 
 
 def wait_for(condition, timeout=5.0) -> None:
@@ -77,16 +61,16 @@ def link(tmp_path):
 def test_session_taps_every_byte_and_decodes_frames_over_a_pty(link):
     pty = Pty(link)
     codec = Kvh1750Codec(rate_hz=200)
-    sink = Collect()
+    sink = Decoding(codec)
     stream = b"\x00garbage" + kvh_bytes(codec, range(10)) + b"\xfe\x81"
-    with DeviceSession(SerialTransport(str(link), 921600, "imu"), codec, [sink], [sink]) as session:
+    with DeviceReader(SerialTransport(str(link), 921600, "imu"), [sink]):
         os.write(pty.master, stream)
         wait_for(lambda: len(sink.samples) == 10 and sum(len(c.data) for c in sink.raw) == len(stream))
         assert b"".join(c.data for c in sink.raw) == stream
         assert all(c.stream == "imu" and c.host_time > 0 for c in sink.raw)
         assert [s.sync_index for s in sink.samples] == list(range(10))
         assert sink.samples[3].dtheta[0] == pytest.approx(3e-6)
-        assert session.counters.skipped_bytes == 8
+        assert sink.counters.skipped_bytes == 8
     assert sink.stopped
     pty.unplug()
 
@@ -94,27 +78,26 @@ def test_session_taps_every_byte_and_decodes_frames_over_a_pty(link):
 def test_session_survives_unplug_and_replug_and_counts_the_gap(link):
     pty = Pty(link)
     codec = Kvh1750Codec(rate_hz=200)
-    sink = Collect()
-    session = DeviceSession(SerialTransport(str(link), 921600, "imu"), codec, [sink], [sink],
-                            backoff_s=(0.02, 0.1)).start()
+    sink = Decoding(codec)
+    reader = DeviceReader(SerialTransport(str(link), 921600, "imu"), [sink], backoff_s=(0.02, 0.1)).start()
     try:
         os.write(pty.master, kvh_bytes(codec, range(0, 40)))
         wait_for(lambda: len(sink.samples) == 40)
         pty.unplug()
-        wait_for(lambda: session.outages == 1)
+        wait_for(lambda: reader.outages == 1)
         time.sleep(0.15)  # a few failed reopen attempts while the device is away
         pty = Pty(link)
-        assert session.wait_connected(5.0)
+        wait_for(lambda: any(c.event == "reconnected" for c in sink.events))
         os.write(pty.master, kvh_bytes(codec, range(70, 100)))
         wait_for(lambda: len(sink.samples) == 70)
     finally:
-        session.stop()
+        reader.stop()
         pty.unplug()
     indices = [s.sync_index for s in sink.samples]
     assert indices == list(range(40)) + list(range(70, 100))
-    assert session.outages == 1
-    assert (session.counters.gaps, session.counters.missing) == (1, 30)
-    assert "imu" in session.last_error
+    assert reader.outages == 1
+    assert (sink.counters.gaps, sink.counters.missing) == (1, 30)
+    assert "imu" in reader.last_error
 
 
 class FakeTable:
@@ -131,7 +114,7 @@ class FakeTable:
         self._thread.start()
 
     def _run(self) -> None:
-        codec, framer = AclCodec(), AclCodec().line_framer()
+        codec, framer = AclCodec(), LineFramer()
         while not self._stop.is_set():
             ready, _, _ = select.select([self.pty.master], [], [], 0.02)
             if not ready:

@@ -11,12 +11,12 @@ import time
 import numpy as np
 import pytest
 import yaml
+from conftest import Decoding
 from test_emulated_devices import read_raw
 
 from drivers.framing import SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec, KvhFrame
-from drivers.reader import DeviceSession
-from drivers.tap import SampleListener
+from drivers.reader import DeviceReader
 from drivers.transport import SerialTransport
 from drivers.tts1 import Status, Tts1Codec
 from emulators.emulate import spawn_emulator
@@ -135,14 +135,6 @@ def test_can_damage_loses_or_shortens_one_message():
     assert len(cut) == 6 and sum(len(m.data) for m in cut) < 48
 
 
-class Samples(SampleListener):
-    def __init__(self) -> None:
-        self.samples: list = []
-
-    def on_sample(self, sample) -> None:
-        self.samples.append(sample)
-
-
 def test_unplug_closes_the_pty_and_the_session_reconnects_through_its_stable_link():
     # The table's 32-bit counter says exactly how many frames were lost, however late they come back.
     cfg = parse_config(trial(duration=1.5, turntable={"faults": {"unplug_at_s": 0.5, "unplug_s": 0.25}}))
@@ -150,10 +142,10 @@ def test_unplug_closes_the_pty_and_the_session_reconnects_through_its_stable_lin
         link = emu.ports["turntable_data"]
         assert os.path.islink(link) and os.readlink(link).startswith("/dev/pts/")
         assert emu.ports["imu"].startswith("/dev/pts/")  # a device that never unplugs keeps its pty name
-        sessions = {name: DeviceSession(SerialTransport(emu.ports[name], 921600, name), codec,
-                                        sample_listeners=[Samples()], backoff_s=(0.02, 0.1)).start()
-                    for name, codec in (("imu", Kvh1750Codec(RATE)), ("turntable_data", Tts1Codec()))}
-        table = sessions["turntable_data"]
+        sinks = {"imu": Decoding(Kvh1750Codec(RATE)), "turntable_data": Decoding(Tts1Codec())}
+        sessions = {name: DeviceReader(SerialTransport(emu.ports[name], 921600, name), [sink],
+                                       backoff_s=(0.02, 0.1)).start() for name, sink in sinks.items()}
+        table = sinks["turntable_data"]
         try:
             deadline = time.monotonic() + 10
             while table.counters.frames + table.counters.missing < 300 and time.monotonic() < deadline:
@@ -172,10 +164,10 @@ def test_unplug_closes_the_pty_and_the_session_reconnects_through_its_stable_lin
     # setting it up and see one more short outage
     assert outages["imu"] == 0 and outages["turntable_data"] in (1, 2)
     # 50 frames lost while unplugged (more only if the host flushed some while it reopened the port)
-    head = {name: s.sample_listeners[0].samples[0].sync_index - 1 for name, s in sessions.items()}
+    head = {name: sink.samples[0].sync_index - 1 for name, sink in sinks.items()}
     assert table.counters.gaps == 1 and table.counters.missing >= 50
     assert head["turntable_data"] + table.counters.frames + table.counters.missing == 300
-    imu = sessions["imu"].counters
+    imu = sinks["imu"].counters
     assert head["imu"] + imu.frames == 300 and imu.missing == 0
 
 

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hil.recording.recorder import Recorder, read_recording
-from hil.recording.replay import open_recording, replay
 
 from hil.cli import main
+from hil.recording.recorder import Recorder, read_recording
+from hil.recording.replay import open_recording
+from hil.trial.offline import replay_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -92,7 +93,7 @@ def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):
     rec = read_recording(recording)
     assert rec.truncated or rec.items  # cut anywhere: still readable
     first = rec.items[0].host_time
-    processor = replay(*open_recording(recording))
+    processor = replay_recording(*open_recording(recording))
     # everything the devices sent up to 1 s before the kill is there and replays
     assert processor.trial_time >= killed_at - first - 1.0 - 0.1
     assert processor.decoders["imu"].framer.counters.corrupt == 0

@@ -1,10 +1,10 @@
 """The MCAP recording: round trip, CAN frames, events, a file cut short, and third-party readability."""
 
 import pytest
-from hil.recording.recorder import FORMAT, Recorder, read_recording
 from mcap.reader import make_reader
 
 from drivers.codec import RawChunk, StreamEvent
+from hil.recording.recorder import FORMAT, Recorder, read_recording
 
 
 def _items():

@@ -15,16 +15,11 @@ from conftest import PAPER_ERRORS, make_config, run_estimator
 
 from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES
-from hil.outputs.report import (
-    FAIL,
-    NOT_JUDGED,
-    PASS,
-    ReportError,
-    measurements,
-    overall,
-    write_report,
-)
-from hil.outputs.result import StreamCounts, build_result, write_outputs
+from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, measurements, overall
+from hil.outputs.report import ReportError, write_report
+from hil.outputs.result import build_result
+from hil.outputs.writer import write_trial_outputs
+from hil.samples import StreamCounts
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +30,7 @@ def trial_dir(tmp_path_factory):
     n = est.solution().samples
     result = build_result("report-test", est, StreamCounts(n, n, n, dropped=3), PAPER_ERRORS["accel_bias_ug"])
     out = tmp_path_factory.mktemp("trial")
-    write_outputs(out, result, est.snapshots, figures=True)
+    write_trial_outputs(out, result, est.snapshots, ReportLimits(), figures=True)
     return out, result
 
 
@@ -194,7 +189,7 @@ def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
     result = build_result("static", est, StreamCounts(n, n, n), PAPER_ERRORS["accel_bias_ug"])
     assert result["estimate"]["gram_condition"] == math.inf  # not observable: a singular Gram matrix
     result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
-    write_outputs(tmp_path, result, est.snapshots, figures=False)
+    write_trial_outputs(tmp_path, result, est.snapshots, ReportLimits(), figures=False)
     loaded = json.loads((tmp_path / "result.json").read_text(), parse_constant=_no_constant)
     assert loaded["estimate"]["gram_condition"] is None and loaded["estimate"]["observable"] is False
     assert loaded["nested"] == {"values": [None, {"low": None}, 1.5]}

@@ -67,12 +67,12 @@ def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_k
 
 
 def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(tmp_path, capsys, monkeypatch):
-    import hil.viewer.rerun_viewer
+    import hil.viewer.trial_viewer
 
     def broken(*args, **kwargs):
         raise OSError("rerun: address already in use")
 
-    monkeypatch.setattr(hil.viewer.rerun_viewer, "TrialViewer", broken)
+    monkeypatch.setattr(hil.viewer.trial_viewer, "TrialViewer", broken)
     out = tmp_path / "out"
     code = main(["run", str(ROOT / "configs" / "emulated_swing.yaml"), "--duration", "5", "--speed", "max",
                  "--quiet", "--viewer", "save", "--no-figures", "--out", str(out)])

@@ -9,7 +9,6 @@ import yaml
 from conftest import make_config
 
 from hil.cli import main
-from hil.samples import AlignedSample
 from hil.trial.table_control import MotionCheck
 
 ROOT_CONFIG = "configs/emulated_swing.yaml"
@@ -21,24 +20,24 @@ def _samples(scale=1.0, offset_deg=0.0, duration=30.0, rate=100.0):
     t = np.arange(1, int(duration * rate) + 1) / rate
     angles = np.column_stack([scale * a.amplitude_deg * np.sin(2 * math.pi * t / a.period_s) + a.center_deg
                               + offset_deg for a in axes])
-    return cfg, [AlignedSample(float(ti), (0.0,) * 3, (0.0,) * 3, tuple(np.radians(a))) for ti, a in zip(t, angles)]
+    return cfg, (t, np.radians(angles))
 
 
 def test_the_commanded_swing_passes_and_a_short_one_fails():
     cfg, good = _samples()
     check = MotionCheck(cfg.turntable, 100.0)
-    check.add(good)
+    check.add(*good)
     assert check.failure is None and check.checked_at is not None
     cfg, short = _samples(scale=0.5)
     check = MotionCheck(cfg.turntable, 100.0)
-    check.add(short)
+    check.add(*short)
     assert "swings over" in check.failure
 
 
 def test_angles_at_a_faster_imu_rate_still_fill_a_whole_swing_period():
     cfg, good = _samples(rate=500.0)
     check = MotionCheck(cfg.turntable, 100.0)
-    check.add(good)
+    check.add(*good)
     assert check.failure is None and check.checked_at is not None
 
 
@@ -46,7 +45,7 @@ def test_a_static_table_off_its_position_fails():
     cfg = make_config(duration=10, kind="static")
     _, samples = _samples(scale=0.0, offset_deg=1.0)
     check = MotionCheck(cfg.turntable, 100.0)
-    check.add(samples)
+    check.add(*samples)
     assert "away from its commanded" in check.failure
 
 

@@ -1,6 +1,5 @@
 """The IMU/table time-offset diagnostic recovers a known lag of the table angles."""
 
-import numpy as np
 import pytest
 from conftest import make_config
 

@@ -15,11 +15,11 @@ from conftest import PAPER_ERRORS, make_config
 from rerun.chunk import RrdReader
 
 from emulators.simulation import Simulation
-from hil.viewer import rerun_viewer as viz
 from hil.estimation.online import OnlineEstimator
 from hil.units import DEG, UG
+from hil.viewer import blueprint, rerun_process, trial_viewer
 from hil.viewer.modes import default_viewer_mode
-from hil.viewer.rerun_viewer import TrialViewer
+from hil.viewer.trial_viewer import TrialViewer
 
 HEALTH = {
     "imu": {"rate_hz": 199.5, "frames": 12000, "dropped": 2, "corrupt": 1, "latency_ms": 3.25},
@@ -47,7 +47,7 @@ def _series(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         batch = chunk.to_record_batch()
         if chunk.is_static or "Scalars:scalars" not in batch.schema.names:
             continue
-        t = batch.column(viz.TIMELINE).cast("int64").to_numpy() / 1e9
+        t = batch.column(blueprint.TIMELINE).cast("int64").to_numpy() / 1e9
         values = batch.column("Scalars:scalars").to_pylist()
         rows[chunk.entity_path].extend(zip(t, values))
     out = {}
@@ -123,8 +123,8 @@ def test_table_angles_are_decimated_for_the_3d_view(saved, trial):
     path, _ = saved
     _, _, batches = trial
     t, angles = _series(path)["/table/angles_deg"]
-    assert len(t) == 60 * viz.TABLE_RATE_HZ + 1  # one per 50 ms tick from 0.01 s to 60 s
-    assert t[0] == pytest.approx(0.01) and np.diff(t)[1:] == pytest.approx(1.0 / viz.TABLE_RATE_HZ)
+    assert len(t) == 60 * trial_viewer.TABLE_RATE_HZ + 1  # one per 50 ms tick from 0.01 s to 60 s
+    assert t[0] == pytest.approx(0.01) and np.diff(t)[1:] == pytest.approx(1.0 / trial_viewer.TABLE_RATE_HZ)
     k = np.searchsorted(batches[-1].t, t[-1])
     assert angles[-1] == pytest.approx(batches[-1].angles[k] / DEG)
     entities = _entities(path)
@@ -139,7 +139,7 @@ def test_saved_recording_carries_the_blueprint_and_passes_rrd_verify(saved, tmp_
     reader = RrdReader(path)
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
     env = dict(os.environ, CI="1", HOME=str(tmp_path), XDG_CONFIG_HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path))
-    proc = subprocess.run([viz._rerun_executable(), "rrd", "verify", str(path)], check=False, env=env,
+    proc = subprocess.run([rerun_process.rerun_executable(), "rrd", "verify", str(path)], check=False, env=env,
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "verified without error" in proc.stdout + proc.stderr
@@ -147,7 +147,7 @@ def test_saved_recording_carries_the_blueprint_and_passes_rrd_verify(saved, tmp_
 
 def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, monkeypatch):
     sim, snapshots, _ = trial
-    monkeypatch.setattr(viz, "QUEUE_ITEMS", 4)
+    monkeypatch.setattr(trial_viewer, "QUEUE_ITEMS", 4)
     viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry)
     release = threading.Event()
     viewer._submit(release.wait)  # the logging thread is stuck in this job

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.outputs.result import SERIES_COLUMNS
+from hil.outputs.series import SERIES_COLUMNS
 
 FIGURES = ("observability.png", "bias.png", "alignment.png")
 

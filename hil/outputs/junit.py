@@ -15,7 +15,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from hil.outputs.report import FAIL, NOT_JUDGED, Measurement
+from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement
 from hil.outputs.result import COMPLETED
 
 JUNIT_NAME = "junit.xml"

@@ -1,9 +1,6 @@
 """The trial report: ``report.html`` beside result.json, readable offline, and ``junit.xml`` for CI.
 
-Each result is a measurement in the manner of OpenHTF: a name, a value, a unit, a limit and an
-outcome (PASS, FAIL, or not judged when the config sets no limit for it). The trial passes when no
-judged measurement fails; a judged measurement without a value (e.g. a bias that was not
-observable) fails. Limits come from ``output.limits`` of the trial config (the copy ``config.yaml``
+The page lists the trial's measurements (:mod:`hil.outputs.measurements`). Limits come from ``output.limits`` of the trial config (the copy ``config.yaml``
 in the output directory) unless given. The page is one self-contained file: the figures are
 embedded as PNG data URIs, the style sheet is inline, nothing is fetched from anywhere.
 """
@@ -11,20 +8,28 @@ embedded as PNG data URIs, the style sheet is inline, nothing is fetched from an
 from __future__ import annotations
 
 import base64
-import csv
 import html
 import json
-import math
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hil.config import ReportLimits, load_config
+from hil.outputs.figures import FIGURES
+from hil.outputs.junit import write_junit
+from hil.outputs.measurements import (
+    FAIL,
+    NOT_JUDGED,
+    PASS,
+    Measurement,
+    format_value,
+    measurements,
+    overall,
+)
+from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
 REPORT_NAME = "report.html"
-PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
 _CAPTIONS = {
     "bias.png": "Accelerometer bias estimate with its ±3σ band and the truth (cf. Liu 2019 Fig. 3)",
     "observability.png": "Rank and condition number of the scaled Gram matrix (cf. Liu 2019 Fig. 2)",
@@ -35,97 +40,6 @@ _CAPTIONS = {
 
 class ReportError(ValueError):
     """A report that cannot be built from the directory given."""
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """One result of the trial, judged against its limit (OpenHTF style)."""
-
-    name: str
-    value: float | int | bool | None
-    unit: str
-    limit: str  # human-readable validator, "" when not judged
-    outcome: str  # PASS, FAIL or NOT_JUDGED
-    description: str = ""
-
-
-def _at_most(name, value, unit, bound, description="", absolute=False) -> Measurement:
-    """A measurement judged by ``value <= bound`` (``|value| <= bound`` when absolute); bound None: not judged."""
-    if bound is None:
-        return Measurement(name, value, unit, "", NOT_JUDGED, description)
-    limit = f"{'|x| ' if absolute else ''}≤ {_fmt(bound)}"
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return Measurement(name, value, unit, limit, FAIL, description)
-    ok = (abs(value) if absolute else value) <= bound
-    return Measurement(name, value, unit, limit, PASS if ok else FAIL, description)
-
-
-def _info(name, value, unit, description="") -> Measurement:
-    return Measurement(name, value, unit, "", NOT_JUDGED, description)
-
-
-def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
-    """The trial's measurements from a result.json document, judged against ``limits``."""
-    est = result.get("estimate", {})
-    bias = est.get("accel_bias_ug") or [None] * 3
-    sigma = est.get("accel_bias_sigma_ug") or [None] * 3
-    truth = (result.get("truth") or {}).get("accel_bias_ug")
-    out: list[Measurement] = []
-    for k, axis in enumerate("xyz"):
-        out.append(_info(f"accel_bias_{axis}", bias[k], "µg", f"accelerometer bias estimate, {axis} axis"))
-    for k, axis in enumerate("xyz"):
-        out.append(_at_most(f"accel_bias_sigma_{axis}", sigma[k], "µg", limits.bias_sigma_ug_max,
-                            f"1σ of the bias estimate, {axis} axis"))  # fmt: skip
-    if truth is not None:
-        for k, axis in enumerate("xyz"):
-            error = None if bias[k] is None else bias[k] - truth[k]
-            out.append(_at_most(f"accel_bias_error_{axis}", error, "µg", limits.bias_error_ug_max,
-                                f"estimate − truth ({_fmt(truth[k])} µg), {axis} axis", absolute=True))  # fmt: skip
-    elif limits.bias_error_ug_max is not None:
-        out.append(Measurement("accel_bias_error", None, "µg", f"|x| ≤ {_fmt(limits.bias_error_ug_max)}", NOT_JUDGED,
-                               "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
-    out.append(_info("bias_observable", est.get("observable"), "", "scaled Gram matrix of full rank"))
-    out.append(_info("gram_rank", est.get("gram_rank"), "of 12", "rank of the scaled Gram matrix (2019 eq. 19)"))
-    if "gram_condition" in est:  # null when the matrix is singular
-        out.append(_info("gram_condition", est["gram_condition"], "", "condition number of the scaled Gram matrix"))
-    out.append(_at_most("converged_at", est.get("converged_at_s"), "s", limits.converged_by_s,
-                        "time after which the bias stays inside the final ±3σ band"))  # fmt: skip
-    if est.get("noise_ug") is not None:
-        out.append(_info("accel_noise", est["noise_ug"], "µg", "residual RMS per axis and sample"))
-
-    alignment = result.get("alignment_deg") or {}
-    method2 = alignment.get("method2") or {}
-    for angle in ("pitch", "roll"):
-        out.append(_at_most(f"alignment_method2_{angle}", method2.get(angle), "deg", limits.method2_error_deg_max,
-                            f"method-2 {angle} error against the turntable, mean of the last 10 %",
-                            absolute=True))  # fmt: skip
-    if "yaw" in method2:
-        out.append(_info("alignment_method2_yaw", method2["yaw"], "deg", "method-2 yaw error, mean of the last 10 %"))
-    for method, angles in (("method1", ("pitch", "roll", "yaw")), ("theoretical", ("pitch", "roll"))):
-        values = alignment.get(method) or {}
-        for angle in angles:
-            if angle in values:
-                out.append(_info(f"alignment_{method}_{angle}", values[angle], "deg",
-                                 f"{'method-1' if method == 'method1' else 'theoretical (2019 eq. 8)'} {angle} error"))  # fmt: skip
-
-    table = (result.get("table_reference") or {}).get("accel_bias_ug")
-    if table is not None:
-        for k, axis in enumerate("xyz"):
-            out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude"))
-
-    streams = result.get("streams") or {}
-    out.append(_at_most("frames_dropped", streams.get("dropped"), "frames", limits.dropped_max, "frames lost"))
-    out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,
-                        "frames with a bad checksum or framing"))  # fmt: skip
-    for key, value in streams.items():
-        if key not in ("dropped", "corrupt"):
-            out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
-    return out
-
-
-def overall(results: list[Measurement]) -> str:
-    """PASS when no judged measurement failed."""
-    return FAIL if any(m.outcome == FAIL for m in results) else PASS
 
 
 def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
@@ -156,12 +70,10 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     results = measurements(result, limits)
     if not any(m.outcome != NOT_JUDGED for m in results):
         notes.append("No limits are set (output.limits in the trial config): the verdict judges nothing.")
-    series = _read_series(out_dir / "series.csv")
+    series = read_series(out_dir / SERIES_NAME)
     page = _render(result, results, _figures(out_dir, series, result), series, notes)
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
-    from hil.outputs.junit import write_junit  # it imports this module
-
     write_junit(out_dir, result, results)
     return path
 
@@ -169,40 +81,13 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
 # --- page ------------------------------------------------------------------------------------------
 
 
-def _fmt(value) -> str:
-    if value is None:
-        return "—"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, int):
-        return str(value)
-    if not math.isfinite(value):
-        return str(value)
-    if value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e5):
-        return f"{value:.3e}"
-    return f"{value:.5g}"
-
-
-def _read_series(path: Path) -> dict[str, np.ndarray] | None:
-    if not path.exists():
-        return None
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    if len(rows) < 2:
-        return None
-    header, body = rows[0], rows[1:]
-    data = np.array([[float(v) if v != "" else np.nan for v in row] for row in body])
-    return {name: data[:, k] for k, name in enumerate(header)}
-
-
 def _figures(out_dir: Path, series: dict[str, np.ndarray] | None, result: dict) -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the trial's figures; drawn from series.csv when the PNGs are missing."""
-    from hil.outputs.figures import FIGURES
-
     names = list(FIGURES) + sorted(p.name for p in out_dir.glob("*.png") if p.name not in FIGURES)
     if series is not None and not all((out_dir / n).exists() for n in FIGURES):
-        from hil.outputs.figures import write_figures
-        from hil.outputs.result import SERIES_COLUMNS
+        from hil.outputs.figures import (
+            write_figures,  # matplotlib only when figures are drawn
+        )
 
         if all(c in series for c in SERIES_COLUMNS):
             with tempfile.TemporaryDirectory() as tmp:
@@ -222,11 +107,11 @@ def _history(series: dict[str, np.ndarray] | None) -> str:
     for frac in (0.1, 0.25, 0.5, 1.0):
         k = min(int(np.searchsorted(t, frac * t[-1])), len(t) - 1)
         cells = "".join(
-            f"<td>{_fmt(float(series[f'bias_{a}_ug'][k]))} ± {_fmt(float(series[f'sigma_{a}_ug'][k]))}</td>"
+            f"<td>{format_value(float(series[f'bias_{a}_ug'][k]))} ± {format_value(float(series[f'sigma_{a}_ug'][k]))}</td>"
             if np.isfinite(series[f"bias_{a}_ug"][k]) else "<td>not observable</td>"
             for a in "xyz"
         )  # fmt: skip
-        rows.append(f"<tr><td>{_fmt(float(t[k]))}</td>{cells}</tr>")
+        rows.append(f"<tr><td>{format_value(float(t[k]))}</td>{cells}</tr>")
     return (
         "<h2>Bias during the trial</h2><table class='history'><thead><tr><th>t (s)</th><th>x (µg)</th>"
         "<th>y (µg)</th><th>z (µg)</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
@@ -266,7 +151,7 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
         outcome_class = m.outcome if m.outcome in (PASS, FAIL) else "none"
         rows.append(
             f"<tr class='row-{outcome_class}'><td><code>{e(m.name)}</code><br><small>{e(m.description)}</small></td>"
-            f"<td class='num'>{e(_fmt(m.value))}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
+            f"<td class='num'>{e(format_value(m.value))}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
             f"<td class='outcome {outcome_class}'>{e(m.outcome)}</td></tr>"
         )
     figure_html = "".join(
@@ -281,7 +166,7 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
 <title>{e(str(trial.get("name", "trial")))}: {verdict}</title><style>{_CSS}</style></head>
 <body>
 <h1>Trial report: {e(str(trial.get("name", "trial")))}</h1>
-<p class="meta">{_fmt(trial.get("duration_s"))} s, {_fmt(trial.get("samples"))} samples.
+<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <div class="verdict {verdict}">{verdict}</div>
 <p>{e(summary)}.</p>

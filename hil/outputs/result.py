@@ -1,52 +1,22 @@
-"""Trial outputs: result.json (schema in DESIGN.md), series.csv and the paper-style figures."""
+"""result.json (schema in DESIGN.md): the document of a trial, its console summary, and the file."""
 
 from __future__ import annotations
 
-import csv
 import json
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hil.estimation.online import OnlineEstimator, Snapshot, convergence_time
+from hil.samples import StreamCounts
 from hil.units import DEG, UG
 
+RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
 
-SERIES_COLUMNS = (
-    "t_s", "samples",
-    "bias_x_ug", "bias_y_ug", "bias_z_ug", "sigma_x_ug", "sigma_y_ug", "sigma_z_ug",
-    "observable", "gram_rank", "gram_condition", "gram_rank_9",
-    "method1_pitch_deg", "method1_roll_deg", "method1_yaw_deg",
-    "method2_pitch_deg", "method2_roll_deg", "method2_yaw_deg",
-    "theoretical_pitch_deg", "theoretical_roll_deg",
-)  # fmt: skip
-
-
-@dataclass
-class StreamCounts:
-    imu_frames: int = 0
-    table_frames: int = 0
-    aligned: int = 0
-    dropped: int = 0
-    corrupt: int = 0
-    extra: dict[str, int] = field(default_factory=dict)
-
-    def as_dict(self) -> dict[str, int]:
-        return {
-            "imu_frames": self.imu_frames,
-            "table_frames": self.table_frames,
-            "aligned": self.aligned,
-            "dropped": self.dropped,
-            "corrupt": self.corrupt,
-            **self.extra,
-        }
-
-
-def _ug(v: np.ndarray | None) -> list[float] | None:
+def to_ug(v: np.ndarray | None) -> list[float] | None:
     return None if v is None else [float(x) for x in np.asarray(v) / UG]
 
 
@@ -72,8 +42,8 @@ def build_result(
         "trial": {"name": name, "duration_s": duration, "samples": final.samples},
         "streams": streams.as_dict(),
         "estimate": {
-            "accel_bias_ug": _ug(final.full.bias),
-            "accel_bias_sigma_ug": _ug(final.full.bias_sigma),
+            "accel_bias_ug": to_ug(final.full.bias),
+            "accel_bias_sigma_ug": to_ug(final.full.bias_sigma),
             "observable": final.full.observable,
             "gram_rank": final.full.observability.rank,
             "gram_condition": final.full.observability.condition,
@@ -81,8 +51,8 @@ def build_result(
             "noise_ug": final.full.noise_sigma / UG,
         },
         "table_reference": {
-            "accel_bias_ug": _ug(table.bias),
-            "accel_bias_sigma_ug": _ug(table.bias_sigma),
+            "accel_bias_ug": to_ug(table.bias),
+            "accel_bias_sigma_ug": to_ug(table.bias_sigma),
             "tilt_deg": None if table.tilt is None else [float(x) / DEG for x in table.tilt],
         },
         "alignment_deg": {
@@ -94,6 +64,14 @@ def build_result(
     if truth_bias_ug is not None:
         result["truth"] = {"accel_bias_ug": list(truth_bias_ug)}
     return result
+
+
+def trial_result(name: str, estimator: OnlineEstimator | None, streams: StreamCounts,
+                 truth_bias_ug: list[float] | None = None) -> dict:
+    """The result.json document of a trial; estimates null when no IMU sample reached the estimator."""
+    if estimator is None:
+        return empty_result(name, streams, truth_bias_ug)
+    return build_result(name, estimator, streams, truth_bias_ug)
 
 
 def empty_result(name: str, streams: StreamCounts, truth_bias_ug: list[float] | None = None) -> dict:
@@ -111,24 +89,6 @@ def empty_result(name: str, streams: StreamCounts, truth_bias_ug: list[float] | 
     return result
 
 
-def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
-    """One row per snapshot, in SERIES_COLUMNS order (empty cells where a value does not exist)."""
-    nan3 = [float("nan")] * 3
-    rows = []
-    for s in snapshots:
-        bias = _ug(s.full.bias) or nan3
-        sigma = _ug(s.full.bias_sigma) or nan3
-        m1 = list(s.error_method1 / DEG) if s.error_method1 is not None else nan3
-        m2 = list(s.error_method2 / DEG) if s.error_method2 is not None else nan3
-        theo = list(s.error_theoretical / DEG) if s.error_theoretical is not None else nan3[:2]
-        obs = s.full.observability
-        rows.append(
-            [s.t, s.samples, *bias, *sigma, int(s.full.observable), obs.rank, obs.condition,
-             s.gravity_only.observability.rank, *m1, *m2, *theo]
-        )  # fmt: skip
-    return rows
-
-
 def _strict_json(value: Any) -> Any:
     """``value`` with every non-finite float (at any depth) replaced by None: JSON has no NaN or Infinity."""
     if isinstance(value, float):
@@ -140,23 +100,9 @@ def _strict_json(value: Any) -> Any:
     return value
 
 
-def write_outputs(out: Path, result: dict, snapshots: list[Snapshot], figures: bool = True,
-                  config_text: str | None = None) -> None:
-    """result.json (strict JSON: null for a non-finite number), series.csv, the trial config as config.yaml
-    and (optionally) the figures."""
-    out.mkdir(parents=True, exist_ok=True)
-    if config_text is not None:
-        (out / "config.yaml").write_text(config_text)
-    (out / "result.json").write_text(json.dumps(_strict_json(result), indent=2, allow_nan=False) + "\n")
-    rows = series_rows(snapshots)
-    with open(out / "series.csv", "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(SERIES_COLUMNS)
-        writer.writerows(["" if isinstance(v, float) and np.isnan(v) else v for v in row] for row in rows)
-    if figures and rows:
-        from hil.outputs.figures import write_figures
-
-        write_figures(out, np.array(rows, dtype=float), result)
+def write_result(out: Path, result: dict) -> None:
+    """``out/result.json``, strict JSON: null for a non-finite number."""
+    (out / RESULT_NAME).write_text(json.dumps(_strict_json(result), indent=2, allow_nan=False) + "\n")
 
 
 def summary_text(result: dict, out: Path) -> str:

@@ -1,23 +1,22 @@
-"""The trial's processing chain, fed raw chunks in arrival order: framing, decoding, alignment, estimation.
+"""The trial's processing chain: decoding, alignment, plausibility, estimation, and the result.
 
-It is deterministic: the same sequence of chunks and events (a live run, or its recording) gives
-the same samples, the same estimator batches and so a bit-identical result. Live acquisition
-(:mod:`hil.trial.live`) and replay (:mod:`hil.recording.replay`) differ only in where the chunks come from.
+Fed raw chunks in arrival order (live devices, a recording) it is deterministic: the same sequence of
+chunks and events gives the same samples, the same estimator batches and so a bit-identical result.
+Samples that need no alignment (a simulation, a CSV of increments) enter after the aligner, in batches.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from drivers.codec import Codec, DecodeError, Framer, RawChunk, StreamEvent
+from drivers.codec import RawChunk, StreamEvent
+from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec, make_codec
 from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
-from hil.outputs.result import StreamCounts, build_result, empty_result
 from hil.pipeline.aligner import Aligner
 from hil.pipeline.plausibility import (
     RATE_MARGIN,
@@ -27,66 +26,31 @@ from hil.pipeline.plausibility import (
     UnitKeys,
 )
 from hil.pipeline.time_offset import TimeOffsetEstimator
-from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
+from hil.samples import AlignedBatch, AlignedSample, ImuGap, StreamCounts
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
 
 
-@dataclass
-class StreamDecoder:
-    """One stream's framer and codec, with its outage count: outages after which the device sent data
-    again (a port closing at the end of a trial, or a reconnection to nothing, is not one).
-
-    ``time_scale`` is how much faster than real time the device runs (an emulator at ``--speed X``):
-    the framer's counter unwrapping, which sizes outages longer than a counter period from the host
-    receive times, then expects that many more frames per host second. None (``--speed max``): the
-    host times say nothing about the device's, and only the counters are used.
-    """
-
-    codec: Codec
-    time_scale: float | None = 1.0
-    framer: Framer = field(init=False)
-    outages: int = 0
-    _reconnects: int = 0  # reconnections not yet followed by data
-
-    def __post_init__(self) -> None:
-        self.framer = self.codec.framer()
-        unwrapper = getattr(self.framer, "unwrapper", None)
-        if unwrapper is not None and unwrapper.rate_hz:
-            unwrapper.rate_hz = None if self.time_scale is None else unwrapper.rate_hz * self.time_scale
-
-    def feed(self, chunk: RawChunk) -> list[ImuSample | TableSample]:
-        if chunk.data:
-            self.outages += self._reconnects  # the device is back: the outages before count
-            self._reconnects = 0
-        samples = []
-        for decoded in self.framer.feed_chunk(chunk):
-            try:
-                samples.append(self.codec.to_sample(decoded))
-            except DecodeError:
-                self.framer.counters.corrupt += 1
-        return samples
-
-    def event(self, event: StreamEvent) -> None:
-        if event.event == "reconnected":
-            self._reconnects += 1
-        self.framer.reset()
+TableCallback = Callable[[np.ndarray, np.ndarray], None]
 
 
 class TrialProcessor:
-    """Chunks in, estimator snapshots out; :meth:`result` gives the result.json document.
+    """Chunks (:meth:`feed`) or aligned batches (:meth:`feed_batch`) in; estimator snapshots, stream
+    counts (:meth:`streams`) and health (:meth:`health`) out, as data.
 
     With a ``duration`` (s) the trial is :attr:`complete` once the estimator has the sample that ends
     it; later chunks (the devices' last bytes, their ports closing) are counted and ignored.
-    ``time_scale`` is the emulator's speed (see :class:`StreamDecoder`).
+    ``time_scale`` is the emulator's speed (see :class:`drivers.decoder.StreamDecoder`).
 
-    ``on_snapshot`` is called with each new snapshot and ``on_aligned`` with each batch of aligned
-    samples (for the viewers); both run on the caller's thread.
+    ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s) and
+    gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion
+    check); both run on the caller's thread.
     """
 
-    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0, on_snapshot: Callable[[Snapshot], None] | None = None,
-                 on_aligned: Callable[[list[AlignedSample]], None] | None = None) -> None:
+    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0,
+                 on_snapshot: Callable[[Snapshot, dict], None] | None = None, on_table: TableCallback | None = None
+                 ) -> None:
         self.cfg = cfg
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
@@ -112,7 +76,9 @@ class TrialProcessor:
         self.unknown_chunks = 0
         self.after_end = 0
         self._on_snapshot = on_snapshot
-        self._on_aligned = on_aligned
+        self._on_table = on_table
+        self._batched = 0  # samples fed as aligned batches
+        self._batched_angles = 0  # ... of which with table angles
 
     def feed(self, item: RawChunk | StreamEvent) -> None:
         """Process one chunk or event from any stream."""
@@ -135,6 +101,29 @@ class TrialProcessor:
             else:
                 self._rejected(self.plausibility)
         self._estimate(ready)
+
+    def feed_batch(self, batch: AlignedBatch) -> None:
+        """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
+        if self.estimator is None:
+            self._start(batch.t0)
+        before = len(self.estimator.snapshots)
+        self.estimator.update_many(batch)
+        self._batched += len(batch)
+        self._batched_angles += 0 if batch.angles is None else len(batch)
+        self._t_end = float(batch.t[-1]) if len(batch) else self._t_end
+        if self._on_table is not None and batch.angles is not None:
+            self._on_table(batch.t - self.estimator.t0, batch.angles)
+        self._snapshots_from(before)
+
+    def _start(self, t0: float) -> None:
+        self.estimator = OnlineEstimator(self.earth, self.geometry, 1.0 / self.cfg.estimator.solve_rate_hz,
+                                         self.cfg.estimator.rank_tolerance, t0=t0)
+
+    def _snapshots_from(self, before: int) -> None:
+        if self._on_snapshot is not None and len(self.estimator.snapshots) > before:
+            health = self.health()
+            for snap in self.estimator.snapshots[before:]:
+                self._on_snapshot(snap, health)
 
     @property
     def stalled(self) -> str | None:
@@ -165,6 +154,9 @@ class TrialProcessor:
         return 0.0 if self.estimator is None else self._t_end - self.estimator.t0
 
     def counts(self) -> StreamCounts:
+        """The stream counters so far (those of result.json but the sync offset)."""
+        if self._batched:
+            return StreamCounts(self._batched, self._batched_angles, self._batched)
         imu, table = (self.decoders[s].framer.counters for s in (IMU, TABLE))
         extra = {
             "imu_outages": self.decoders[IMU].outages,
@@ -183,15 +175,29 @@ class TrialProcessor:
         return StreamCounts(imu.frames, table.frames, self.aligner.counters.aligned, imu.missing + table.missing,
                             imu.corrupt + table.corrupt + self.plausibility.rejected + self.gate.rejected, extra)
 
-    def result(self) -> dict:
-        """The result.json document (call after :meth:`finish`); estimates null when no IMU sample got through."""
-        truth = list(self.cfg.imu.errors.accel_bias_ug) if self.cfg.imu.source == "emulator" else None
-        if self.estimator is None:
-            return empty_result(self.cfg.trial.name, self.counts(), truth)
-        result = build_result(self.cfg.trial.name, self.estimator, self.counts(), truth)
-        offset = self.time_offset.estimate()
-        result["streams"]["sync_offset_ms"] = None if offset is None else offset * 1e3
-        return result
+    def streams(self) -> StreamCounts:
+        """result.json's ``streams`` (call after :meth:`finish`): the counts and, for streams that were
+        aligned, the sync offset between the IMU and the table found by :mod:`hil.pipeline.time_offset`."""
+        counts = self.counts()
+        if not self._batched:
+            offset = self.time_offset.estimate() if self.estimator is not None else None
+            counts.extra["sync_offset_ms"] = None if offset is None else offset * 1e3
+        return counts
+
+    def health(self) -> dict[str, dict[str, float]]:
+        """Per-stream counters for the viewer's stream-health panel and the console."""
+        counts = self.counts()
+        if self._batched:
+            return {"aligner": {"aligned": counts.aligned}}
+        out: dict[str, dict[str, float]] = {}
+        for name in (IMU, TABLE):
+            c = self.decoders[name].counters
+            out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
+                         "outages": counts.extra[f"{name}_outages"]}
+        out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
+                          "bridged": counts.extra["aligner_imu_bridged"],
+                          "without_angles": counts.extra["aligner_without_angles"]}
+        return out
 
     def _estimate(self, ready: list[AlignedSample | ImuGap], final: bool = False) -> None:
         """Hand aligned samples to the estimator in blocks of ``estimator.batch_samples`` (a gap or the
@@ -200,8 +206,7 @@ class TrialProcessor:
         if self.estimator is None:
             if not ready:
                 return
-            self.estimator = OnlineEstimator(self.earth, self.geometry, 1.0 / self.cfg.estimator.solve_rate_hz,
-                                             self.cfg.estimator.rank_tolerance, t0=self.aligner.t0)
+            self._start(self.aligner.t0)
         before = len(self.estimator.snapshots)
         if ready:
             last = ready[-1]
@@ -222,9 +227,7 @@ class TrialProcessor:
         if final:
             self._update(self._block)
             self._block = []
-        if self._on_snapshot is not None:
-            for snap in self.estimator.snapshots[before:]:
-                self._on_snapshot(snap)
+        self._snapshots_from(before)
 
     def _update(self, run: list[AlignedSample]) -> None:
         self.updates += bool(run)
@@ -235,8 +238,10 @@ class TrialProcessor:
                 continue
             self.estimator.update_samples(chunk)
             self.time_offset.add(chunk)
-        if run and self._on_aligned is not None:
-            self._on_aligned(run)
+        with_angles = [s for s in run if s.angles is not None]
+        if with_angles and self._on_table is not None:
+            self._on_table(np.array([s.t for s in with_angles]) - self.estimator.t0,
+                           np.array([s.angles for s in with_angles], dtype=float))
 
     def _gated(self, run: list[AlignedSample]) -> list[list[AlignedSample] | ImuGap]:
         """The run split where the gyro disagrees with the table: those samples become bridged gaps."""

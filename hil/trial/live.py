@@ -1,6 +1,6 @@
 """A live trial: device readers, the recorder, and the processing loop with its sinks.
 
-Threads: one reader per device (:class:`drivers.reader.DeviceSession`) hands every raw chunk to a
+Threads: one reader per device (:class:`drivers.reader.DeviceReader`) hands every raw chunk to a
 :class:`Fanout`, which stamps it with the host time rounded to the recording's nanoseconds and puts
 it, in one global order, into the recorder's queue (unbounded: the recording never drops) and into
 the bounded processing queue. The caller's thread runs the :class:`~hil.pipeline.processor.TrialProcessor`
@@ -24,16 +24,16 @@ from typing import Any
 import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent
-from drivers.reader import DeviceSession
+from drivers.reader import DeviceReader
 from drivers.tap import RawListener
-from drivers.transport import CanTransport, SerialTransport, Transport
+from drivers.transport import Transport, open_transport
 from hil.config import Config
+from hil.estimation.online import Snapshot
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import IMU, TABLE, TrialProcessor
 from hil.recording.recorder import Recorder, to_ns
-from hil.samples import AlignedSample
 from hil.trial.table_control import MotionCheck
-from hil.trial.viewer_feed import Viewer, ViewerSinks, health
+from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
@@ -98,20 +98,16 @@ class LatencyStats:
 
 
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
-    """The IMU and table transports, from the config or from the emulator's ports."""
-    imu_port = (ports or {}).get("imu", cfg.imu.port)
-    table_port = (ports or {}).get("turntable_data", cfg.turntable.data_port)
-    if isinstance(imu_port, dict):
-        imu: Transport = CanTransport(imu_port["interface"], imu_port["channel"], IMU)
-    elif cfg.imu.source == "can" and cfg.imu.can is not None:
-        imu = CanTransport(cfg.imu.can.interface, cfg.imu.can.channel, IMU, cfg.imu.can.bitrate)
-    elif imu_port:
-        imu = SerialTransport(imu_port, cfg.imu.baudrate, IMU)
-    else:
+    """The IMU and table transports, from the emulator's ports (ports.json) or from the config."""
+    ports = ports or {}
+    imu_port = ports.get("imu") or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
+    table_port = ports.get("turntable_data", cfg.turntable.data_port)
+    if not imu_port:
         raise TrialAborted("imu: no port (set imu.port, or imu.source: emulator)")
     if not table_port:
         raise TrialAborted("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
-    return {IMU: imu, TABLE: SerialTransport(table_port, cfg.turntable.baudrate, TABLE)}
+    return {IMU: open_transport(imu_port, IMU, cfg.imu.baudrate),
+            TABLE: open_transport(table_port, TABLE, cfg.turntable.baudrate)}
 
 
 class LiveTrial:
@@ -132,7 +128,7 @@ class LiveTrial:
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
                  ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float | None = 1.0,
                  motion_check: MotionCheck | None = None,
-                 on_progress: Callable[[TrialProcessor, dict], None] | None = None,
+                 on_progress: Callable[[float, Snapshot | None, dict], None] | None = None,
                  source_done: Callable[[], bool] | None = None,
                  stop_requested: Callable[[], str | None] | None = None,
                  on_end: Callable[[], None] | None = None) -> None:
@@ -150,13 +146,10 @@ class LiveTrial:
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
-        sinks = ViewerSinks(viewer, self._live_health)
+        feed = ViewerFeed(viewer, self._live_health)
         self.motion_check = motion_check
-        self.processor = TrialProcessor(cfg, duration, time_scale, sinks.on_snapshot, self._aligned_to(sinks))
-        sinks.processor = self.processor
-        codecs = {name: d.codec for name, d in self.processor.decoders.items()}
-        self.sessions = [DeviceSession(t, codecs[name], raw_listeners=[self.fanout])
-                         for name, t in transports(cfg, ports).items()]
+        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed))
+        self.readers = [DeviceReader(t, raw_listeners=[self.fanout]) for t in transports(cfg, ports).values()]
 
     def run(self) -> str:
         """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``.
@@ -166,8 +159,8 @@ class LiveTrial:
         """
         ended = "early: the trial did not start"
         try:
-            for session in self.sessions:
-                session.start()
+            for reader in self.readers:
+                reader.start()
             try:
                 self._loop()
             except TrialAborted as exc:
@@ -177,8 +170,8 @@ class LiveTrial:
             return ended
         finally:
             self.on_end()
-            for session in self.sessions:
-                session.stop()
+            for reader in self.readers:
+                reader.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
                 self.processor.feed(self.queue.get_nowait())
             self.recorder.close(ended)
@@ -186,20 +179,20 @@ class LiveTrial:
             if self.viewer is not None:
                 self.viewer.close()
 
-    def _aligned_to(self, sinks: ViewerSinks) -> Callable[[list[AlignedSample]], None]:
+    def _table_to(self, feed: ViewerFeed) -> Callable[[np.ndarray, np.ndarray], None]:
         if self.motion_check is None:
-            return sinks.on_aligned
+            return feed.on_table
         check = self.motion_check
 
-        def both(samples: list[AlignedSample]) -> None:
-            sinks.on_aligned(samples)
-            check.add(samples)
+        def both(t: np.ndarray, angles: np.ndarray) -> None:
+            feed.on_table(t, angles)
+            check.add(t, angles)
 
         return both
 
     def health(self) -> dict[str, dict[str, float]]:
         """Stream counters with the live figures (queue length, latency)."""
-        figures = health(self.processor)
+        figures = self.processor.health()
         figures["aligner"].update(self._live_health()["aligner"])
         return figures
 
@@ -235,7 +228,9 @@ class LiveTrial:
                 next_progress = now + 0.5
                 health = self.health()
                 if self.on_progress is not None:
-                    self.on_progress(self.processor, health)
+                    estimator = self.processor.estimator
+                    snap = estimator.snapshots[-1] if estimator is not None and estimator.snapshots else None
+                    self.on_progress(self.processor.trial_time, snap, health)
             if item is None and self.queue.empty():
                 self._check_alive(now, started)
 

@@ -18,7 +18,6 @@ import numpy as np
 
 from drivers.table_client import GIMBALS, TableCommandClient, TableError
 from hil.config import TurntableConfig
-from hil.samples import AlignedSample
 from hil.units import DEG
 
 SETTLE_S = 2.0  # beyond the longest period, for the table to reach the commanded motion
@@ -95,15 +94,16 @@ class MotionCheck:
         self.checked_at: float | None = None
         self.failure: str | None = None
 
-    def add(self, samples: list[AlignedSample]) -> None:
-        for s in samples:
-            tick = math.floor(s.t * self.rate_hz + 1e-9)  # an instant on a tick belongs to it
-            if s.angles is None or tick == self._tick:
+    def add(self, t: np.ndarray, angles: np.ndarray) -> None:
+        """Gimbal angles (N, 3) rad at trial times t (N,) s."""
+        for ti, a in zip(t.tolist(), angles):
+            tick = math.floor(ti * self.rate_hz + 1e-9)  # an instant on a tick belongs to it
+            if tick == self._tick:
                 continue
             if self._start is None:
-                self._start = s.t
+                self._start = ti
             self._tick = tick
-            self._samples.append((s.t, np.asarray(s.angles)))
+            self._samples.append((ti, a))
         if self._samples and self._samples[-1][0] - self._start >= self.settle:
             t = self._samples[-1][0]
             if self.failure is None and (self.checked_at is None or t - self.checked_at >= self.window):

@@ -1,63 +1,102 @@
-"""What the processing hands to viewers: snapshots, gimbal angles and stream health, live or in replay."""
+"""The viewer of a trial: opened as ``--viewer`` asks, and fed the processor's snapshots, stream health
+and gimbal angles as data."""
 
 from __future__ import annotations
 
+import sys
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
+from hil.config import Config
 from hil.estimation.online import Snapshot
-from hil.pipeline.processor import IMU, TABLE, TrialProcessor
-from hil.samples import AlignedSample
+from hil.frames import TableGeometry
+from hil.trial.outcome import TrialSetupError, truth_bias_ug
+from hil.units import UG
+
+Health = dict[str, dict[str, float]]
 
 
 class Viewer(Protocol):
-    """What a trial needs of a viewer (see :class:`hil.viewer.rerun_viewer.TrialViewer`)."""
+    """What a trial needs of a viewer (see :class:`hil.viewer.trial_viewer.TrialViewer`)."""
+
+    mode: str
+    url: str | None
+    viewer_process: object | None
 
     def log_snapshot(self, snap: Snapshot) -> None: ...
+    def log_snapshots(self, snaps: list[Snapshot]) -> None: ...
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
-    def log_health(self, t: float, health: dict[str, dict[str, float]]) -> None: ...
+    def log_health(self, t: float, health: Health) -> None: ...
     def close(self) -> None: ...
+    def stop(self) -> None: ...
 
 
-def health(processor: TrialProcessor) -> dict[str, dict[str, float]]:
-    """Per-stream counters for the viewer's stream-health panel."""
-    counts = processor.counts()
-    out: dict[str, dict[str, float]] = {}
-    for name in (IMU, TABLE):
-        c = processor.decoders[name].framer.counters
-        out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
-                     "outages": counts.extra[f"{name}_outages"]}
-    out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
-                      "bridged": counts.extra["aligner_imu_bridged"],
-                      "without_angles": counts.extra["aligner_without_angles"]}
-    return out
+@dataclass(frozen=True)
+class ViewerOptions:
+    """``--viewer`` and ``--bind``."""
+
+    mode: str = "none"
+    bind: str = "127.0.0.1"
 
 
-class ViewerSinks:
+def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) -> Viewer | None:
+    """The Rerun viewer the options ask for (None for ``none``); raises :class:`TrialSetupError` when it
+    does not start."""
+    if options.mode == "none":
+        return None
+    from hil.viewer.trial_viewer import (
+        TrialViewer,  # rerun only when a viewer is asked for
+    )
+
+    truth = truth_bias_ug(cfg)
+    try:
+        viewer = TrialViewer(options.mode, out, geometry=TableGeometry.from_config(cfg.turntable),
+                             truth_bias=None if truth is None else np.array(truth) * UG, bind=options.bind,
+                             recording_name=cfg.trial.name, blocking=blocking)
+    except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
+        raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
+    if viewer.url:
+        print(f"web viewer: {viewer.url}", file=sys.stderr)
+    return viewer
+
+
+def finish_viewer(viewer: Viewer | None) -> None:
+    """Finish the .rrd; a served web viewer stays up until Ctrl-C."""
+    if viewer is None:
+        return
+    viewer.close()
+    if viewer.mode == "serve":
+        print(f"viewer serving at {viewer.url}; Ctrl-C to stop", file=sys.stderr)
+        try:
+            while viewer.viewer_process is not None and viewer.viewer_process.poll() is None:
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass
+        viewer.stop()
+
+
+class ViewerFeed:
     """The processor's callbacks, forwarding to a viewer (or nowhere); ``extra_health`` adds live figures."""
 
-    def __init__(self, viewer: Viewer | None, extra_health: Callable[[], dict[str, dict[str, float]]] | None = None
-                 ) -> None:
+    def __init__(self, viewer: Viewer | None, extra_health: Callable[[], Health] | None = None) -> None:
         self.viewer = viewer
         self.extra_health = extra_health
-        self.processor: TrialProcessor | None = None
 
-    def on_snapshot(self, snap: Snapshot) -> None:
-        if self.viewer is None or self.processor is None:
+    def on_snapshot(self, snap: Snapshot, health: Health) -> None:
+        if self.viewer is None:
             return
         self.viewer.log_snapshot(snap)
-        figures = health(self.processor)
         if self.extra_health is not None:
+            health = {stream: dict(values) for stream, values in health.items()}
             for stream, values in self.extra_health().items():
-                figures.setdefault(stream, {}).update(values)
-        self.viewer.log_health(snap.t, figures)
+                health.setdefault(stream, {}).update(values)
+        self.viewer.log_health(snap.t, health)
 
-    def on_aligned(self, samples: list[AlignedSample]) -> None:
-        with_angles = [s for s in samples if s.angles is not None]
-        if self.viewer is None or self.processor is None or not with_angles:
-            return
-        t0 = self.processor.estimator.t0
-        self.viewer.log_table(np.array([s.t - t0 for s in with_angles]),
-                              np.array([s.angles for s in with_angles], dtype=float))
+    def on_table(self, t: np.ndarray, angles: np.ndarray) -> None:
+        if self.viewer is not None:
+            self.viewer.log_table(t, angles)

@@ -1,4 +1,4 @@
-"""The ``--viewer`` modes and the default one, apart from :mod:`hil.viewer.rerun_viewer` so the parser need not import Rerun."""
+"""The ``--viewer`` modes and the default one, apart from :mod:`hil.viewer.trial_viewer` so the parser need not import Rerun."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ import time
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from hil.pipeline.processor import TrialProcessor
+from hil.estimation.online import Snapshot
 from hil.units import UG
 
 
@@ -29,8 +29,9 @@ class ConsoleProgress:
     def __exit__(self, *exc: object) -> None:
         self._progress.stop()
 
-    def update(self, processor: TrialProcessor, health: dict[str, dict[str, float]]) -> None:
-        """Called by the trial about twice a second."""
+    def update(self, trial_time: float, snap: Snapshot | None, health: dict[str, dict[str, float]]) -> None:
+        """Called by the trial about twice a second with the trial time (s), the latest snapshot and the
+        stream health."""
         now = time.monotonic()
         frames = {name: health[name]["frames"] for name in ("imu", "table")}
         rates = {name: 0.0 for name in frames}
@@ -38,7 +39,6 @@ class ConsoleProgress:
             then, before = self._last
             rates = {name: (frames[name] - before[name]) / max(now - then, 1e-9) for name in frames}
         self._last = (now, frames)
-        snap = processor.estimator.snapshots[-1] if processor.estimator and processor.estimator.snapshots else None
         if snap is None:
             text = "acquiring"
         elif snap.full.bias is None:
@@ -51,5 +51,5 @@ class ConsoleProgress:
             for name in ("imu", "table"))
         p99 = health["aligner"].get("age_p99_ms")
         latency = f" p99 {p99:.1f}ms" if p99 is not None else ""
-        self._progress.update(self._task, completed=processor.trial_time, description=f"{text} | {streams}{latency}",
-                              time=f"{processor.trial_time:.0f}/{self.duration or 0:.0f} s")
+        self._progress.update(self._task, completed=trial_time, description=f"{text} | {streams}{latency}",
+                              time=f"{trial_time:.0f}/{self.duration or 0:.0f} s")

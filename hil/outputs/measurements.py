@@ -1,0 +1,121 @@
+"""A trial's results as measurements in the manner of OpenHTF: a name, a value, a unit, a limit and an
+outcome (PASS, FAIL, or not judged when the config sets no limit for it).
+
+The trial passes when no judged measurement fails; a judged measurement without a value (e.g. a bias
+that was not observable) fails.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hil.config import ReportLimits
+
+PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One result of the trial, judged against its limit (OpenHTF style)."""
+
+    name: str
+    value: float | int | bool | None
+    unit: str
+    limit: str  # human-readable validator, "" when not judged
+    outcome: str  # PASS, FAIL or NOT_JUDGED
+    description: str = ""
+
+
+def _at_most(name, value, unit, bound, description="", absolute=False) -> Measurement:
+    """A measurement judged by ``value <= bound`` (``|value| <= bound`` when absolute); bound None: not judged."""
+    if bound is None:
+        return Measurement(name, value, unit, "", NOT_JUDGED, description)
+    limit = f"{'|x| ' if absolute else ''}≤ {format_value(bound)}"
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return Measurement(name, value, unit, limit, FAIL, description)
+    ok = (abs(value) if absolute else value) <= bound
+    return Measurement(name, value, unit, limit, PASS if ok else FAIL, description)
+
+
+def _info(name, value, unit, description="") -> Measurement:
+    return Measurement(name, value, unit, "", NOT_JUDGED, description)
+
+
+def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
+    """The trial's measurements from a result.json document, judged against ``limits``."""
+    est = result.get("estimate", {})
+    bias = est.get("accel_bias_ug") or [None] * 3
+    sigma = est.get("accel_bias_sigma_ug") or [None] * 3
+    truth = (result.get("truth") or {}).get("accel_bias_ug")
+    out: list[Measurement] = []
+    for k, axis in enumerate("xyz"):
+        out.append(_info(f"accel_bias_{axis}", bias[k], "µg", f"accelerometer bias estimate, {axis} axis"))
+    for k, axis in enumerate("xyz"):
+        out.append(_at_most(f"accel_bias_sigma_{axis}", sigma[k], "µg", limits.bias_sigma_ug_max,
+                            f"1σ of the bias estimate, {axis} axis"))  # fmt: skip
+    if truth is not None:
+        for k, axis in enumerate("xyz"):
+            error = None if bias[k] is None else bias[k] - truth[k]
+            out.append(_at_most(f"accel_bias_error_{axis}", error, "µg", limits.bias_error_ug_max,
+                                f"estimate − truth ({format_value(truth[k])} µg), {axis} axis", absolute=True))  # fmt: skip
+    elif limits.bias_error_ug_max is not None:
+        out.append(Measurement("accel_bias_error", None, "µg", f"|x| ≤ {format_value(limits.bias_error_ug_max)}", NOT_JUDGED,
+                               "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
+    out.append(_info("bias_observable", est.get("observable"), "", "scaled Gram matrix of full rank"))
+    out.append(_info("gram_rank", est.get("gram_rank"), "of 12", "rank of the scaled Gram matrix (2019 eq. 19)"))
+    if "gram_condition" in est:  # null when the matrix is singular
+        out.append(_info("gram_condition", est["gram_condition"], "", "condition number of the scaled Gram matrix"))
+    out.append(_at_most("converged_at", est.get("converged_at_s"), "s", limits.converged_by_s,
+                        "time after which the bias stays inside the final ±3σ band"))  # fmt: skip
+    if est.get("noise_ug") is not None:
+        out.append(_info("accel_noise", est["noise_ug"], "µg", "residual RMS per axis and sample"))
+
+    alignment = result.get("alignment_deg") or {}
+    method2 = alignment.get("method2") or {}
+    for angle in ("pitch", "roll"):
+        out.append(_at_most(f"alignment_method2_{angle}", method2.get(angle), "deg", limits.method2_error_deg_max,
+                            f"method-2 {angle} error against the turntable, mean of the last 10 %",
+                            absolute=True))  # fmt: skip
+    if "yaw" in method2:
+        out.append(_info("alignment_method2_yaw", method2["yaw"], "deg", "method-2 yaw error, mean of the last 10 %"))
+    for method, angles in (("method1", ("pitch", "roll", "yaw")), ("theoretical", ("pitch", "roll"))):
+        values = alignment.get(method) or {}
+        for angle in angles:
+            if angle in values:
+                out.append(_info(f"alignment_{method}_{angle}", values[angle], "deg",
+                                 f"{'method-1' if method == 'method1' else 'theoretical (2019 eq. 8)'} {angle} error"))  # fmt: skip
+
+    table = (result.get("table_reference") or {}).get("accel_bias_ug")
+    if table is not None:
+        for k, axis in enumerate("xyz"):
+            out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude"))
+
+    streams = result.get("streams") or {}
+    out.append(_at_most("frames_dropped", streams.get("dropped"), "frames", limits.dropped_max, "frames lost"))
+    out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,
+                        "frames with a bad checksum or framing"))  # fmt: skip
+    for key, value in streams.items():
+        if key not in ("dropped", "corrupt"):
+            out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
+    return out
+
+
+def overall(results: list[Measurement]) -> str:
+    """PASS when no judged measurement failed."""
+    return FAIL if any(m.outcome == FAIL for m in results) else PASS
+
+
+def format_value(value) -> str:
+    """A value as the report and the limits show it."""
+    if value is None:
+        return "—"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return str(value)
+    if not math.isfinite(value):
+        return str(value)
+    if value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e5):
+        return f"{value:.3e}"
+    return f"{value:.5g}"

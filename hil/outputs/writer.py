@@ -1,0 +1,32 @@
+"""Every output of a trial in its directory: result.json, series.csv, config.yaml, the figures,
+report.html and junit.xml."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hil.config import ReportLimits
+from hil.estimation.online import Snapshot
+from hil.outputs.measurements import measurements, overall
+from hil.outputs.report import write_report
+from hil.outputs.result import write_result
+from hil.outputs.series import write_series
+
+
+def write_trial_outputs(out: Path, result: dict, snapshots: list[Snapshot], limits: ReportLimits,
+                        config_text: str | None = None, figures: bool = True) -> str:
+    """Write the outputs of a finished trial (figures drawn once, from the snapshots); returns the
+    outcome (PASS or FAIL) against ``limits``."""
+    out.mkdir(parents=True, exist_ok=True)
+    if config_text is not None:
+        (out / "config.yaml").write_text(config_text)
+    write_result(out, result)
+    series = write_series(out, snapshots)
+    if figures and len(series):
+        from hil.outputs.figures import (
+            write_figures,  # matplotlib only when figures are drawn
+        )
+
+        write_figures(out, series, result)
+    write_report(out, limits)
+    return overall(measurements(result, limits))

@@ -1,0 +1,103 @@
+"""The live trial of ``hil run``: the devices (or their emulators, in their own process), the viewer, the
+table under ``acl`` control and the :class:`~hil.trial.live.LiveTrial`; the table is sent Off, the
+viewer closed and the emulator reaped on every way out, signals included."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from hil.config import Config
+from hil.trial.outcome import TrialOutcome, TrialSetupError, truth_bias_ug
+from hil.trial.viewer_feed import ViewerOptions, open_viewer
+
+
+def emulated(cfg: Config) -> bool:
+    """Both devices emulated (a mixed config is refused)."""
+    sources = {cfg.imu.source, cfg.turntable.source}
+    if "emulator" in sources and sources != {"emulator"}:
+        raise TrialSetupError("imu.source and turntable.source: emulate both devices or neither")
+    return sources == {"emulator"}
+
+
+def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
+             viewer: ViewerOptions, quiet: bool = False) -> tuple[TrialOutcome, object]:
+    """Acquire, record and estimate until the trial ends; returns the outcome and the viewer (still open
+    for a ``serve`` viewer to keep serving)."""
+    from emulators.emulate import parse_speed
+    from hil.trial.stop_signals import StopSignals
+
+    is_emulated = emulated(cfg)
+    duration = duration if duration is not None else cfg.trial.duration_s
+    if is_emulated and duration is None:
+        raise TrialSetupError("an emulated trial needs trial.duration_s or --duration")
+    if is_emulated and cfg.imu.protocol == "can-dbc" and cfg.imu.can is not None and cfg.imu.can.interface == "virtual":
+        raise TrialSetupError("imu.can.interface: 'virtual' reaches only its own process, and the emulated devices "
+                              "run in theirs; use udp_multicast (the default without an imu.can block)")
+    try:
+        time_scale = parse_speed(speed) if is_emulated else 1.0
+    except ValueError as exc:
+        raise TrialSetupError(f"--speed: {exc}") from None
+    out.mkdir(parents=True, exist_ok=True)
+    config_text = config_path.read_text()
+    with StopSignals() as signals:
+        trial, ended = _acquire(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet,
+                                lambda: signals.received)
+        outcome = TrialOutcome.of(trial.processor, cfg, config_text, out, ended, truth_bias_ug(cfg))
+    return outcome, trial.viewer
+
+
+def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
+             time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested):
+    """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
+    from drivers.table_client import InterlockError, LimitError, TableError
+    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
+    from hil.trial.live import LiveTrial
+    from hil.trial.table_control import MotionCheck, TableControl
+    from hil.viewer.progress import ConsoleProgress
+
+    emulator, ports, control, viewer = None, None, None, None
+    try:
+        if emulated(cfg):
+            try:
+                emulator, ports = spawn_emulator(config_path, out / "ports.json", speed, duration,
+                                                 stats_file=out / "emulator.json", log_file=out / "emulator.log",
+                                                 hold=True)
+            except EmulatorError as exc:
+                raise TrialSetupError(f"{config_path}: {exc}") from None
+        viewer = open_viewer(options, cfg, out, blocking=False)
+        command_url = _command_url(cfg, ports)
+        with ConsoleProgress(duration, quiet=quiet) as progress:
+            check = None
+            if command_url is not None:
+                control = TableControl(command_url, cfg.turntable)
+                control.open()
+                control.arm()
+                check = MotionCheck(cfg.turntable, cfg.trial.rate_hz)
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
+                              motion_check=check, on_progress=progress.update, stop_requested=stop_requested,
+                              on_end=control.stop if control is not None else None,
+                              source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
+                              if emulator else None)
+            return trial, trial.run()
+    except (TableError, LimitError, InterlockError) as exc:
+        raise TrialSetupError(str(exc)) from None
+    finally:
+        if viewer is not None:
+            viewer.close()  # the trial closes it too; closing twice is harmless
+        if control is not None:
+            control.stop()
+            if control.stop_error:
+                print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
+        if emulator is not None:
+            stop_emulator(emulator)
+
+
+def _command_url(cfg: Config, ports: dict | None) -> str | None:
+    """The table's acl port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
+    url = cfg.turntable.command_port
+    if url == "emulator":
+        if ports is None or "turntable_cmd" not in ports:
+            raise TrialSetupError("turntable.command_port: 'emulator' needs turntable.source: emulator")
+        return ports["turntable_cmd"]
+    return url

@@ -1,0 +1,68 @@
+"""The runners whose data is already there: a recording (``hil replay``), the emulator's truth and sensor
+errors (``hil simulate``), and increments exported from other software (``hil estimate``). Each feeds
+the same processor as a live trial and returns one :class:`~hil.trial.outcome.TrialOutcome`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from hil.config import Config
+from hil.outputs.result import COMPLETED
+from hil.pipeline.processor import TrialProcessor
+from hil.recording.recorder import Recording
+from hil.trial.outcome import TrialOutcome, truth_bias_ug
+from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
+
+
+def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions) -> tuple[TrialOutcome, Viewer | None]:
+    """A recording's chunks through the processing of the live run, in the same order."""
+    from hil.recording.replay import open_recording, recording_path
+
+    out = Path(out) if out else recording_path(source).parent / "replay"
+    recording, cfg = open_recording(source)
+    viewer = open_viewer(options, cfg, out, blocking=True)
+    processor = replay_recording(recording, cfg, viewer)
+    if recording.truncated:
+        print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
+    ended = recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
+    outcome = TrialOutcome.of(processor, cfg, recording.metadata["config"], out, ended, truth_bias_ug(cfg))
+    return outcome, viewer
+
+
+def replay_recording(recording: Recording, cfg: Config, viewer: Viewer | None = None) -> TrialProcessor:
+    """The finished processor of a recording's items fed in their order (and logged to ``viewer``)."""
+    duration = recording.metadata.get("duration_s")
+    scale = recording.metadata.get("time_scale", "1.0")
+    feed = ViewerFeed(viewer)
+    processor = TrialProcessor(cfg, float(duration) if duration else None, float(scale) if scale else None,
+                               feed.on_snapshot, feed.on_table)
+    for item in recording.items:
+        processor.feed(item)
+    processor.finish()
+    if viewer is not None and processor.estimator is not None:
+        viewer.log_health(processor.trial_time, processor.health())
+    return processor
+
+
+def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions
+                   ) -> tuple[TrialOutcome, Viewer | None]:
+    """The emulator's samples, already aligned, in batches into the processor: no transport, no alignment."""
+    from emulators.simulation import Simulation
+
+    sim = Simulation.from_config(cfg)
+    viewer = open_viewer(options, cfg, out, blocking=True)
+    feed = ViewerFeed(viewer)
+    processor = TrialProcessor(cfg, on_snapshot=feed.on_snapshot, on_table=feed.on_table)
+    for batch in sim.batches():
+        processor.feed_batch(batch)
+    return TrialOutcome.of(processor, cfg, config_text, out, truth=truth_bias_ug(cfg)), viewer
+
+
+def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
+    """Increments (and table angles, if present) from a CSV into the processor; no truth."""
+    from hil.recording.csv_input import read_increments_csv
+
+    processor = TrialProcessor(cfg)
+    processor.feed_batch(read_increments_csv(data))
+    return TrialOutcome.of(processor, cfg, config_text, out)

@@ -1,0 +1,86 @@
+"""The Rerun layout of a trial: the default blueprint and the styles of its time series.
+
+The timeline is ``trial_time``: seconds since the start of the trial, the clock of ``Snapshot.t``.
+Entity paths and units are listed in docs/viewer.md.
+"""
+
+from __future__ import annotations
+
+import rerun as rr
+import rerun.blueprint as rrb
+
+TIMELINE = "trial_time"
+AXES = ("x", "y", "z")
+ANGLES = ("pitch", "roll", "yaw")
+HEALTH_VIEWS = (("rate_hz", "frame rate (Hz)"), ("frames", "frames"), ("dropped", "dropped frames"),
+                ("corrupt", "corrupt frames (CRC, framing)"), ("latency_ms", "latency (ms)"),
+                ("sync_offset_ms", "sync offset (ms)"))
+
+AXIS_COLORS = {"x": (228, 26, 28), "y": (77, 175, 74), "z": (55, 126, 184)}
+_BAND = 0.55  # band lines: the axis colour mixed with grey
+TRUTH_COLOR = (255, 170, 0)
+_METHOD_COLORS = {"method1": (230, 85, 13), "method2": (49, 163, 84), "theoretical": (170, 170, 170)}
+_METHOD_NAMES = {"method1": "method 1", "method2": "method 2", "theoretical": "theoretical"}
+STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (255, 127, 0))
+
+
+def _band_color(axis: str) -> tuple[int, int, int]:
+    return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in AXIS_COLORS[axis])
+
+
+def default_blueprint() -> rrb.Blueprint:
+    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and stream health."""
+    bias = [
+        rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg)", plot_legend=rrb.PlotLegend(visible=a == "x"))
+        for a in AXES
+    ]
+    bias.append(rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg)"))
+    observability = [
+        rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank", axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
+        rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
+                           plot_legend=rrb.PlotLegend(visible=False)),
+    ]  # fmt: skip
+    alignment = [
+        rrb.TimeSeriesView(origin=f"/alignment/{angle}", name=f"{angle} error (deg)",
+                           plot_legend=rrb.PlotLegend(visible=angle == "pitch"))
+        for angle in ANGLES
+    ]  # fmt: skip
+    health = rrb.Grid(
+        *(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
+        grid_columns=2,
+        name="stream health",
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(*bias, name="accelerometer bias"),
+            rrb.Vertical(*observability, *alignment, name="observability and alignment"),
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="/world", name="turntable and apparent gravity in i_b0"),
+                health,
+                row_shares=[3, 2],
+            ),
+            column_shares=[1, 1, 1],
+        ),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+    )
+
+
+def log_series_styles(rec: rr.RecordingStream, with_truth: bool) -> None:
+    """The names, colours and widths of every time series (static)."""
+    for a in AXES:
+        names, colors, widths = ["estimate", "−3σ", "+3σ"], [AXIS_COLORS[a], _band_color(a), _band_color(a)], [2, 1, 1]
+        if with_truth:
+            names, colors, widths = names + ["truth"], colors + [TRUTH_COLOR], widths + [1.5]
+        rec.log(f"bias/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+    rec.log("sigma", rr.SeriesLines(names=list(AXES), colors=[AXIS_COLORS[a] for a in AXES]), static=True)
+    rec.log("observability/rank", rr.SeriesLines(names=["12-state (with bias)", "9-state (method 1)"],
+                                                 colors=[(55, 126, 184), (230, 85, 13)]), static=True)  # fmt: skip
+    rec.log("observability/log10_condition", rr.SeriesLines(names="log10 cond", colors=(55, 126, 184)), static=True)
+    for angle in ANGLES:
+        methods = ("method1", "method2") if angle == "yaw" else ("method1", "method2", "theoretical")
+        rec.log(f"alignment/{angle}", rr.SeriesLines(names=[_METHOD_NAMES[m] for m in methods],
+                                                     colors=[_METHOD_COLORS[m] for m in methods]), static=True)  # fmt: skip
+    rec.log("table/angles_deg", rr.SeriesLines(names=["outer", "middle", "inner"],
+                                               colors=[(55, 126, 184), (77, 175, 74), (228, 26, 28)]), static=True)  # fmt: skip

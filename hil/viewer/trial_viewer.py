@@ -1,0 +1,286 @@
+"""Rerun logging of a trial: bias convergence, observability, alignment, the turntable in 3D, stream health.
+
+:class:`TrialViewer` logs the estimator's snapshots, the gimbal angles and the stream counters to a
+Rerun recording with the default blueprint (:mod:`hil.viewer.blueprint`: the 2019 paper's Figs. 2,
+3/6 and 4/7, live).
+
+Logging never blocks the caller: each call hands its data to one background thread that converts it
+and passes it to the Rerun SDK (which batches and writes from its own threads). When that thread
+falls behind, live calls are dropped and counted (:attr:`TrialViewer.dropped`) rather than waited
+for; offline producers (simulate, replay) pass ``blocking=True`` so nothing is lost.
+
+Viewer modes (:mod:`hil.viewer.modes`): ``spawn`` starts the native viewer, ``serve`` a web viewer
+(the URL is printed), both as a child process (:mod:`hil.viewer.rerun_process`); ``save`` writes
+``recording.rrd`` only; ``none`` logs nothing. ``spawn`` and ``serve`` write the .rrd too.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import subprocess
+import threading
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Self
+
+import numpy as np
+import rerun as rr
+
+from hil.estimation.online import Snapshot
+from hil.frames import TableGeometry
+from hil.units import DEG, UG
+from hil.viewer.blueprint import (
+    ANGLES,
+    AXES,
+    STREAM_COLORS,
+    TIMELINE,
+    default_blueprint,
+    log_series_styles,
+)
+from hil.viewer.modes import VIEWER_MODES
+from hil.viewer.rerun_process import start_viewer, telemetry_requested
+from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
+
+log = logging.getLogger(__name__)
+
+APPLICATION_ID = "turntable-hil"
+RRD_NAME = "recording.rrd"
+TABLE_RATE_HZ = 20.0  # gimbal angles in the 3D view; the viewer draws at display rate anyway
+CONE_PERIOD_S = 10.0  # the reconstructed cone is redrawn at most this often (trial time)
+QUEUE_ITEMS = 1024
+SMALL_BATCH = 8  # rows up to this many are logged one by one (merged by the SDK), more as columns
+
+
+class TrialViewer:
+    """Rerun logging of one trial; see the module docstring. All methods return at once."""
+
+    def __init__(
+        self,
+        mode: str,
+        out_dir: Path,
+        *,
+        geometry: TableGeometry,
+        truth_bias: np.ndarray | None = None,
+        bind: str = "127.0.0.1",
+        recording_name: str = "trial",
+        blocking: bool = False,
+        telemetry: bool | None = None,
+        table_rate_hz: float = TABLE_RATE_HZ,
+    ) -> None:
+        if mode not in VIEWER_MODES:
+            raise ValueError(f"viewer mode {mode!r}: choose one of {', '.join(VIEWER_MODES)}")
+        self.mode = mode
+        self.out_dir = Path(out_dir)
+        self.geometry = geometry
+        self.truth_bias = None if truth_bias is None else np.asarray(truth_bias, dtype=float)
+        self.bind = bind
+        self.blocking = blocking
+        self.table_rate_hz = table_rate_hz
+        self.telemetry = telemetry_requested() if telemetry is None else telemetry
+        self.rrd_path: Path | None = None
+        self.url: str | None = None  # the web viewer's address in serve mode
+        self.viewer_process: subprocess.Popen | None = None
+        self.dropped = 0  # calls not logged because the logging thread was behind
+        self.error: BaseException | None = None  # the first error the logging thread met
+        self._closed = False
+        self._next_table_tick = -np.inf
+        self._next_cone_t = 0.0
+        self._ib0_logged = False
+        if mode == "none":
+            self._rec = None
+            return
+
+        self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+        rr.set_log_time_enabled(False, recording=self._rec)
+        rr.set_log_tick_enabled(False, recording=self._rec)
+        blueprint = default_blueprint()
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.rrd_path = self.out_dir / RRD_NAME
+        if mode == "save":
+            self._rec.save(self.rrd_path, default_blueprint=blueprint)
+        else:
+            self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry)
+            self._rec.set_sinks(rr.GrpcSink(grpc_url), rr.FileSink(self.rrd_path), default_blueprint=blueprint)
+        self._rec.send_recording_name(recording_name)
+        self._health_streams: dict[str, list[str]] = {}
+        log_series_styles(self._rec, self.truth_bias is not None)
+        log_turntable(self._rec, geometry)
+        self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
+        self._worker = threading.Thread(target=self._work, name="rerun-logging", daemon=True)
+        self._worker.start()
+
+    # -- public API (called from the processing thread) --
+
+    def log_snapshot(self, snap: Snapshot) -> None:
+        """One estimator snapshot (live, at the display rate)."""
+        self._submit(lambda: self._write_snapshots([snap]))
+
+    def log_snapshots(self, snaps: list[Snapshot]) -> None:
+        """Many snapshots at once, sent as columns (simulate, replay); waits for room, never drops."""
+        if snaps:
+            snaps = list(snaps)
+            self._submit(lambda: self._write_snapshots(snaps), block=True)
+
+    def log_table(self, t: np.ndarray, angles: np.ndarray) -> None:
+        """Gimbal angles (N, 3) rad ordered (outer, middle, inner) at trial times t (N,) s, for the 3D view.
+
+        Decimated to ``table_rate_hz``."""
+        if self._rec is None or len(t) == 0:
+            return
+        t = np.asarray(t, dtype=float)
+        ticks = np.floor(t * self.table_rate_hz + 1e-9)  # a sample on a tick belongs to it
+        first_of_tick = np.empty(len(t), dtype=bool)
+        first_of_tick[0] = True
+        first_of_tick[1:] = ticks[1:] != ticks[:-1]
+        keep = first_of_tick & (ticks >= self._next_table_tick)
+        if not keep.any():
+            return
+        self._next_table_tick = ticks[keep][-1] + 1
+        t_kept, angles_kept = t[keep], np.array(angles, dtype=float)[keep]
+        self._submit(lambda: self._write_table(t_kept, angles_kept))
+
+    def log_health(self, t: float, health: dict[str, dict[str, float]]) -> None:
+        """Stream counters at trial time t: {stream: {metric: value}}, e.g. rate_hz, dropped, latency_ms."""
+        if self._rec is None:
+            return
+        rows = [(stream, metric, float(value)) for stream, metrics in health.items() for metric, value in metrics.items()
+                if value is not None]  # fmt: skip
+        self._submit(lambda: self._write_health(float(t), rows))
+
+    def close(self) -> None:
+        """Log what is queued, flush and finish the .rrd. A spawned viewer keeps running; a served one
+        keeps serving until :meth:`stop` or the end of the process."""
+        if self._rec is None or self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._worker.join()
+        self._rec.flush()
+        if self.mode == "save":
+            self._rec.disconnect()
+        if self.error is not None:
+            log.warning("Rerun logging failed: %s", self.error)
+
+    def stop(self) -> None:
+        """Close, and stop the web viewer server of ``serve`` mode."""
+        self.close()
+        if self._rec is not None and self.mode != "save":
+            self._rec.disconnect()
+        process, self.viewer_process = self.viewer_process, None
+        if process is not None and self.mode == "serve" and process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(5.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- the logging thread --
+
+    def _submit(self, job: Callable[[], None], block: bool | None = None) -> None:
+        if self._rec is None or self._closed:
+            return
+        try:
+            self._queue.put(job, block=self.blocking if block is None else block)
+        except queue.Full:
+            self.dropped += 1
+
+    def _work(self) -> None:
+        while (job := self._queue.get()) is not None:
+            try:
+                job()
+            except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
+                if self.error is None:
+                    self.error = exc
+                    log.warning("Rerun logging error (further errors not reported): %s", exc)
+
+    def _scalars(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
+        """Rows of a multi-series entity: values (N, K), one series per column; all-NaN rows left out.
+
+        A few rows go through ``log`` (the SDK merges them into large chunks), many through
+        ``send_columns``; one Rerun call costs tens of microseconds either way, hence few entities."""
+        values = np.asarray(values, dtype=float).reshape(len(t), -1)
+        rows = ~np.all(np.isnan(values), axis=1)
+        if not rows.any():
+            return
+        t, values = t[rows], values[rows]
+        if len(t) <= SMALL_BATCH:
+            for ti, row in zip(t, values):
+                self._rec.set_time(TIMELINE, duration=float(ti))
+                self._rec.log(path, rr.Scalars(row))
+        else:
+            columns = rr.Scalars.columns(scalars=values).partition([values.shape[1]] * len(t))
+            self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=columns)
+
+    def _write_snapshots(self, snaps: list[Snapshot]) -> None:
+        n = len(snaps)
+        t = np.fromiter((s.t for s in snaps), float, n)
+        nan3 = np.full(3, np.nan)
+        bias = np.array([s.full.bias if s.full.bias is not None else nan3 for s in snaps]) / UG
+        sigma = np.array([s.full.bias_sigma if s.full.bias_sigma is not None else nan3 for s in snaps]) / UG
+        for k, a in enumerate(AXES):
+            series = [bias[:, k], bias[:, k] - 3.0 * sigma[:, k], bias[:, k] + 3.0 * sigma[:, k]]
+            if self.truth_bias is not None:
+                series.append(np.where(np.isnan(bias[:, k]), np.nan, self.truth_bias[k] / UG))
+            self._scalars(f"bias/{a}", t, np.column_stack(series))
+        self._scalars("sigma", t, sigma)
+        ranks = [(s.full.observability.rank, s.gravity_only.observability.rank) for s in snaps]
+        self._scalars("observability/rank", t, np.array(ranks, float))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            condition = np.log10(np.array([s.full.observability.condition for s in snaps], float))
+        self._scalars("observability/log10_condition", t, np.where(np.isfinite(condition), condition, np.nan))
+        errors = {}
+        for attr, size in (("error_method1", 3), ("error_method2", 3), ("error_theoretical", 2)):
+            errors[attr] = np.array([getattr(s, attr) if getattr(s, attr) is not None else nan3[:size] for s in snaps])
+        for k, angle in enumerate(ANGLES):
+            columns = [errors["error_method1"][:, k], errors["error_method2"][:, k]]
+            if k < 2:
+                columns.append(errors["error_theoretical"][:, k])
+            self._scalars(f"alignment/{angle}", t, np.column_stack(columns) / DEG)
+        self._write_cones(snaps)
+
+    def _write_cones(self, snaps: list[Snapshot]) -> None:
+        for i, s in enumerate(snaps):
+            solution = s.full if s.full.observable else s.gravity_only
+            if s.t < self._next_cone_t and i != len(snaps) - 1 or not solution.observable:
+                continue
+            self._next_cone_t = s.t + CONE_PERIOD_S
+            log_cone(self._rec, solution, s.t)
+
+    def _write_table(self, t: np.ndarray, angles: np.ndarray) -> None:
+        if not self._ib0_logged:
+            # i_b0 is the body frame at the start, fixed in inertial space: drawn at the first attitude C_b^n(0)
+            start = self.geometry.attitude_matrix(angles[:1])[0][0]
+            self._rec.log("world/ib0", rr.Transform3D(mat3x3=start), rr.TransformAxes3D(0.3), static=True)
+            self._ib0_logged = True
+        for path, k, axis in GIMBALS:
+            q = axis_quaternions(angles[:, k], axis)
+            if len(t) <= SMALL_BATCH:
+                for ti, qi in zip(t, q):
+                    self._rec.set_time(TIMELINE, duration=float(ti))
+                    self._rec.log(path, rr.Transform3D(quaternion=qi))
+            else:
+                self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+                                       columns=rr.Transform3D.columns(quaternion=q))  # fmt: skip
+        self._scalars("table/angles_deg", t, angles / DEG)
+
+    def _write_health(self, t: float, rows: list[tuple[str, str, float]]) -> None:
+        by_metric: dict[str, dict[str, float]] = {}
+        for stream, metric, value in rows:
+            by_metric.setdefault(metric, {})[stream] = value
+        for metric, values in by_metric.items():
+            path = f"health/{rr.escape_entity_path_part(metric)}"
+            streams = self._health_streams.setdefault(path, [])
+            if any(stream not in streams for stream in values):
+                streams.extend(stream for stream in values if stream not in streams)
+                colors = [STREAM_COLORS[k % len(STREAM_COLORS)] for k in range(len(streams))]
+                self._rec.log(path, rr.SeriesLines(names=streams, colors=colors), static=True)
+            row = np.array([values.get(stream, np.nan) for stream in streams])
+            self._scalars(path, np.array([t]), row[None, :])
