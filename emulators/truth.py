@@ -38,11 +38,6 @@ class Truth:
         """C_b^n(t) from the gimbal angles."""
         return self.geometry.attitude(self.angles(t))
 
-    def attitude_ib0(self, t: np.ndarray) -> Rotation:
-        """C_b^ib0(t) = C_n^b(0) C_n^n0(t) C_b^n(t): the body at t in the body frame frozen at t = 0."""
-        c0 = self.attitude_n(np.zeros(1))
-        return c0.inv() * self.earth.n_to_n0(t) * self.attitude_n(t)
-
     def rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """omega_ib^b (rad/s) and f^b (m/s^2) at instants t, each (N, 3)."""
         angles, angle_rates = self.motion(np.asarray(t, dtype=float))

@@ -10,12 +10,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hil.config import TurntableConfig
 from hil.units import DEG
+
+if TYPE_CHECKING:
+    from hil.config import (
+        TurntableConfig,  # the schema is needed for the annotation only
+    )
 
 EARTH_RATE = 7.2921151467e-5  # rad/s, WGS-84
 WGS84_A = 6378137.0  # m, semi-major axis
@@ -73,11 +78,6 @@ class Earth:
 def euler_rotation(yaw_pitch_roll: np.ndarray) -> Rotation:
     """Rotation Rz(yaw) Rx(pitch) Ry(roll) from angles (rad), shape (3,) or (N, 3)."""
     return Rotation.from_euler(EULER_SEQ, yaw_pitch_roll)
-
-
-def euler_angles(rotation: Rotation) -> np.ndarray:
-    """(yaw, pitch, roll) in rad of C_b^n, the inverse of :func:`euler_rotation`."""
-    return rotation.as_euler(EULER_SEQ)
 
 
 def euler_from_matrix(c: np.ndarray) -> np.ndarray:
@@ -154,10 +154,6 @@ class TableGeometry:
         w_mount[:, 1] += rates[:, 2]
         return w_mount @ self._body_to_mount_matrix
 
-    def body_rate(self, angles: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
-        """omega_nb^b (rad/s) from gimbal angles and their rates, both (N, 3) ordered (outer, middle, inner)."""
-        _, middle_inner, inner = self.attitude_matrix(angles)
-        return self.body_rate_from(middle_inner, inner, angle_rates)
 
 
 def table_body_rotation(geometry: TableGeometry, earth: Earth, dt: np.ndarray, angles_start: np.ndarray,

@@ -84,12 +84,6 @@ class AlignedBatch:
     def __len__(self) -> int:
         return len(self.t)
 
-    def slice(self, start: int, stop: int) -> AlignedBatch:
-        """The samples start..stop-1, keeping the interval start of the first one."""
-        t0 = self.t0 if start == 0 else float(self.t[start - 1])
-        angles = None if self.angles is None else self.angles[start:stop]
-        return AlignedBatch(self.t[start:stop], self.dtheta[start:stop], self.dv[start:stop], angles, t0)
-
     @classmethod
     def from_samples(cls, samples: list[AlignedSample], t0: float) -> AlignedBatch:
         """Stack single samples into a batch; angles are kept only if every sample has them."""

@@ -1,5 +1,7 @@
 
+import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from drivers.decoder import StreamDecoder
 from drivers.tap import RawListener
@@ -79,3 +81,9 @@ class Decoding(RawListener):
 
     def stop(self) -> None:
         self.stopped = True
+
+
+def true_attitude_ib0(truth, t: np.ndarray) -> Rotation:
+    """C_b^ib0(t) = C_n^b(0) C_n^n0(t) C_b^n(t): the body at t in the body frame frozen at t = 0."""
+    c0 = truth.attitude_n(np.zeros(1))
+    return c0.inv() * truth.earth.n_to_n0(t) * truth.attitude_n(t)

@@ -6,6 +6,7 @@ from hil.estimation.alignment import attitude_error, dual_vector, theoretical_er
 from hil.estimation.apparent_gravity import ApparentGravityEstimator
 from hil.estimation.strapdown import cumulative_product
 from hil.frames import EARTH_RATE, TableGeometry, euler_rotation
+from hil.samples import AlignedBatch
 from hil.units import DEG, UG
 from tests.conftest import PAPER_ERRORS, make_config, run_estimator
 
@@ -149,7 +150,8 @@ def test_a_solve_instant_inside_a_data_gap_is_served_by_the_next_sample():
     sim = Simulation.from_config(cfg)
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=7.0)
     est.update_many(batches[0])
-    gap = batches[1].slice(500, 1000)  # 15-20 s; the solve at 14 s falls in the gap
+    b = batches[1]  # 15-20 s; the solve at 14 s falls in the gap
+    gap = AlignedBatch(b.t[500:], b.dtheta[500:], b.dv[500:], b.angles[500:], float(b.t[499]))
     est.update_many(gap)
     times = [s.t for s in est.snapshots]
     assert times == [7.0, pytest.approx(15.01)]

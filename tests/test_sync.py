@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import make_config
+from conftest import make_config, true_attitude_ib0
 from scipy.spatial.transform import Rotation
 
 from emulators.simulation import Simulation
@@ -125,7 +125,7 @@ def test_long_imu_gap_is_bridged_by_the_table_attitude():
             assert est.bridge(item)
         else:
             est.update(item)
-    true_attitude = sim.truth.attitude_ib0(np.array([30.0]))
+    true_attitude = true_attitude_ib0(sim.truth, np.array([30.0]))
     error = np.linalg.norm((Rotation.from_matrix(est.strapdown.attitude).inv() * true_attitude).as_rotvec())
     assert error < 1e-9
 

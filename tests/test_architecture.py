@@ -1,0 +1,98 @@
+"""The layout of DESIGN.md held against the code: imports point down the layer list, no import cycles
+(lazy imports included), no module over 400 lines."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("hil", "drivers", "emulators")
+MAX_LINES = 400
+# DESIGN.md "Layout": an import may only point to its own layer or one above it in this list
+LAYERS = (
+    ("hil.config", "hil.units", "hil.samples", "hil.frames"),
+    ("hil.estimation",),
+    ("drivers",),
+    ("emulators",),
+    ("hil.pipeline", "hil.recording"),
+    ("hil.outputs", "hil.viewer"),
+    ("hil.trial",),
+    ("hil.cli",),
+)
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _imports(path: Path, modules: dict[str, Path]) -> set[str]:
+    """Our modules that ``path`` imports anywhere (module level or inside functions)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module] + [f"{node.module}.{alias.name}" for alias in node.names]
+        for name in names:
+            while name and name not in modules:
+                name = name.rpartition(".")[0]
+            if name and name not in PACKAGES:
+                found.add(name)
+    return found
+
+
+def _layer(module: str) -> int:
+    for k, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return k
+    raise AssertionError(f"{module} is in no layer of DESIGN.md's list")
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = _modules()
+    return {name: _imports(path, modules) - {name} for name, path in modules.items() if name not in PACKAGES}
+
+
+def test_every_import_points_down_the_layer_list():
+    wrong = [f"{a} (layer {_layer(a) + 1}) imports {b} (layer {_layer(b) + 1})"
+             for a, targets in _graph().items() for b in sorted(targets) if _layer(b) > _layer(a)]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_import_cycles():
+    graph = _graph()
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+    cycles = []
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                cycles.append(" -> ".join(path[path.index(nxt):] + [nxt]))
+            elif nxt not in state:
+                visit(nxt, path + [nxt])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    assert not cycles, "\n".join(cycles)
+
+
+def test_no_module_is_over_400_lines():
+    long = {name: n for name, path in _modules().items() if (n := len(path.read_text().splitlines())) > MAX_LINES}
+    assert not long, long
+
+
+def test_the_walk_sees_the_imports_it_checks():
+    graph = _graph()
+    assert "hil.pipeline.processor" in graph["hil.trial.live"]
+    assert "drivers.decoder" in graph["hil.pipeline.processor"]
+    assert "hil.trial.offline" in graph["hil.cli"]  # an import inside a function counts
