@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from emulators.sensor_errors import BiasInstability, SensorErrorModel
 from hil.config import ImuErrors
 from hil.estimation import allan
+from hil.outputs.noise import write_noise
 from hil.units import DEG, DEG_PER_H, UG
 
 T = 0.01  # s, 100 Hz
@@ -183,3 +185,22 @@ def test_datasheet_units_follow_from_degrees_and_hours():
     assert allan.GYRO_UNITS.random_walk == pytest.approx(math.pi / 180.0 / 3600.0 / 60.0)
     assert allan.ACCEL_UNITS.white == allan.ACCEL_UNITS.random_walk == pytest.approx(1.0 / 60.0)
     assert allan.Term(2.0, 1.0, 4.0).scaled(2.0) == allan.Term(1.0, 0.5, 2.0)
+
+
+def test_noise_json_has_the_design_keys_in_datasheet_units_and_null_where_unresolved(tmp_path):
+    arw_deg_per_sqrt_h, vrw = 0.05, 0.02  # deg/sqrt(h), m/s/sqrt(h)
+    gyro = allan.analyse(_white(1 << 12, arw_deg_per_sqrt_h * allan.GYRO_UNITS.white, 3, seed=1), T)
+    accel = allan.analyse(_white(1 << 12, vrw * allan.ACCEL_UNITS.white, 3, seed=2), T)
+    doc = write_noise(tmp_path, gyro, accel)
+    assert json.loads((tmp_path / "noise.json").read_text()) == doc
+    assert (tmp_path / "allan.png").stat().st_size > 0
+    assert doc["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([arw_deg_per_sqrt_h] * 3, rel=0.05)
+    assert doc["accel"]["vrw_m_per_s_per_sqrt_h"] == pytest.approx([vrw] * 3, rel=0.05)
+    assert doc["gyro"]["bias_instability_dph"] == doc["accel"]["rrw_m_per_s2_per_sqrt_h"] == [None] * 3
+    assert doc["tau_s"][0] == T and len(doc["adev"]["gyro"]) == 3 and len(doc["adev"]["gyro"][0]) == len(doc["tau_s"])
+    # The deviation at tau = 1 s of white noise is N: deg/h at 1 s from deg/sqrt(h) is a factor 60.
+    one_second = doc["tau_s"].index(T * 128)
+    assert doc["adev"]["gyro"][0][one_second] * math.sqrt(T * 128) / 60.0 == pytest.approx(arw_deg_per_sqrt_h, rel=0.1)
+    lower, upper = doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["lower"], doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["upper"]
+    assert all(lo < v < hi for lo, v, hi in zip(lower, doc["gyro"]["arw_deg_per_sqrt_h"], upper))
+    assert doc["duration_s"] == pytest.approx((1 << 12) * T)
