@@ -218,7 +218,7 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL)
     if len(factors) < _MIN_OCTAVES:
         raise ValueError(
             f"{n} samples give {len(factors)} octaves of tau; the noise terms need at least {_MIN_OCTAVES} "
-            f"({2 ** _MIN_OCTAVES} samples): record longer"
+            f"({2 ** _MIN_OCTAVES} samples): record a longer trial"
         )
     tau = factors * period
     avar = overlapping_avar(dx, period, factors)
