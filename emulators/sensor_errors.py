@@ -84,7 +84,8 @@ class BiasInstability:
     spectrum S(f) = s^2 / (ln(r) f), whose Allan variance is 2 ln2 s^2 / ln r = (2 ln2 / pi) B^2, the
     IEEE 952 floor (Eq. C.15), over the decades the corners span: the deviation is within 2 % of
     0.664 B from 0.11 s (and 10 sample periods) to 7.6e4 s (docs/noise.md). Sampled per interval T
-    from the stationary state: b_i[k] = phi_i b_i[k-1] + sqrt(1 - phi_i^2) s e_i[k], phi_i = exp(-T / Tc_i), b_i[0] ~ N(0, s^2).
+    from the stationary state:
+        b_i[k] = phi_i b_i[k-1] + sqrt(1 - phi_i^2) s e_i[k],  phi_i = exp(-T / Tc_i),  b_i[0] ~ N(0, s^2).
     Its own random stream (a child of the seed), so the other error kinds draw exactly as without it.
     """
 
