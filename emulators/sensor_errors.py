@@ -11,7 +11,8 @@ specific force f = dv/T (all per axis x, y, z; products and squares element-wise
        over the interval), random walk and white noise (1-sigma per sample, Liu 2019 Table 2):
            w3 = w1 + b_g + k_g (t_k - T/2) + r_g[k] + sigma_g n_g[k]
            f3 = f2 + b_a + k_a (t_k - T/2) + r_a[k] + sigma_a n_a[k]
-       with r[k] = r[k-1] + q sqrt(T) m[k], r[0] = 0 (a Wiener process sampled per interval), n, m ~ N(0, 1)
+       with r[k] = r[k-1] + q sqrt(T) m[k], r[0] = 0 (a Wiener process sampled per interval), n, m ~ N(0, 1);
+       plus the bias instability, a sum of Gauss-Markov processes (``BiasInstability``)
     4. output quantisation with the remainder carried to the next sample:
            dtheta_out = Q_dtheta(w3 T),   dv_out = Q_dv(f3 T)
 
@@ -33,11 +34,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import signal
 
 from hil.config import ImuErrors
-from hil.units import ARCSEC, DEG_PER_H, PPM, UG
+from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG
 
-_SECONDS_PER_HOUR = 3600.0
 # Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the
 # first sample) so that the running fractional sum keeps its precision over long trials.
 _QUANT_BLOCK = 4096
@@ -75,6 +76,42 @@ class _Quantiser:
         return counts * self._quantum
 
 
+class BiasInstability:
+    """Flicker bias: a sum of first-order Gauss-Markov processes, one column per coefficient B.
+
+    Correlation times Tc_i = 0.1 s * 4^i, i = -2..11 (6.25 ms to 4.2e5 s), each process of variance
+    s^2 = B^2 ln(4) / pi. Lorentzians of equal variance at log-spaced corners (ratio r) sum to a 1/f
+    spectrum S(f) = s^2 / (ln(r) f), whose Allan variance is 2 ln2 s^2 / ln r = (2 ln2 / pi) B^2, the
+    IEEE 952 floor (Eq. C.15), over the decades the corners span: the deviation is within 2 % of
+    0.664 B from 0.11 s (and 10 sample periods) to 7.6e4 s (docs/noise.md). Sampled per interval T
+    from the stationary state:
+        b_i[k] = phi_i b_i[k-1] + sqrt(1 - phi_i^2) s e_i[k],  phi_i = exp(-T / Tc_i),  b_i[0] ~ N(0, s^2).
+    Its own random stream (a child of the seed), so the other error kinds draw exactly as without it.
+    """
+
+    CORRELATION_TIMES = 0.1 * 4.0 ** np.arange(-2, 12)
+
+    def __init__(self, coefficient: np.ndarray, period: float, seed: int) -> None:
+        self._rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(1)[0]))
+        self._phi = np.exp(-period / self.CORRELATION_TIMES)
+        sigma = np.asarray(coefficient, dtype=float) * math.sqrt(math.log(4.0) / math.pi)
+        self._state = sigma * self._rng.standard_normal((len(self._phi), len(sigma)))
+        self._drive = np.sqrt(1.0 - self._phi**2)[:, None] * sigma
+
+    def __call__(self, n: int) -> np.ndarray:
+        """The next n samples of the bias (n, columns), in the coefficients' unit."""
+        # Drawn sample-major, so that the stream does not depend on how the series is chunked.
+        draws = self._rng.standard_normal((n,) + self._state.shape)
+        total = np.zeros((self._state.shape[1], n))
+        for i, phi in enumerate(self._phi):
+            zi = phi * self._state[i][:, None]
+            b = signal.lfilter([1.0], [1.0, -phi], self._drive[i][:, None] * draws[:, i].T, zi=zi)[0]
+            if n:
+                self._state[i] = b[:, -1]
+            total += b
+        return total.T
+
+
 class _Channel:
     """One sensor triad (gyros or accelerometers): static coefficients in SI and the random-walk state."""
 
@@ -98,8 +135,11 @@ class _Channel:
         self._period = period
         self._quantise = _Quantiser(quantum) if quantum > 0.0 else None
 
-    def __call__(self, t: np.ndarray, x: np.ndarray, white: np.ndarray, walk: np.ndarray) -> np.ndarray:
-        """Measured increments from ideal increments x (N, 3); white and walk are N(0, 1) draws (N, 3)."""
+    def __call__(
+        self, t: np.ndarray, x: np.ndarray, white: np.ndarray, walk: np.ndarray, instability: np.ndarray | None
+    ) -> np.ndarray:
+        """Measured increments from ideal increments x (N, 3); white and walk are N(0, 1) draws (N, 3),
+        instability the bias instability's rate (N, 3) or None."""
         period = self._period
         if self._matrix is not None:
             x = x @ self._matrix.T
@@ -109,6 +149,8 @@ class _Channel:
         if len(walk_state):
             self._walk = walk_state[-1]
         rate_error = self._bias + np.outer(t - period / 2.0, self._drift) + walk_state + self._noise * white
+        if instability is not None:
+            rate_error = rate_error + instability
         x = x + rate_error * period
         return self._quantise(x) if self._quantise is not None else x
 
@@ -124,13 +166,13 @@ class SensorErrorModel:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         period = 1.0 / rate_hz
-        sqrt_hour = math.sqrt(_SECONDS_PER_HOUR)
+        sqrt_hour = math.sqrt(HOUR)
         e = errors
         self._rng = np.random.Generator(np.random.PCG64(seed))
         self._gyro = _Channel(
             bias=np.array(e.gyro_bias_dph) * DEG_PER_H,
             noise=np.array(e.gyro_noise_dph) * DEG_PER_H,
-            drift=np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / _SECONDS_PER_HOUR,
+            drift=np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / HOUR,
             random_walk=np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / sqrt_hour,
             scale=np.array(e.gyro_scale_ppm) * PPM,
             misalignment=np.array(e.gyro_misalignment_arcsec) * ARCSEC,
@@ -141,7 +183,7 @@ class SensorErrorModel:
         self._accel = _Channel(
             bias=np.array(e.accel_bias_ug) * UG,
             noise=np.array(e.accel_noise_ug) * UG,
-            drift=np.array(e.accel_drift_ug_per_h) * UG / _SECONDS_PER_HOUR,
+            drift=np.array(e.accel_drift_ug_per_h) * UG / HOUR,
             random_walk=np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / sqrt_hour,
             scale=np.array(e.accel_scale_ppm) * PPM,
             misalignment=np.array(e.accel_misalignment_arcsec) * ARCSEC,
@@ -149,6 +191,11 @@ class SensorErrorModel:
             quantum=e.dv_quantum_mps,
             period=period,
         )
+        instability = np.concatenate(
+            [np.array(e.gyro_bias_instability_dph) * DEG_PER_H, np.array(e.accel_bias_instability_ug) * UG]
+        )
+        self._gyro_instability, self._accel_instability = instability[:3].any(), instability[3:].any()
+        self._instability = BiasInstability(instability, period, seed) if instability.any() else None
 
     def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Measured increments from ideal ones over consecutive intervals ending at t (N,).
@@ -165,7 +212,8 @@ class SensorErrorModel:
             )
         # A fixed number of draws per sample, in a fixed order, keeps the stream independent of chunking.
         draws = self._rng.standard_normal((n, 12))
+        bias = self._instability(n) if self._instability is not None else np.zeros((n, 6))
         return (
-            self._gyro(t, dtheta, draws[:, 0:3], draws[:, 6:9]),
-            self._accel(t, dv, draws[:, 3:6], draws[:, 9:12]),
+            self._gyro(t, dtheta, draws[:, 0:3], draws[:, 6:9], bias[:, :3] if self._gyro_instability else None),
+            self._accel(t, dv, draws[:, 3:6], draws[:, 9:12], bias[:, 3:] if self._accel_instability else None),
         )

@@ -187,6 +187,7 @@ class ImuErrors(_Model):
     accel_noise_ug: Vec3 = ZERO3  # white, 1-sigma per sample
     accel_drift_ug_per_h: Vec3 = ZERO3  # linear bias drift b = b_s + k t
     accel_random_walk_ug_per_sqrt_h: Vec3 = ZERO3  # bias random walk
+    accel_bias_instability_ug: Vec3 = ZERO3  # flicker bias B (IEEE 952): Allan deviation floor 0.664 B
     accel_scale_ppm: Vec3 = ZERO3
     accel_misalignment_arcsec: Vec6 = (0.0,) * 6  # (xy, xz, yx, yz, zx, zy)
     accel_nonlinearity_ug_per_g2: Vec3 = ZERO3  # quadratic scale factor term K_nl
@@ -194,6 +195,7 @@ class ImuErrors(_Model):
     gyro_noise_dph: Vec3 = ZERO3  # white, 1-sigma per sample
     gyro_drift_dph_per_h: Vec3 = ZERO3
     gyro_random_walk_dph_per_sqrt_h: Vec3 = ZERO3
+    gyro_bias_instability_dph: Vec3 = ZERO3
     gyro_scale_ppm: Vec3 = ZERO3
     gyro_misalignment_arcsec: Vec6 = (0.0,) * 6
     dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment

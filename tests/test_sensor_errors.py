@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulators.sensor_errors import SensorErrorModel
+from emulators.sensor_errors import BiasInstability, SensorErrorModel
 from hil.config import ImuErrors
 from hil.units import ARCSEC, DEG_PER_H, PPM, UG
 
@@ -39,6 +39,7 @@ ALL_TERMS = dict(
     accel_noise_ug=[50, 40, 30],
     accel_drift_ug_per_h=[5, -3, 1],
     accel_random_walk_ug_per_sqrt_h=[2, 3, 4],
+    accel_bias_instability_ug=[5, 10, 15],
     accel_scale_ppm=[100, -50, 20],
     accel_misalignment_arcsec=[10, -20, 30, -40, 50, -60],
     accel_nonlinearity_ug_per_g2=[10, 20, -30],
@@ -46,6 +47,7 @@ ALL_TERMS = dict(
     gyro_noise_dph=[0.01, 0.01, 0.02],
     gyro_drift_dph_per_h=[0.001, 0.002, -0.003],
     gyro_random_walk_dph_per_sqrt_h=[0.001, 0.001, 0.002],
+    gyro_bias_instability_dph=[0.002, 0.003, 0.004],
     gyro_scale_ppm=[5, 10, -15],
     gyro_misalignment_arcsec=[1, 2, 3, 4, 5, 6],
     dtheta_quantum_rad=1e-9,
@@ -169,6 +171,27 @@ def test_quantisation_gives_whole_quanta_and_tracks_the_input_sum():
         np.testing.assert_allclose(counts, np.rint(counts), rtol=0, atol=1e-6)
         assert np.max(np.abs(np.cumsum(x_out, axis=0) - np.cumsum(x_in, axis=0))) <= q
         assert np.any(x_out != x_in)
+
+
+def test_bias_instability_draws_its_own_stream_so_the_other_kinds_do_not_shift():
+    n = 2000
+    t, (dtheta, dv) = _times(n), _zeros(n)
+    others = {"gyro_noise_dph": [0.01] * 3, "gyro_random_walk_dph_per_sqrt_h": [0.001] * 3,
+              "accel_noise_ug": [50] * 3, "accel_random_walk_ug_per_sqrt_h": [2] * 3}
+    without = _model(**others).apply(t, dtheta, dv)
+    b_dph = [0.1, 0.2, 0.3]
+    with_gyro_instability = _model(**others, gyro_bias_instability_dph=b_dph).apply(t, dtheta, dv)
+    assert with_gyro_instability[1].tobytes() == without[1].tobytes()
+    bias = BiasInstability(np.concatenate([np.array(b_dph) * DEG_PER_H, np.zeros(3)]), T, seed=7)(n)[:, :3]
+    np.testing.assert_allclose(with_gyro_instability[0] - without[0], bias * T, rtol=1e-9, atol=0.0)
+
+
+def test_bias_instability_starts_stationary_with_variance_b2_ln4_over_pi_per_process():
+    """Each Gauss-Markov process starts from its stationary law, so the sum's variance holds at k = 0."""
+    columns = 4000
+    first = BiasInstability(np.ones(columns), T, seed=1)(1)[0]
+    expected = len(BiasInstability.CORRELATION_TIMES) * np.log(4.0) / np.pi
+    assert np.var(first) == pytest.approx(expected, rel=4 * np.sqrt(2.0 / columns))
 
 
 def test_chunked_application_equals_whole_exactly():

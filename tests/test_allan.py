@@ -1,0 +1,207 @@
+"""Allan deviation, its EDF and intervals, and the fitted noise terms, against analytic cases."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from emulators.sensor_errors import BiasInstability, SensorErrorModel
+from hil.config import ImuErrors
+from hil.estimation import allan
+from hil.outputs.noise import write_noise
+from hil.units import DEG, DEG_PER_H, UG
+
+T = 0.01  # s, 100 Hz
+
+
+def _exact_edf(cov: np.ndarray, m: int) -> float:
+    """EDF of the overlapping Allan variance for rates of covariance cov (n, n), exact for Gaussian rates.
+
+    The estimator is y^T Q y with Q = D^T D / (2 M tau^2), D the second differences of the phase in
+    terms of the rates; mean tr(Q S), variance 2 tr((Q S)^2), so nu = 2 mean^2 / var = tr(C)^2 / |C|_F^2
+    with C = D S D^T.
+    """
+
+    def second_difference(a: np.ndarray) -> np.ndarray:  # D a along axis 0, through the prefix sums
+        p = np.vstack([np.zeros((1, a.shape[1])), np.cumsum(a, axis=0)])
+        return p[2 * m :] - 2.0 * p[m:-m] + p[: -2 * m]
+
+    c = second_difference(second_difference(cov).T)
+    return np.trace(c) ** 2 / np.sum(c * c)
+
+
+def _gauss_markov_avar(tau: np.ndarray, tc: float, variance: float) -> np.ndarray:
+    """Allan variance of a first-order Gauss-Markov process (IEEE 952 Annex C, exponentially correlated)."""
+    x = tau / tc
+    return 2.0 * variance * tc / tau * (1.0 - (3.0 - 4.0 * np.exp(-x) + np.exp(-2.0 * x)) / (2.0 * x))
+
+
+def _white(n: int, coefficient: float, columns: int, seed: int) -> np.ndarray:
+    """Angle increments of white rate noise with ARW coefficient N: per-sample rate sigma N / sqrt(T)."""
+    return np.random.default_rng(seed).standard_normal((n, columns)) * coefficient * math.sqrt(T)
+
+
+def _emulated(n: int, seed: int, **errors) -> tuple[np.ndarray, np.ndarray]:
+    zeros = np.zeros((n, 3))
+    return SensorErrorModel(ImuErrors(**errors), 1.0 / T, seed).apply(np.arange(1, n + 1) * T, zeros, zeros)
+
+
+N = 1024  # rate samples of the exact-EDF cases
+INDEX = np.arange(N)
+
+
+@pytest.mark.parametrize(
+    "noise,cov,factors,tol",
+    [
+        ("white", np.eye(N), (1, 2, 4, 8, 16, 32, 64, 128, 256), 0.02),
+        ("random_walk", np.minimum.outer(INDEX, INDEX) + 1.0, (1, 2, 4, 8, 16, 32, 64, 128, 256), 0.11),
+        # Flicker from the emulator's Gauss-Markov sum at 20 Hz, in its flat range (m >= 2, 0.1 s).
+        (
+            "flicker",
+            sum(np.exp(-0.05 / tc) ** np.abs(np.subtract.outer(INDEX, INDEX)) for tc in BiasInstability.CORRELATION_TIMES),
+            (2, 4, 8, 16, 32, 64, 128, 256),
+            0.05,
+        ),
+    ],
+)
+def test_sp1065_edf_matches_the_exact_edf_of_the_quadratic_form(noise, cov, factors, tol):
+    for m in factors:
+        assert float(allan.edf(noise, N + 1, m)) == pytest.approx(_exact_edf(cov, m), rel=tol)
+
+
+def test_flicker_edf_at_m1_is_of_the_order_of_n():
+    """SP 1065's m = 1 flicker FM formula is 2(N-2)^2/(2.3N-4.9), not 2(N-2)/(2.3N-4.9) (< 1 EDF)."""
+    assert float(allan.edf("flicker", 1025, 1)) == pytest.approx(2 * 1023**2 / (2.3 * 1025 - 4.9))
+    assert float(allan.edf("flicker", 1025, 1)) > 800
+
+
+# The every-tau checks use 99.9 % intervals: about 50 of them at once (tau x axes).
+
+
+def test_white_noise_gives_arw_over_root_tau_within_the_interval_at_every_tau():
+    arw = 0.05 * DEG / 60.0  # 0.05 deg/sqrt(h) in rad/sqrt(s)
+    result = allan.analyse(_white(1 << 16, arw, 3, seed=11), T, level=0.999)
+    truth = arw / np.sqrt(result.tau)[:, None]
+    assert np.all((result.lower <= truth) & (truth <= result.upper))
+    for term in result.white:
+        assert term.lower <= arw <= term.upper
+        assert term.value == pytest.approx(arw, rel=0.01)
+    assert all(t.value is None for t in result.bias_instability + result.random_walk)
+
+
+def test_random_walk_gives_the_half_slope_with_the_configured_coefficient():
+    """Rate random walk sampled per interval: avar = K^2 tau / 3 (1 + 1 / (2 m^2)) exactly (sum of the
+    squared weights m (2 m^2 + 1) / 3 of the driving steps in one second difference)."""
+    k_dph_per_sqrt_h = 2.0
+    dtheta, _ = _emulated(1 << 16, 5, gyro_random_walk_dph_per_sqrt_h=[k_dph_per_sqrt_h] * 3)
+    result = allan.analyse(dtheta, T, level=0.999)
+    k = k_dph_per_sqrt_h * DEG_PER_H / 60.0  # rad/s/sqrt(s)
+    m = result.tau / T
+    truth = np.sqrt(k**2 * result.tau / 3.0 * (1.0 + 1.0 / (2.0 * m**2)))[:, None]
+    assert np.all((result.lower <= truth) & (truth <= result.upper))
+    for term in result.random_walk:
+        assert term.lower <= k <= term.upper
+        assert term.value == pytest.approx(k, rel=0.02)
+    assert all(t.value is None for t in result.bias_instability)
+
+
+def test_emulated_bias_instability_is_flat_within_2_percent_from_011_s_to_76000_s():
+    tau = np.logspace(math.log10(0.11), math.log10(7.6e4), 200)
+    avar = sum(_gauss_markov_avar(tau, tc, math.log(4.0) / math.pi) for tc in BiasInstability.CORRELATION_TIMES)
+    assert np.all(np.abs(np.sqrt(avar / allan.FLICKER_FLOOR) - 1.0) < 0.02)
+
+
+def test_emulated_bias_instability_is_flat_and_read_back_over_white_noise():
+    """Configured B and a white noise that dominates below about 1 s; the deviation follows
+    sqrt(N^2 / tau + 0.664^2 B^2) from 0.11 s on, within its interval at every tau."""
+    b_dph, b_ug, sigma_dph, sigma_ug = 0.5, 20.0, 2.0, 60.0
+    dtheta, dv = _emulated(
+        1 << 18, 3,
+        gyro_bias_instability_dph=[b_dph] * 3, accel_bias_instability_ug=[b_ug] * 3,
+        gyro_noise_dph=[sigma_dph] * 3, accel_noise_ug=[sigma_ug] * 3,
+    )
+    for increments, b, sigma in ((dtheta, b_dph * DEG_PER_H, sigma_dph * DEG_PER_H), (dv, b_ug * UG, sigma_ug * UG)):
+        result = allan.analyse(increments, T, level=0.999)
+        for term in result.bias_instability:
+            assert term.lower <= b <= term.upper
+            assert term.value == pytest.approx(b, rel=0.1)
+        flat = result.tau >= 0.11
+        truth = np.sqrt(sigma**2 * T / result.tau + allan.FLICKER_FLOOR * b**2)[flat, None]
+        assert np.all((result.lower[flat] <= truth) & (truth <= result.upper[flat]))
+
+
+def test_interval_coverage_matches_its_level_over_many_seeds():
+    """The chi-square interval of each tau holds the true deviation as often as its level says."""
+    seeds, n, level = 600, 4096, 0.683
+    factors = np.array([1, 8, 64, 512])
+    sigma = 3  # binomial standard deviations allowed
+    white = _white(n, 1.0, seeds, seed=1)
+    walk = np.cumsum(np.random.default_rng(2).standard_normal((n, seeds)), axis=0) * math.sqrt(T) * T
+    for increments, noise, truth in (
+        (white, "white", 1.0 / (factors * T)),
+        (walk, "random_walk", factors * T / 3.0 * (1.0 + 1.0 / (2.0 * factors**2))),
+    ):
+        avar = allan.overlapping_avar(increments, T, factors)
+        lower, upper = allan.chi2_interval(avar, allan.edf(noise, n + 1, factors)[:, None], level)
+        hit = np.mean((lower <= truth[:, None]) & (truth[:, None] <= upper), axis=1)
+        assert np.all(np.abs(hit - level) < sigma * math.sqrt(level * (1 - level) / seeds)), (noise, hit)
+
+
+def test_fitted_term_intervals_hold_the_truth_at_least_as_often_as_their_level():
+    """The terms' standard deviations are bounds, so their intervals cover at least their level."""
+    seeds, level = 200, 0.683
+    result = allan.analyse(_white(4096, 1.0, seeds, seed=4), T, level)
+    hits = [t.lower <= 1.0 <= t.upper for t in result.white]
+    assert np.mean(hits) >= level - 3 * math.sqrt(level * (1 - level) / seeds)
+
+
+def test_octave_tau_stop_where_one_second_difference_is_left():
+    assert list(allan.octave_factors(1024)) == [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]
+    assert list(allan.octave_factors(1023)) == [1, 2, 4, 8, 16, 32, 64, 128, 256]
+
+
+def test_a_constant_rate_leaves_no_deviation():
+    """Zero test: a bias (linear phase) is removed exactly by the second difference."""
+    result = allan.analyse(np.full((256, 3), 1e-3 * T), T)
+    assert np.all(result.adev < 1e-18)
+    assert all(t.value is None for t in result.white + result.bias_instability + result.random_walk)
+
+
+def test_too_short_a_record_is_one_clear_error():
+    with pytest.raises(ValueError, match="15 samples give 3 octaves of tau; the noise terms need at least 4"):
+        allan.analyse(np.zeros((15, 3)), T)
+
+
+def test_bias_instability_floor_factor_is_ieee_952s_0664():
+    assert math.sqrt(allan.FLICKER_FLOOR) == pytest.approx(0.664, abs=5e-4)
+
+
+def test_datasheet_units_follow_from_degrees_and_hours():
+    """1 deg/sqrt(h) = (pi/180)/60 rad/sqrt(s) = 60 deg/h/sqrt(Hz); 1 m/s/sqrt(h) = 1/60 m/s/sqrt(s)."""
+    assert allan.GYRO_UNITS.white == pytest.approx(math.pi / 180.0 / 60.0)
+    assert allan.GYRO_UNITS.white / DEG_PER_H == pytest.approx(60.0)
+    assert allan.GYRO_UNITS.random_walk == pytest.approx(math.pi / 180.0 / 3600.0 / 60.0)
+    assert allan.ACCEL_UNITS.white == allan.ACCEL_UNITS.random_walk == pytest.approx(1.0 / 60.0)
+    assert allan.Term(2.0, 1.0, 4.0).scaled(2.0) == allan.Term(1.0, 0.5, 2.0)
+
+
+def test_noise_json_has_the_design_keys_in_datasheet_units_and_null_where_unresolved(tmp_path):
+    arw_deg_per_sqrt_h, vrw = 0.05, 0.02  # deg/sqrt(h), m/s/sqrt(h)
+    gyro = allan.analyse(_white(1 << 12, arw_deg_per_sqrt_h * allan.GYRO_UNITS.white, 3, seed=1), T)
+    accel = allan.analyse(_white(1 << 12, vrw * allan.ACCEL_UNITS.white, 3, seed=2), T)
+    doc = write_noise(tmp_path, gyro, accel)
+    assert json.loads((tmp_path / "noise.json").read_text()) == doc
+    assert (tmp_path / "allan.png").stat().st_size > 0
+    assert doc["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([arw_deg_per_sqrt_h] * 3, rel=0.05)
+    assert doc["accel"]["vrw_m_per_s_per_sqrt_h"] == pytest.approx([vrw] * 3, rel=0.05)
+    assert doc["gyro"]["bias_instability_dph"] == doc["accel"]["rrw_m_per_s2_per_sqrt_h"] == [None] * 3
+    assert doc["tau_s"][0] == T and len(doc["adev"]["gyro"]) == 3 and len(doc["adev"]["gyro"][0]) == len(doc["tau_s"])
+    # The deviation at tau = 1 s of white noise is N: deg/h at 1 s from deg/sqrt(h) is a factor 60.
+    one_second = doc["tau_s"].index(T * 128)
+    assert doc["adev"]["gyro"][0][one_second] * math.sqrt(T * 128) / 60.0 == pytest.approx(arw_deg_per_sqrt_h, rel=0.1)
+    lower, upper = doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["lower"], doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["upper"]
+    assert all(lo < v < hi for lo, v, hi in zip(lower, doc["gyro"]["arw_deg_per_sqrt_h"], upper))
+    assert doc["duration_s"] == pytest.approx((1 << 12) * T)
