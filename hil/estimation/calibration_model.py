@@ -43,8 +43,8 @@ ZERO_STEP = 1e-6  # rad, central-difference step of the reference in the zero of
 class Window:
     """One dwell or rate-plateau window: the IMU's mean outputs and the table's encoder readings.
 
-    ``angles`` (M, 3) rad: encoder angles (outer, middle, inner) sampled through the window (a dwell may
-    give one row, its mean); ``rates`` (3,) rad/s: the gimbal rates of a plateau (zero for a dwell);
+    ``angles`` (M, 3) rad: encoder angles (outer, middle, inner) at the midpoints of the IMU intervals of
+    the window (plain mean = the window mean; a dwell may give one row, its mean); ``rates`` (3,) rad/s: the gimbal rates of a plateau (zero for a dwell);
     ``specific_force`` (3,) m/s^2 = sum(dv) / window length; ``angular_rate`` (3,) rad/s = sum(dtheta) /
     window length; ``samples``: IMU samples averaged (the weight of the window); ``duration_s``: its length.
     """
