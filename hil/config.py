@@ -172,6 +172,7 @@ class TurntableConfig(_Model):
     timing: DeviceTiming = DeviceTiming()
     faults: FaultConfig = FaultConfig()
     interlock_trip_at_s: float | None = Field(None, ge=0)  # emulator: an interlock opens at this time
+    zero_offset_arcsec: Vec3 = ZERO3  # emulator truth: true gimbal angle minus encoder reading (outer, middle, inner)
 
     @model_validator(mode="after")
     def _serial_has_port(self) -> TurntableConfig:
@@ -287,6 +288,27 @@ class ReportLimits(_Model):
     corrupt_max: int | None = Field(None, ge=0)  # corrupt frames in the streams
 
 
+class CalibrationConfig(_Model):
+    """The multi-position calibration: dwell positions, rate plateaus and the terms to fit."""
+
+    positions: Literal[18, 6] | list[Vec3] = 18  # the paper's 18 (or its 6 up/down) or (outer, middle, inner) deg
+    dwell_s: float = Field(20.0, gt=0)
+    settle_s: float = Field(2.0, ge=0)  # after each move or rate change, before the window starts
+    plateau_rate_dps: float = Field(10.0, gt=0)  # gyro plateaus: both signs about each axis
+    plateau_s: float = Field(36.0, ge=0)  # 0: no plateaus (accelerometers only)
+    accel_terms: list[Literal["bias", "scale", "misalignment", "nonlinearity", "zero_offset"]] = [
+        "bias", "scale", "misalignment", "nonlinearity", "zero_offset"]
+    gyro_terms: list[Literal["bias", "scale", "misalignment", "zero_offset"]] = [
+        "bias", "scale", "misalignment", "zero_offset"]
+    rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # a term's unexplained fraction of its scaled design column
+
+    @model_validator(mode="after")
+    def _positions_listed(self) -> CalibrationConfig:
+        if isinstance(self.positions, list) and not self.positions:
+            raise ValueError("positions: expected 18, 6 or a non-empty list of [outer, middle, inner] deg")
+        return self
+
+
 class OutputConfig(_Model):
     dir: str | None = None
     figures: bool = True
@@ -299,6 +321,7 @@ class Config(_Model):
     turntable: TurntableConfig = TurntableConfig()
     imu: ImuConfig = ImuConfig()
     estimator: EstimatorConfig = EstimatorConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
     output: OutputConfig = OutputConfig()
 
     @model_validator(mode="after")

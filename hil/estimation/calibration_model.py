@@ -1,0 +1,259 @@
+"""Sensor-triad error model of the multi-position calibration and its weighted least squares.
+
+Forward model (three-stage self-calibration 2018, Eq. (6), written as the emulator applies it, term by
+term; r is the reference, specific force or angular rate in the body frame, SI):
+
+    v = (I + S) C r,    y = v + K_nl v^2 + b        (squares element-wise)
+
+S = diag(scale errors), C = I + M with the misalignment angles (xy, xz, yx, yz, zx, zy) placed as in
+Eq. (5): M = [[0, xz, -xy], [-yz, 0, yx], [zy, -zx, 0]]. The reference is computed at the true gimbal
+angles, encoder reading plus zero offset (outer, middle, inner).
+
+The parameter vector theta holds, in this order, the terms of :data:`TERMS`. A fit names the terms it
+estimates; the others stay at their given values. Observability is judged term by term in priority
+order on the column-scaled design: a term whose column is, to within ``tolerance`` of its squared norm,
+a combination of the columns already kept cannot be separated by the schedule; the reason names them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+AXES = "xyz"
+MISALIGNMENT = ("xy", "xz", "yx", "yz", "zx", "zy")
+# (row, column, sign) of each misalignment angle in M, Eq. (5).
+MISALIGNMENT_ENTRIES = ((0, 2, -1.0), (0, 1, 1.0), (1, 2, 1.0), (1, 0, -1.0), (2, 1, -1.0), (2, 0, 1.0))
+ZERO_OFFSETS = ("outer", "middle", "inner")
+TERMS = (
+    tuple(f"bias_{a}" for a in AXES)
+    + tuple(f"scale_{a}" for a in AXES)
+    + tuple(f"misalignment_{p}" for p in MISALIGNMENT)
+    + tuple(f"nonlinearity_{a}" for a in AXES)
+    + tuple(f"zero_offset_{g}" for g in ZERO_OFFSETS)
+)
+INDEX = {name: k for k, name in enumerate(TERMS)}
+BIAS, SCALE, MIS, NONLIN, ZERO = (slice(0, 3), slice(3, 6), slice(6, 12), slice(12, 15), slice(15, 18))
+ZERO_STEP = 1e-6  # rad, central-difference step of the reference in the zero offsets
+
+
+@dataclass(frozen=True)
+class Window:
+    """One dwell or rate-plateau window: the IMU's mean outputs and the table's encoder readings.
+
+    ``angles`` (M, 3) rad: encoder angles (outer, middle, inner) at the midpoints of the IMU intervals of
+    the window (plain mean = the window mean; a dwell may give one row, its mean); ``rates`` (3,) rad/s: the gimbal rates of a plateau (zero for a dwell);
+    ``specific_force`` (3,) m/s^2 = sum(dv) / window length; ``angular_rate`` (3,) rad/s = sum(dtheta) /
+    window length; ``samples``: IMU samples averaged (the weight of the window); ``duration_s``: its length.
+    """
+
+    angles: np.ndarray
+    rates: np.ndarray
+    specific_force: np.ndarray
+    angular_rate: np.ndarray
+    samples: int
+    duration_s: float
+
+    @property
+    def static(self) -> bool:
+        return not np.any(self.rates)
+
+
+def window_from_samples(dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray, angles: np.ndarray,
+                        rates: Sequence[float] = (0.0, 0.0, 0.0)) -> Window:
+    """A :class:`Window` from the aligned samples inside it: increments (N, 3), their intervals dt (N,) s,
+    and the encoder angles (M, 3) rad latched through the window."""
+    span = float(np.sum(dt))
+    return Window(np.atleast_2d(np.asarray(angles, float)), np.asarray(rates, float),
+                  np.sum(dv, axis=0) / span, np.sum(dtheta, axis=0) / span, len(dt), span)
+
+
+def window_means(windows: Sequence[Window], zero_offsets: np.ndarray,
+                 per_sample: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """Mean over each window's encoder angles (plus the zero offsets) of ``per_sample(angles, rates)``,
+    (N, 3): one batched call over all windows' rows."""
+    counts = [len(w.angles) for w in windows]
+    angles = np.vstack([w.angles for w in windows]) + zero_offsets
+    rates = np.repeat(np.array([w.rates for w in windows]), counts, axis=0)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    return np.add.reduceat(per_sample(angles, rates), starts, axis=0) / np.array(counts)[:, None]
+
+
+def misalignment_matrix(angles: np.ndarray) -> np.ndarray:
+    """C = I + M of Eq. (5) from the angles (xy, xz, yx, yz, zx, zy), rad."""
+    c = np.eye(3)
+    for (row, col, sign), angle in zip(MISALIGNMENT_ENTRIES, angles, strict=True):
+        c[row, col] = sign * angle
+    return c
+
+
+def triad_matrix(theta: np.ndarray) -> np.ndarray:
+    """K = (I + S) C, the linear part of the forward model."""
+    return (1.0 + theta[SCALE])[:, None] * misalignment_matrix(theta[MIS])
+
+
+def forward(theta: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Sensor outputs y (N, 3) from references r (N, 3): Eq. (6) as in the module docstring."""
+    v = reference @ triad_matrix(theta).T
+    return v + theta[NONLIN] * v * v + theta[BIAS]
+
+
+def inverse(theta: np.ndarray, output: np.ndarray) -> np.ndarray:
+    """References r (N, 3) from outputs y (N, 3): the exact inverse of :func:`forward`."""
+    a = np.atleast_2d(output) - theta[BIAS]
+    k = theta[NONLIN]
+    # v + k v^2 = a, the root near a, written to stay exact as k -> 0
+    v = 2.0 * a / (1.0 + np.sqrt(1.0 + 4.0 * k * a))
+    return np.linalg.solve(triad_matrix(theta), v.T).T
+
+
+def compensate(accel: np.ndarray, gyro: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
+               dt: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Raw increments (N, 3) over intervals dt (s) -> compensated ones: :func:`inverse` of each triad's theta
+    (18,) applied to the interval-mean rate and specific force."""
+    dt = np.reshape(np.asarray(dt, dtype=float), (-1, 1))
+    return inverse(gyro, np.asarray(dtheta) / dt) * dt, inverse(accel, np.asarray(dv) / dt) * dt
+
+
+def forward_jacobian(theta: np.ndarray, reference: np.ndarray,
+                     reference_at: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """d y / d theta, (N, 3, 18): analytic in the sensor terms, central differences in the zero offsets.
+
+    ``reference_at(zero_offsets)`` gives the references with the gimbal zero offsets (3,) rad.
+    """
+    n = len(reference)
+    s, c = 1.0 + theta[SCALE], misalignment_matrix(theta[MIS])
+    v = reference @ (s[:, None] * c).T
+    chain = 1.0 + 2.0 * theta[NONLIN] * v  # d y_i / d v_i
+    jac = np.zeros((n, 3, len(TERMS)))
+    for i in range(3):
+        jac[:, i, BIAS.start + i] = 1.0
+        jac[:, i, SCALE.start + i] = chain[:, i] * (reference @ c[i])
+        jac[:, i, NONLIN.start + i] = v[:, i] ** 2
+    for k, (row, col, sign) in enumerate(MISALIGNMENT_ENTRIES):
+        jac[:, row, MIS.start + k] = chain[:, row] * sign * s[row] * reference[:, col]
+    zero = theta[ZERO]
+    for k in range(3):
+        step = np.zeros(3)
+        step[k] = ZERO_STEP
+        dr = (reference_at(zero + step) - reference_at(zero - step)) / (2.0 * ZERO_STEP)
+        jac[:, :, ZERO.start + k] = chain * (dr @ (s[:, None] * c).T)
+    return jac
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A least-squares solution: theta (18,), its covariance over the fitted terms, what was left out.
+
+    ``sigma`` (18,) is the 1-sigma of every term (0 for terms held fixed, NaN for unobservable ones);
+    ``unobservable`` maps a term to the reason; ``noise`` is the per-group residual standard deviation
+    of one sample (noise variance from the residuals); ``residuals`` as the observation (N, groups).
+    """
+
+    theta: np.ndarray
+    sigma: np.ndarray
+    covariance: np.ndarray
+    fitted: tuple[str, ...]
+    unobservable: dict[str, str] = field(default_factory=dict)
+    noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def select_terms(design: np.ndarray, names: Sequence[str], tolerance: float) -> tuple[list[int], dict[str, str]]:
+    """Columns kept (in the given priority order) and the reasons for those left out.
+
+    A column is left out when the part of it (scaled to unit norm) not explained by the kept columns
+    has squared norm below ``tolerance``: the schedule cannot separate that term.
+    """
+    kept: list[int] = []
+    reasons: dict[str, str] = {}
+    norms = np.linalg.norm(design, axis=0)
+    for j, name in enumerate(names):
+        if norms[j] == 0.0:
+            reasons[name] = "does not change the measurements of this schedule (its design column is zero)"
+            continue
+        col = design[:, j] / norms[j]
+        if kept:
+            basis = design[:, kept] / norms[kept]
+            coef = np.linalg.lstsq(basis, col, rcond=None)[0]
+            unexplained = float(np.sum((col - basis @ coef) ** 2))
+        else:
+            coef, unexplained = np.zeros(0), 1.0
+        if unexplained < tolerance:
+            big = np.abs(coef) > 0.05 * np.max(np.abs(coef))
+            partners = ", ".join(names[kept[k]] for k in np.flatnonzero(big))
+            reasons[name] = (f"not separable from {partners} in this schedule (design rank "
+                             f"{np.linalg.matrix_rank(design[:, kept]) } with it added; unexplained "
+                             f"fraction {unexplained:.1e} < {tolerance:g})")
+        else:
+            kept.append(j)
+    return kept, reasons
+
+
+def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
+                  model: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], samples: np.ndarray,
+                  prior: np.ndarray, tolerance: float, iterations: int = 8,
+                  held_covariance: np.ndarray | None = None) -> Fit:
+    """Weighted Gauss-Newton over the coordinates ``basis`` (18, p) of theta, named ``names``.
+
+    ``model(theta)`` gives the residuals (N, G) (observation minus prediction) and the Jacobian of the
+    prediction (N, G, 18); column g of the residuals belongs to noise group g. A window's weight is
+    ``samples / (prior * s_g^2)``: ``prior`` (N, G) is the relative per-sample variance, s_g^2 the
+    group's variance factor from the residuals (dof from the leverages), re-estimated each iteration.
+    ``held_covariance`` (18, 18): the covariance of terms held at values estimated elsewhere (zero for the
+    others), carried into the fitted terms through the Jacobian.
+    """
+    theta = np.array(theta0, dtype=float)
+    residual, jac = model(theta)
+    design = (jac @ basis) * np.sqrt(samples[:, None, None] / prior[:, :, None])
+    kept, unobservable = select_terms(design.reshape(-1, basis.shape[1]), names, tolerance)
+    basis = basis[:, kept]
+    factor = np.ones(residual.shape[1])
+    for _ in range(iterations):
+        h = (jac @ basis).reshape(-1, len(kept))
+        w = (samples[:, None] / (prior * _usable(factor))).reshape(-1)
+        step = np.linalg.solve(h.T @ (w[:, None] * h), h.T @ (w * residual.reshape(-1)))
+        theta = theta + basis @ step
+        residual, jac = model(theta)
+        factor = _variance_factors(residual, jac @ basis, samples[:, None] / prior, _usable(factor))
+        if np.max(np.abs(step)) < 1e-15:
+            break
+    h = (jac @ basis).reshape(-1, len(kept))
+    w = (samples[:, None] / (prior * _usable(factor))).reshape(-1)
+    # sandwich form: a group whose residuals are zero (noise-free data) gets zero variance
+    ratio = np.broadcast_to(factor / _usable(factor), (len(samples), len(factor))).reshape(-1)
+    root = np.linalg.inv(h.T @ (w[:, None] * h))
+    cov_fit = root @ (h.T @ ((w * ratio)[:, None] * h)) @ root
+    covariance = basis @ cov_fit @ basis.T
+    if held_covariance is not None:
+        carry = basis @ (-root @ h.T @ (w[:, None] * jac.reshape(-1, len(TERMS)))) + np.eye(len(TERMS))
+        covariance = covariance + carry @ held_covariance @ carry.T
+    sigma = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    for name in unobservable:
+        if name in INDEX:
+            sigma[INDEX[name]] = np.nan
+    fitted = tuple(TERMS[k] for k in np.flatnonzero(np.any(basis != 0, axis=1)))
+    noise = np.sqrt(factor * np.mean(prior, axis=0))
+    return Fit(theta, sigma, covariance, fitted, unobservable, noise, residual)
+
+
+def _usable(factor: np.ndarray) -> np.ndarray:
+    """Variance factors fit to weight with: unknown (NaN) as 1, zero as a tiny fraction of the largest."""
+    finite = np.where(np.isfinite(factor), factor, 1.0)
+    top = np.max(finite)
+    return np.maximum(finite, 1e-30 * top if top > 0 else 1.0)
+
+
+def _variance_factors(residual: np.ndarray, jac: np.ndarray, base_weight: np.ndarray,
+                      factor: np.ndarray) -> np.ndarray:
+    """s_g^2 per group: weighted residual sum over (rows - leverage), the unbiased a-posteriori variance;
+    NaN for a group without degrees of freedom. ``base_weight`` is samples / prior, (N, G)."""
+    n, groups, p = jac.shape
+    h = jac.reshape(-1, p)
+    w = (base_weight / factor).reshape(-1)
+    leverage = (np.einsum("ij,jk,ik->i", h, np.linalg.inv(h.T @ (w[:, None] * h)), h) * w).reshape(n, groups)
+    dof = n - leverage.sum(axis=0)
+    ssr = np.sum(base_weight * residual**2, axis=0)
+    return np.where(dof > 0.5, ssr / np.maximum(dof, 0.5), np.nan)
