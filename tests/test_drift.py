@@ -1,4 +1,4 @@
-"""Bias repeatability and drift (15-state model), the drift check and convergence."""
+"""Bias repeatability and drift (15-state model), the drift check, convergence, and the site's true gravity."""
 
 import numpy as np
 import pytest
@@ -9,14 +9,18 @@ from hil.estimation.apparent_gravity import N_DRIFT, ApparentGravityEstimator
 from hil.estimation.convergence import BIAS_TOLERANCE, convergence_time
 from hil.estimation.online import OnlineEstimator
 from hil.estimation.online import convergence_time as online_convergence_time
-from hil.frames import EARTH_RATE, Earth
-from hil.units import UG
+from hil.frames import EARTH_RATE, Earth, TableGeometry, site_specific_force
+from hil.units import ARCSEC, UG
 from tests.conftest import PAPER_ERRORS, make_config
 
 UG_PER_H = UG / 3600.0
 BIAS = np.array([60.0, 150.0, 260.0]) * UG
 DRIFT = np.array([2.0, -1.5, 3.0]) * UG_PER_H
 DRIFT_UG_PER_H = [600.0, -400.0, 500.0]
+
+
+def with_site(cfg, **keys):
+    return cfg.model_copy(update={"site": cfg.site.model_copy(update=keys)})
 
 
 def synthetic(rng, n, drift, noise=50 * UG, dt=1.0):
@@ -172,3 +176,34 @@ def test_estimator_convergence_uses_every_solve_not_the_thinned_history():
     assert full.bias_converged_at() == online_convergence_time(full.snapshots) is not None
     assert thinned.bias_converged_at() == full.bias_converged_at()
     assert len(thinned.snapshots) <= 8
+
+
+def test_site_gravity_is_normal_gravity_turned_by_the_deflection():
+    earth = Earth.from_degrees(32.0)
+    np.testing.assert_array_equal(site_specific_force(earth), earth.f_n)
+    xi, eta = 20 * ARCSEC, -15 * ARCSEC
+    f = site_specific_force(earth, (xi, eta), 50e-5)
+    assert np.linalg.norm(f) == pytest.approx(earth.g + 50e-5, rel=1e-15)
+    np.testing.assert_allclose(f[:2] / f[2], [np.tan(eta), np.tan(xi)], rtol=1e-12)  # zenith north and east
+
+
+def test_deflection_leaves_the_self_calibrated_bias_and_becomes_table_tilt():
+    """Self-calibration estimates the gravity direction, so the bias is unchanged; the table reference
+    (normal gravity) takes the deflection as a base tilt: ``(I - [delta x]) [0, 0, g] = g [eta, xi, 1]``
+    gives ``delta = (xi, -eta)`` about east and north."""
+    deflection = (20.0, -15.0)
+    cfg = make_config(duration=300, rate=50, errors=PAPER_ERRORS, seed=2)
+    plain = run(cfg).solution().full
+    moved = run(with_site(cfg, deflection_arcsec=deflection, gravity_anomaly_mgal=30.0)).solution().full
+    np.testing.assert_allclose(moved.bias / UG, plain.bias / UG, atol=0.01)
+    assert np.all(np.abs(moved.bias - BIAS) < 4 * moved.bias_sigma)
+
+    cfg = with_site(make_config(duration=300, rate=50, errors={"accel_bias_ug": [60, 150, 260]}),
+                    deflection_arcsec=deflection)
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, TableGeometry(), solve_period=100.0)
+    for batch in sim.batches():
+        est.update_many(batch)
+    table = est.table_referenced()
+    np.testing.assert_allclose(table.tilt / ARCSEC, [20.0, 15.0], atol=0.05)
+    np.testing.assert_allclose(table.bias / UG, BIAS / UG, atol=0.1)
