@@ -13,6 +13,9 @@ from emulators.truth import Truth
 from hil.config import Config, ConfigError
 from hil.frames import Earth, TableGeometry
 from hil.samples import AlignedBatch
+from hil.units import ARCSEC
+
+MGAL = 1e-5  # m/s^2 per milligal
 
 
 @dataclass
@@ -29,13 +32,16 @@ class Simulation:
         if cfg.trial.duration_s is None:
             raise ConfigError("trial.duration_s: required key is missing (an emulated trial needs a duration)")
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-        truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion))
+        site = cfg.site
+        truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
+                      (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),
+                      site.gravity_anomaly_mgal * MGAL)
         errors = SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, gravity=earth.g)
         return cls(truth, errors, cfg.imu_rate_hz, cfg.trial.duration_s)
 
     @property
     def samples(self) -> int:
-        return int(round(self.duration * self.rate_hz))
+        return round(self.duration * self.rate_hz)
 
     def batches(self, chunk: int = 20000) -> Iterator[AlignedBatch]:
         """Consecutive batches covering the trial; sample k ends at (k + 1) / rate."""

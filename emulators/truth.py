@@ -1,7 +1,9 @@
 """Truth model: commanded gimbal motion -> body attitude -> ideal IMU increments.
 
 The IMU sits at the turntable's centre of rotation on a site fixed to the rotating earth, so the
-specific force is ``f^b = C_n^b [0, 0, g]`` and the angular rate is
+specific force is ``f^b = C_n^b f^n`` with ``f^n`` the site's true gravity reversed (normal gravity
+``[0, 0, g]`` turned by the deflection of the vertical and scaled by the anomaly:
+:func:`hil.frames.site_specific_force`) and the angular rate is
 ``omega_ib^b = omega_nb^b + C_n^b omega_ie^n``. Increments over each sample interval are the exact
 integrals of these, evaluated with Gauss-Legendre quadrature of the analytic motion (never by
 differencing attitudes), so error-free data through the estimator gives zero bias. Intervals are
@@ -12,12 +14,13 @@ of acceleration inside an interval costs no accuracy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from emulators.motion import MotionProfile, motion_breaks
-from hil.frames import Earth, TableGeometry
+from hil.frames import Earth, TableGeometry, site_specific_force
 
 QUADRATURE_NODES = 3  # exact for polynomials of degree 5 over one sample interval
 
@@ -29,6 +32,13 @@ class Truth:
     earth: Earth
     geometry: TableGeometry
     motion: MotionProfile
+    deflection: tuple[float, float] = (0.0, 0.0)  # rad, deflection of the vertical (xi north, eta east)
+    gravity_anomaly: float = 0.0  # m/s^2, true minus normal gravity magnitude
+
+    @cached_property
+    def f_n(self) -> np.ndarray:
+        """Specific force at rest in n under the site's true gravity."""
+        return site_specific_force(self.earth, self.deflection, self.gravity_anomaly)
 
     def angles(self, t: np.ndarray) -> np.ndarray:
         """Gimbal angles (N, 3), rad, ordered (outer, middle, inner)."""
@@ -43,7 +53,7 @@ class Truth:
         angles, angle_rates = self.motion(np.asarray(t, dtype=float))
         c_bn, middle_inner, inner = self.geometry.attitude_matrix(angles)
         omega = self.geometry.body_rate_from(middle_inner, inner, angle_rates) + self.earth.omega_n @ c_bn
-        return omega, self.earth.f_n @ c_bn
+        return omega, self.f_n @ c_bn
 
     def increments(self, t_start: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ideal (dtheta, dv) over the intervals (t[k-1], t[k]], with t[-1] = t_start; each (N, 3)."""

@@ -80,6 +80,10 @@ class SiteConfig(_Model):
     latitude_deg: float = Field(ge=-90, le=90)
     longitude_deg: float = Field(0.0, ge=-180, le=360)
     height_m: float = Field(0.0, ge=-1000, le=20000)
+    # true gravity, emulator only (the estimator keeps normal gravity): deflection of the vertical
+    # (xi north, eta east, positive when the plumb line's zenith lies north/east of the ellipsoid normal)
+    deflection_arcsec: Vec2 = (0.0, 0.0)
+    gravity_anomaly_mgal: float = Field(0.0, ge=-1000, le=1000)  # true minus normal gravity magnitude
 
 
 class AxisMotion(_Model):
@@ -275,6 +279,7 @@ class EstimatorConfig(_Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
     batch_samples: int = Field(10, ge=1, le=10000)  # live: samples handed to the estimator at once
+    bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
 
 
 class ReportLimits(_Model):

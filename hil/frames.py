@@ -75,6 +75,19 @@ class Earth:
         return cls(latitude_deg * DEG, height_m)
 
 
+def site_specific_force(earth: Earth, deflection: tuple[float, float] = (0.0, 0.0), anomaly: float = 0.0) -> np.ndarray:
+    """Specific force at rest in n (ENU) under the site's true gravity, m/s^2.
+
+    Magnitude ``g + anomaly``; direction the plumb line's zenith, which the deflection of the vertical
+    (xi, eta) rad turns north and east of the ellipsoid normal (2018 gravity-vector paper, Sec. 2.1,
+    eq. 1: ``tan xi = dg_N / g``, ``tan eta = dg_E / g``, the true gravity pointing further south and
+    west for positive components). Zero deflection and anomaly give :attr:`Earth.f_n` exactly.
+    """
+    xi, eta = deflection
+    up = np.array([math.tan(eta), math.tan(xi), 1.0])
+    return (earth.g + anomaly) * up / np.linalg.norm(up)
+
+
 def euler_rotation(yaw_pitch_roll: np.ndarray) -> Rotation:
     """Rotation Rz(yaw) Rx(pitch) Ry(roll) from angles (rad), shape (3,) or (N, 3)."""
     return Rotation.from_euler(EULER_SEQ, yaw_pitch_roll)

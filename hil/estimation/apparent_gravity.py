@@ -2,8 +2,10 @@
 
 Model (2019 eqs. 9-15): ``f^ib0(t) = A [cos wt, sin wt, 1]^T + C_b^ib0(t) bias + noise`` with the
 12-state vector ``[A11..A33, bx, by, bz]``; without the bias columns it is the 9-state model of the
-2014 paper ("method 1"). Each IMU increment gives one 3-row measurement: the mean specific force in
-i_b0 over its interval, against the interval means of the regressors.
+2014 paper ("method 1"). With the bias split into repeatability and linear drift (2018 gravity-vector
+paper, eq. 90: ``bias = b_s + k t``) it is the 15-state model ``[A11..A33, b_s, k]``. Each IMU
+increment gives one 3-row measurement: the mean specific force in i_b0 over its interval, against
+the interval means of the regressors.
 
 The recursion is kept in information form: the normal matrix ``W = sum H^T H`` (the observability
 Gram matrix of 2019 eq. 19 in discrete form) and ``sum H^T z`` are accumulated per sample and solved
@@ -14,6 +16,12 @@ when a solution is asked for (the display rate). This equals batch least squares
   whose sums carry no cancellation; ``A`` in the paper's basis is recovered exactly;
 - ``W`` is judged and solved after symmetric diagonal scaling (unit diagonal), so rank and
   condition number describe the motion, not the units.
+
+The drift columns ``C_b^ib0 t`` (t in s from the trial start) are summed as the border of the same
+normal equations on every trial, so the 9- and 12-state blocks are unchanged by them and a drift can
+be checked whatever the model. The 15-state system is solved with the time origin moved to the middle
+of the data so far, ``b = b_c + k (t - t/2)``: an exact change of parameters that makes the bias and
+drift columns nearly orthogonal before the scaling (the fit itself does not depend on the origin).
 """
 
 from __future__ import annotations
@@ -24,11 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
-from hil.estimation.normal_equations import NormalEquations
+from hil.estimation.normal_equations import NormalEquations, unit_diagonal
 from hil.frames import EARTH_RATE
 
 N_GRAVITY = 9  # A11..A33
 N_FULL = 12  # plus bias x, y, z
+N_DRIFT = 15  # plus bias drift rate x, y, z
+DRIFT_SIGNIFICANCE = 4.0  # a drift beyond this many sigma on some axis is significant
 
 
 def gravity_basis(t_start: np.ndarray, t_end: np.ndarray, omega: float = EARTH_RATE) -> np.ndarray:
@@ -63,7 +73,11 @@ class Observability:
 
 @dataclass(frozen=True)
 class Solution:
-    """A least-squares solution of the 12-state (with bias) or 9-state model at time ``t``."""
+    """A least-squares solution of the 15-state (bias and drift), 12-state (bias) or 9-state model at time ``t``.
+
+    With drift, ``bias`` is the bias at ``t`` (``b_s + k t``) and ``bias_t0`` the repeatability ``b_s``
+    (the bias at t = 0); without, the two ``drift`` fields and ``bias_t0`` are None.
+    """
 
     t: float
     samples: int
@@ -73,6 +87,11 @@ class Solution:
     noise_sigma: float  # m/s^2, residual RMS per axis and sample
     observability: Observability
     observable: bool
+    states: int = N_FULL
+    bias_t0: np.ndarray | None = None  # (3,) m/s^2, b_s
+    bias_t0_sigma: np.ndarray | None = None
+    drift: np.ndarray | None = None  # (3,) m/s^3 (m/s^2 per s), k
+    drift_sigma: np.ndarray | None = None
 
     @property
     def a(self) -> np.ndarray:
@@ -87,6 +106,23 @@ class Solution:
         return basis @ self.a_internal.T
 
 
+@dataclass(frozen=True)
+class DriftCheck:
+    """The bias drift rate of the 15-state model, formed on every trial so that an unmodelled drift shows."""
+
+    drift: np.ndarray  # (3,) m/s^3
+    sigma: np.ndarray  # (3,) m/s^3, 1-sigma
+    significant: bool  # some axis beyond DRIFT_SIGNIFICANCE sigma
+
+    @classmethod
+    def from_solution(cls, solution: Solution) -> DriftCheck | None:
+        """The check from a 15-state solution; None while the drift is not observable."""
+        if solution.drift is None:
+            return None
+        significant = bool(np.any(np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma))
+        return cls(solution.drift, solution.drift_sigma, significant)
+
+
 def measurement_matrix(t_start: np.ndarray, t_end: np.ndarray, c_mean: np.ndarray, omega: float = EARTH_RATE) -> np.ndarray:
     """H (N, 3, 12) of 2019 eq. 14 over each interval: row r is ``[e_r (x) w^T, C[r, :]]``."""
     w = gravity_basis(t_start, t_end, omega)
@@ -97,13 +133,21 @@ def measurement_matrix(t_start: np.ndarray, t_end: np.ndarray, c_mean: np.ndarra
     return h
 
 
+def drift_columns(t_start: np.ndarray, t_end: np.ndarray, c_mean: np.ndarray) -> np.ndarray:
+    """G (N, 3, 3): the drift regressor ``C_b^ib0 t`` over each interval, as ``mean(C) t_mid``.
+
+    The interval mean of ``C t`` differs from it by ``dC/dt dt^2 / 12``, times k a few 1e-12 ug at 200 Hz.
+    """
+    return c_mean * (0.5 * (t_start + t_end))[:, None, None]
+
+
 class ApparentGravityEstimator:
-    """Normal equations of the 12-state model; the 9-state model is their leading block."""
+    """Normal equations of the 15-state model; the 12- and 9-state models are their leading blocks."""
 
     def __init__(self, rank_tolerance: float = 1e-6, omega: float = EARTH_RATE) -> None:
         self.rank_tolerance = rank_tolerance
         self.omega = omega
-        self.normal = NormalEquations(N_FULL)
+        self.normal = NormalEquations(N_FULL, border=N_DRIFT - N_FULL)
         self.t = 0.0
 
     @property
@@ -122,41 +166,46 @@ class ApparentGravityEstimator:
         """As :meth:`update_many`, yielding after the samples up to each stop are in (to solve there);
         samples with ``accept`` False are left out."""
         h = measurement_matrix(t_start, t_end, c_mean, self.omega)
-        for stop in self.normal.add_segments(h, f_ib0, stops, accept):
+        g = drift_columns(t_start, t_end, c_mean)
+        for stop in self.normal.add_segments(h, f_ib0, stops, accept, g=g):
             self.t = float(t_end[stop - 1])
             yield stop
 
     def observability(self, n: int = N_FULL) -> Observability:
         """Rank and condition number of the diagonally scaled Gram matrix of the first n states."""
-        scaled, _ = self.normal.scaled(n)
-        eig = eigh(scaled, eigvals_only=True)
-        top = max(float(eig[-1]), np.finfo(float).tiny)
-        rank = int(np.sum(eig > self.rank_tolerance * top))
-        condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
-        return Observability(rank, condition, eig)
+        return self._observability(unit_diagonal(self._normal_equations(n)[0])[0])
 
-    def solve(self, with_bias: bool = True) -> Solution:
-        """The least-squares solution now: 12-state (with bias) or 9-state ("method 1")."""
-        n = N_FULL if with_bias else N_GRAVITY
-        obs = self.observability(n)
-        scaled, scale = self.normal.scaled(n)
-        rhs = self.normal.rhs[:n] * scale
+    def solve(self, states: int = N_FULL) -> Solution:
+        """The least-squares solution now: 15-state (bias and drift), 12-state (bias) or 9-state ("method 1")."""
+        n = states
+        info, rhs = self._normal_equations(n)
+        scaled, scale = unit_diagonal(info)
+        obs = self._observability(scaled)
+        rhs = rhs * scale
         observable = obs.full(n)
         if observable:
             factor = cho_factor(scaled)
             y = cho_solve(factor, rhs)
-            cov_scaled_diag = np.diag(cho_solve(factor, np.eye(n)))
+            cov_scaled = cho_solve(factor, np.eye(n))
         else:
             y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
-            cov_scaled_diag = np.full(n, np.nan)
+            cov_scaled = np.full((n, n), np.nan)
         x = y * scale
         dof = max(3 * self.samples - n, 1)
         rss = max(self.normal.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
         noise_var = rss / dof
+        sigma = np.sqrt(noise_var * np.diag(cov_scaled)) * scale
+        drift: dict[str, np.ndarray] = {}
         bias = bias_sigma = None
-        if with_bias and observable:
-            bias = x[N_GRAVITY:].copy()
-            bias_sigma = np.sqrt(noise_var * cov_scaled_diag[N_GRAVITY:]) * scale[N_GRAVITY:]
+        if n > N_GRAVITY and observable:
+            bias, bias_sigma = x[N_GRAVITY:N_FULL].copy(), sigma[N_GRAVITY:N_FULL]
+        if n == N_DRIFT and observable:
+            cov = noise_var * cov_scaled * np.outer(scale, scale)
+            k = x[N_FULL:]
+            tau = self.drift_origin
+            b_t0, b_t0_sigma = self._bias_at(bias, k, cov, -tau)
+            bias, bias_sigma = self._bias_at(bias, k, cov, self.t - tau)
+            drift = {"bias_t0": b_t0, "bias_t0_sigma": b_t0_sigma, "drift": k.copy(), "drift_sigma": sigma[N_FULL:]}
         return Solution(
             t=self.t,
             samples=self.samples,
@@ -166,4 +215,35 @@ class ApparentGravityEstimator:
             noise_sigma=float(np.sqrt(noise_var)),
             observability=obs,
             observable=observable,
+            states=n,
+            **drift,
         )
+
+    @property
+    def drift_origin(self) -> float:
+        """The time origin (s) of the drift in the 15-state solve: the middle of the data so far."""
+        return 0.5 * self.t
+
+    def _normal_equations(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The normal matrix and right-hand side of the first n states; for 15 states with the drift's
+        time origin at :attr:`drift_origin` (``H' = H T``: the drift column ``C (t - tau)``)."""
+        info, rhs = self.normal.info[:n, :n], self.normal.rhs[:n]
+        if n == N_DRIFT:
+            change = np.eye(n)
+            change[N_GRAVITY:N_FULL, N_FULL:] = -self.drift_origin * np.eye(3)
+            info, rhs = change.T @ info @ change, change.T @ rhs
+        return info, rhs
+
+    def _observability(self, scaled: np.ndarray) -> Observability:
+        eig = eigh(scaled, eigvals_only=True)
+        top = max(float(eig[-1]), np.finfo(float).tiny)
+        rank = int(np.sum(eig > self.rank_tolerance * top))
+        condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
+        return Observability(rank, condition, eig)
+
+    @staticmethod
+    def _bias_at(b_c: np.ndarray, k: np.ndarray, cov: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``b_c + k dt`` and its 1-sigma from the covariance of the centred 15-state solution."""
+        ib, ik = np.arange(N_GRAVITY, N_FULL), np.arange(N_FULL, N_DRIFT)
+        var = cov[ib, ib] + 2.0 * dt * cov[ib, ik] + dt * dt * cov[ik, ik]
+        return b_c + k * dt, np.sqrt(np.maximum(var, 0.0))

@@ -1,9 +1,10 @@
 """The estimator as one object, fed sample by sample live or batch by batch offline.
 
-Per sample: strapdown C_b^ib0 and f^ib0, the 12/9-state normal equations and, when the turntable
+Per sample: strapdown C_b^ib0 and f^ib0, the 15/12/9-state normal equations and, when the turntable
 angles are known, the table-referenced bias. At the solve rate (display rate) it forms a
-:class:`Snapshot`: bias and its sigma, observability, and the method-1/method-2 alignment errors
-against the table attitude together with the theoretical error of 2019 eq. 8.
+:class:`Snapshot`: bias (with the ``drift`` bias model also its drift rate) and sigma, observability,
+the drift check, and the method-1/method-2 alignment errors against the table attitude together with
+the theoretical error of 2019 eq. 8 for the bias at that instant.
 """
 
 from __future__ import annotations
@@ -20,7 +21,16 @@ from hil.estimation.alignment import (
     body_attitude,
     theoretical_error,
 )
-from hil.estimation.apparent_gravity import ApparentGravityEstimator, Solution
+from hil.estimation.apparent_gravity import (
+    N_DRIFT,
+    N_FULL,
+    N_GRAVITY,
+    ApparentGravityEstimator,
+    DriftCheck,
+    Solution,
+)
+from hil.estimation.convergence import BIAS_TOLERANCE, DRIFT_TOLERANCE, SolveTrack
+from hil.estimation.convergence import convergence_time as settled_from
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
 from hil.frames import Earth, TableGeometry, table_body_rotation
@@ -30,6 +40,7 @@ MAX_SNAPSHOTS = 7200  # 2 h at 1 Hz, ~40 MB; older history is thinned beyond
 OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neighbours is left out
 OUTLIER_WINDOW = 25  # samples before it that it is judged against
 OUTLIER_FLOOR = 5e-3  # m/s^2 (~0.5 mg): the gate is never tighter than this (quiet sensors, noise-free data)
+BIAS_MODELS = {"constant": N_FULL, "drift": N_DRIFT}  # estimator.bias_model -> states of Snapshot.full
 
 
 @dataclass(frozen=True)
@@ -38,12 +49,13 @@ class Snapshot:
 
     t: float
     samples: int
-    full: Solution  # 12-state, with bias
+    full: Solution  # the bias model's: 12-state (constant) or 15-state (drift); bias at t
     gravity_only: Solution  # 9-state, method 1
     attitude: np.ndarray  # C_b^ib0 at t
     error_method1: np.ndarray | None  # (pitch, roll, yaw) rad against the table, None without angles
     error_method2: np.ndarray | None
-    error_theoretical: np.ndarray | None  # (pitch, roll) rad, 2019 eq. 8 with the estimated bias
+    error_theoretical: np.ndarray | None  # (pitch, roll) rad, 2019 eq. 8 with the estimated bias at t
+    drift_check: DriftCheck | None = None  # from the 15-state sums whatever the model; None: not observable
 
 
 class OnlineEstimator:
@@ -58,7 +70,11 @@ class OnlineEstimator:
         t0: float = 0.0,
         outlier_sigmas: float | None = OUTLIER_SIGMAS,
         max_snapshots: int = MAX_SNAPSHOTS,
+        bias_model: str = "constant",
     ) -> None:
+        if bias_model not in BIAS_MODELS:
+            raise ValueError(f"bias_model {bias_model!r}: expected one of {', '.join(BIAS_MODELS)}")
+        self.bias_model = bias_model
         self.earth = earth
         self.geometry = geometry or TableGeometry()
         self.solve_period = solve_period
@@ -67,6 +83,7 @@ class OnlineEstimator:
         self.gravity = ApparentGravityEstimator(rank_tolerance)
         self.table = TableReferenceEstimator(earth.f_n, rank_tolerance)
         self.snapshots: list[Snapshot] = []
+        self.track = SolveTrack(13)  # every solve: t, bias, its sigma, 15-state drift, its sigma
         self.outlier_sigmas = outlier_sigmas
         self.max_snapshots = max_snapshots
         self.outliers = 0  # specific-force samples left out of the least squares
@@ -155,6 +172,17 @@ class OnlineEstimator:
     def table_referenced(self) -> TableReferencedBias:
         return self.table.solve()
 
+    def bias_converged_at(self, tolerance: float = BIAS_TOLERANCE) -> float | None:
+        """Convergence time (s) of the bias (:mod:`hil.estimation.convergence`, tolerance in m/s^2) over
+        every solve so far."""
+        rows = self.track.rows
+        return settled_from(rows[:, 0], rows[:, 1:4], rows[:, 4:7], tolerance)
+
+    def drift_converged_at(self, tolerance: float = DRIFT_TOLERANCE) -> float | None:
+        """Convergence time (s) of the 15-state drift rate (tolerance in m/s^3) over every solve so far."""
+        rows = self.track.rows
+        return settled_from(rows[:, 0], rows[:, 7:10], rows[:, 10:13], tolerance)
+
     def _keep(self, snap: Snapshot) -> None:
         """Append a snapshot; past ``max_snapshots`` every other older one is dropped, so a 24-hour
         trial's history stays bounded (full display rate for the first ``max_snapshots``, then thinner)."""
@@ -200,8 +228,9 @@ class OnlineEstimator:
         return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0, c_end[1:]
 
     def _snapshot(self) -> Snapshot:
-        full = self.gravity.solve(with_bias=True)
-        gravity_only = self.gravity.solve(with_bias=False)
+        drift = self.gravity.solve(N_DRIFT)
+        full = drift if BIAS_MODELS[self.bias_model] == N_DRIFT else self.gravity.solve(N_FULL)
+        gravity_only = self.gravity.solve(N_GRAVITY)
         t = self._t_last - self.t0
         errors: list[np.ndarray | None] = [None, None, None]
         reference = self._reference
@@ -212,19 +241,21 @@ class OnlineEstimator:
                 errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, t, self.earth), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
-        return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors)
+        nan3 = np.full(3, np.nan)
+        self.track.append(np.concatenate((
+            [t], *(nan3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
+        )))  # fmt: skip
+        return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors,
+                        drift_check=DriftCheck.from_solution(drift))
 
 
 def convergence_time(snapshots: list[Snapshot]) -> float | None:
-    """First time after which every bias estimate stays inside the final estimate's +-3 sigma band."""
-    final = snapshots[-1].full if snapshots else None
-    if final is None or final.bias is None:
-        return None
-    band = 3.0 * final.bias_sigma
-    converged_at = snapshots[-1].t
-    for snap in reversed(snapshots):
-        bias = snap.full.bias
-        if bias is None or np.any(np.abs(bias - final.bias) > band):
-            break
-        converged_at = snap.t
-    return converged_at
+    """Convergence time (s) of the bias over these snapshots (:mod:`hil.estimation.convergence`).
+
+    On the estimator's own history prefer :meth:`OnlineEstimator.bias_converged_at`, which sees every
+    solve where the history beyond ``max_snapshots`` is thinned.
+    """
+    nan3 = np.full(3, np.nan)
+    bias = np.array([nan3 if s.full.bias is None else s.full.bias for s in snapshots]).reshape(-1, 3)
+    sigma = np.array([nan3 if s.full.bias_sigma is None else s.full.bias_sigma for s in snapshots]).reshape(-1, 3)
+    return settled_from(np.array([s.t for s in snapshots]), bias, sigma, BIAS_TOLERANCE)
