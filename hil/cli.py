@@ -135,7 +135,7 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, config_text: str,
     is sent Off, the viewer closed and the emulator reaped on every way out. Returns the finished trial and
     how it ended."""
     from drivers.table_client import InterlockError, LimitError, TableError
-    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
+    from emulators.process import EmulatorError, spawn_emulator, stop_emulator
     from hil.live import LiveTrial
     from hil.progress import ConsoleProgress
     from hil.table_control import MotionCheck, TableControl
@@ -181,7 +181,7 @@ def _acquire(args: argparse.Namespace, cfg, config_path: Path, config_text: str,
 
 def _speed(text: str) -> float | None:
     """``--speed``: a multiple of real time, None for ``max``."""
-    from emulators.emulate import parse_speed
+    from emulators.process import parse_speed
 
     try:
         return parse_speed(text)
@@ -297,7 +297,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    from emulators.emulate import run_emulator
+    from emulators.process import run_emulator
     from hil.config import load_config
 
     run_emulator(load_config(args.config), args.ports_file, _speed(args.speed), args.duration,

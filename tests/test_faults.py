@@ -19,10 +19,10 @@ from drivers.session import DeviceSession
 from drivers.tap import SampleListener
 from drivers.transport import SerialTransport
 from drivers.tts1 import Status, Tts1Codec
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
-from emulators.harness import EmulatorThread
-from emulators.timing import DeviceClock
+from emulators.in_process import EmulatorThread
+from emulators.clocks import DeviceClock
 from hil.config import DeviceTiming, FaultConfig, parse_config
 
 RATE = 200.0

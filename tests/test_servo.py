@@ -20,7 +20,7 @@ from drivers.table_client import (
     TableError,
 )
 from drivers.tts1 import Mode, Status, Tts1Codec
-from emulators.harness import EmulatorThread
+from emulators.in_process import EmulatorThread
 from emulators.motion import motion_from_config
 from emulators.servo import Servo
 from emulators.truth import Truth
