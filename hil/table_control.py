@@ -16,8 +16,9 @@ from collections import deque
 
 import numpy as np
 
-from drivers.table_client import GIMBALS, TableCommandClient, TableError
+from drivers.table_client import TableCommandClient, TableError
 from hil.config import TurntableConfig
+from hil.samples import GIMBAL_AXES as GIMBALS
 from hil.samples import AlignedSample
 from hil.units import DEG
 
