@@ -2,7 +2,7 @@
 
     python benchmarks/emulator_timing.py [--duration 60] [--rate 200] [CONFIG]
 
-Starts ``python -m emulators.emulate`` in its own process at speed 1, reads both ptys from this
+Starts ``python -m emulators`` in its own process at speed 1, reads both ptys from this
 process with plain ``os.read`` and times each complete frame's arrival. Prints, per device: the
 emulator's pulse-to-frame-written latency (p50, p99; includes the wire time at the configured
 baudrate), the reader's frame intervals (std, p99 of |interval - 1/rate|), and the emulator's CPU use.
@@ -25,7 +25,7 @@ import yaml
 
 from drivers.registry import imu_codec
 from drivers.tts1 import Tts1Codec
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from hil.config import load_config
 
 

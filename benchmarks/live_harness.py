@@ -16,7 +16,7 @@ import threading
 import time
 from pathlib import Path
 
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from hil.config import load_config
 from hil.trial.live import LiveTrial
 

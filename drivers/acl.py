@@ -12,7 +12,11 @@ from typing import ClassVar
 
 AXIS_NUMBER = {"inner": "1", "middle": "2", "outer": "3"}
 AXES = ("1", "2", "3", "ALL")
-MODES = {"Position": "P", "Rate": "R", "Synthesis": "S", "Off": "O"}
+MODES = {"Position": "P", "Rate": "R", "Synthesis": "S", "Off": "O"}  # mode -> its ``:Mode?`` letter
+MOTION_MODES = {"swing": "Synthesis", "rate": "Rate", "positions": "Position", "static": "Position"}
+"""The table mode that performs each ``turntable.motion.kind``: a swing is an oscillation about the centre
+(Synthesis), a rate a constant demanded rate (Rate), static and positions held position demands
+(Position). An axis of a swing with no amplitude may be commanded in Position, which holds it alike."""
 EOL = b"\r\n"
 MAX_LINE = 256
 

@@ -1,8 +1,9 @@
 """Turntable command client (``acl``): checks limits and interlocks before sending; always ends with Off.
 
-Limits come from :class:`hil.config.LimitsConfig` (ordered outer, middle, inner). A demand outside
-them raises :class:`LimitError` before a byte is written. Closing the client, in any way (normal end,
-an exception, Ctrl-C inside a ``with`` block), sends ``:Mode ALL,Off`` and reads the modes back.
+Limits come from :class:`hil.config.LimitsConfig` (ordered outer, middle, inner, as
+:data:`hil.samples.GIMBAL_AXES`). A demand outside them raises :class:`LimitError` before a byte is
+written. Closing the client, in any way (normal end, an exception, Ctrl-C inside a ``with`` block),
+sends ``:Mode ALL,Off`` and reads the modes back.
 """
 
 from __future__ import annotations
@@ -14,8 +15,7 @@ import serial
 
 from drivers.acl import AXIS_NUMBER, AclCodec, AclCommand, AclError, AclReply
 from drivers.transport import TransportError, open_serial
-
-GIMBALS = ("outer", "middle", "inner")  # index order of LimitsConfig
+from hil.samples import GIMBAL_AXES  # also the index order of LimitsConfig
 
 
 class LimitError(ValueError):
@@ -100,7 +100,7 @@ class TableCommandClient:
     def apply_limits(self) -> None:
         """Load the configured limits into the table, so it also enforces them (accelerations included)."""
         lim = self.limits
-        for k, gimbal in enumerate(GIMBALS):
+        for k, gimbal in enumerate(GIMBAL_AXES):
             axis = _axis(gimbal)
             self.send(AclCommand(":Limit:Position", (axis, lim.position_min_deg[k], lim.position_max_deg[k])))
             self.send(AclCommand(":Limit:Rate", (axis, lim.rate_dps[k])))
@@ -157,9 +157,9 @@ class TableCommandClient:
 
 
 def _index(gimbal: str) -> int:
-    if gimbal not in GIMBALS:
-        raise ValueError(f"turntable: unknown axis {gimbal!r}; use one of {', '.join(GIMBALS)}")
-    return GIMBALS.index(gimbal)
+    if gimbal not in GIMBAL_AXES:
+        raise ValueError(f"turntable: unknown axis {gimbal!r}; use one of {', '.join(GIMBAL_AXES)}")
+    return GIMBAL_AXES.index(gimbal)
 
 
 def _axis(gimbal: str) -> str:

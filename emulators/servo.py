@@ -35,6 +35,7 @@ from drivers.acl import (
     ERR_INTERLOCK,
     ERR_LIMIT,
     MODES,
+    MOTION_MODES,
     AclCommand,
     AclError,
     AclReply,
@@ -55,7 +56,6 @@ from hil.units import DEG
 IDN = "turntable-hil,emulated three-axis table,0,1"
 _AXIS_INDEX = {AXIS_NUMBER[g]: k for k, g in enumerate(GIMBAL_AXES)}  # acl axis "1".."3" -> column
 _TTS1_MODE = {"O": Mode.OFF, "P": Mode.POSITION, "R": Mode.RATE, "S": Mode.SYNTHESIS}
-_KIND_MODE = {"swing": "S", "rate": "R", "positions": "P", "static": "P"}
 _RANK = "OPRS"  # the table's tts1 mode is the most active of its axes' modes
 _STILL = 1e-12  # rad/s; below this an axis counts as not moving
 
@@ -164,7 +164,7 @@ class Servo:
         self.sync_output = True
         self.horizon = -1.0 / rate_hz  # latest trial time already emitted
         self.trip_at = table.interlock_trip_at_s
-        mode = _KIND_MODE[table.motion.kind]
+        mode = MODES[MOTION_MODES[table.motion.kind]]
         self.demands = [_configured_demand(table.motion, axis) for axis in GIMBAL_AXES]
         self.motion = ServoMotion(tuple((Piece(0.0, 0.0, initial, k, mode),) for k in range(3)))
 
@@ -377,7 +377,8 @@ def _configured_demand(motion: MotionConfig, axis: str) -> _Demand:
     if motion.kind == "positions":
         return _Demand("P", getattr(motion.positions[0], f"{axis}_deg"))
     frequency = 0.0 if a.period_s is None else 1.0 / a.period_s
-    return _Demand(_KIND_MODE[motion.kind], a.center_deg, a.rate_dps, (a.amplitude_deg, frequency, a.phase_deg))
+    return _Demand(MODES[MOTION_MODES[motion.kind]], a.center_deg, a.rate_dps,
+                   (a.amplitude_deg, frequency, a.phase_deg))
 
 
 def _put(values: tuple, axes: list[int], value: float) -> tuple:

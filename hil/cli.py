@@ -97,7 +97,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    from emulators.emulate import parse_speed, run_emulator
+    from emulators.process import parse_speed, run_emulator
     from hil.config import load_config
     from hil.trial.outcome import TrialSetupError
 

@@ -21,7 +21,7 @@ KVH_HEADER = b"\xfe\x81\xff\x55"
 def _emulate(tmp_path: Path, cfg: dict, *extra: str) -> tuple[subprocess.Popen, dict, Path]:
     config, ports_file, stats = tmp_path / "c.yaml", tmp_path / "ports.json", tmp_path / "stats.json"
     config.write_text(yaml.safe_dump(cfg))
-    proc = subprocess.Popen([sys.executable, "-m", "emulators.emulate", str(config), "--ports-file", str(ports_file),
+    proc = subprocess.Popen([sys.executable, "-m", "emulators", str(config), "--ports-file", str(ports_file),
                              "--stats-file", str(stats), *extra], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 20
     while not ports_file.exists():

@@ -15,7 +15,7 @@ from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
 
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from emulators.simulation import Simulation
 from hil.config import load_config
 

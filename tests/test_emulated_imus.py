@@ -20,9 +20,9 @@ from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture
 from drivers.transport import open_can_bus
-from emulators.emulate import spawn_emulator
-from emulators.harness import EmulatorThread
+from emulators.in_process import EmulatorThread
 from emulators.ports import CanPort
+from emulators.process import spawn_emulator
 from emulators.simulation import Simulation
 from hil.config import ConfigError, parse_config
 

@@ -18,7 +18,7 @@ import serial
 import yaml
 from crccheck.crc import Crc16Xmodem
 
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 
 CONFIG = {"trial": {"name": "shutdown", "duration_s": 600.0, "rate_hz": 200.0, "seed": 1},
           "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},

@@ -19,10 +19,10 @@ from drivers.kvh1750 import Kvh1750Codec, KvhFrame
 from drivers.reader import DeviceReader
 from drivers.transport import SerialTransport
 from drivers.tts1 import Status, Tts1Codec
-from emulators.emulate import spawn_emulator
+from emulators.clocks import DeviceClock
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
-from emulators.harness import EmulatorThread
-from emulators.timing import DeviceClock
+from emulators.in_process import EmulatorThread
+from emulators.process import spawn_emulator
 from hil.config import DeviceTiming, FaultConfig, parse_config
 
 RATE = 200.0

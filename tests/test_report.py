@@ -28,7 +28,7 @@ def trial_dir(tmp_path_factory):
     cfg = make_config(duration=60.0, rate=100.0, errors=PAPER_ERRORS)
     est = run_estimator(cfg, solve_period=1.0)
     n = est.solution().samples
-    result = build_result("report-test", est, StreamCounts(n, n, n, dropped=3), PAPER_ERRORS["accel_bias_ug"])
+    result = build_result("report-test", est, StreamCounts(n, n, n, dropped=3), {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"]})
     out = tmp_path_factory.mktemp("trial")
     write_trial_outputs(out, result, est.snapshots, ReportLimits(), figures=True)
     return out, result
@@ -186,7 +186,7 @@ def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
     cfg = make_config(duration=60.0, rate=100.0, kind="static", errors=PAPER_ERRORS)
     est = run_estimator(cfg, solve_period=1.0)
     n = est.solution().samples
-    result = build_result("static", est, StreamCounts(n, n, n), PAPER_ERRORS["accel_bias_ug"])
+    result = build_result("static", est, StreamCounts(n, n, n), {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"]})
     assert result["estimate"]["gram_condition"] == math.inf  # not observable: a singular Gram matrix
     result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
     write_trial_outputs(tmp_path, result, est.snapshots, ReportLimits(), figures=False)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import yaml
 
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from hil.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

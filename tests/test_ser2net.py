@@ -15,7 +15,7 @@ import yaml
 
 from drivers.table_client import TableCommandClient, TableError
 from drivers.transport import SerialTransport, TransportError, serial_url
-from emulators.emulate import spawn_emulator
+from emulators.process import spawn_emulator
 from hil.cli import main
 from hil.config import load_config
 

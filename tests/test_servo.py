@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from test_emulated_devices import read_raw
 
-from drivers.acl import AclCommand
+from drivers.acl import MODES, MOTION_MODES, AclCommand
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.table_client import (
     InterlockError,
@@ -20,7 +20,7 @@ from drivers.table_client import (
     TableError,
 )
 from drivers.tts1 import Mode, Status, Tts1Codec
-from emulators.harness import EmulatorThread
+from emulators.in_process import EmulatorThread
 from emulators.motion import motion_from_config
 from emulators.servo import Servo
 from emulators.truth import Truth
@@ -218,3 +218,17 @@ def test_the_acl_port_answers_bad_commands_with_errors_and_is_loopback_only():
                                               b"?101 acl: bad axis argument '4' in ':Mode 4,Position'",
                                               b"P,P,P"]
         emu.join()
+
+
+@pytest.mark.parametrize("kind, axis", [("static", {"center_deg": 1.0}),
+                                         ("swing", {"amplitude_deg": 5.0, "period_s": 8.0, "center_deg": 1.0}),
+                                         ("rate", {"rate_dps": 2.0})])
+def test_the_table_performs_each_motion_kind_in_the_acl_mode_named_for_it(kind, axis):
+    cfg = parse_config({
+        "trial": {"name": "servo", "duration_s": 4.0, "rate_hz": RATE, "seed": 2},
+        "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
+        "turntable": {"limits": LIMITS, "motion": {"kind": kind, "axes": dict.fromkeys(CENTERS, axis)}},
+    })
+    servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
+    letter = MODES[MOTION_MODES[kind]]
+    assert servo.handle(AclCommand(":Mode?", ("ALL",))).text == ",".join([letter] * 3)

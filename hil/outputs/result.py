@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from hil.estimation.online import OnlineEstimator, Snapshot, convergence_time
+from hil.estimation.apparent_gravity import DriftCheck
+from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.samples import StreamCounts
-from hil.units import DEG, UG
+from hil.units import DEG, HOUR, UG
 
 RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
@@ -30,10 +31,20 @@ def _tail_mean(snapshots: list[Snapshot], attr: str, duration: float) -> np.ndar
     return np.mean(rows, axis=0) if rows else None
 
 
-def build_result(
-    name: str, estimator: OnlineEstimator, streams: StreamCounts, truth_bias_ug: list[float] | None = None
-) -> dict:
-    """The result.json document of a trial."""
+def to_ug_per_h(v: np.ndarray | None) -> list[float] | None:
+    """m/s^3 as micro-g per hour."""
+    return None if v is None else [float(x) for x in np.asarray(v) / UG * HOUR]
+
+
+def _drift_check(check: DriftCheck | None) -> dict | None:
+    if check is None:
+        return None
+    return {"drift_ug_per_h": to_ug_per_h(check.drift), "sigma_ug_per_h": to_ug_per_h(check.sigma),
+            "significant": check.significant}
+
+
+def build_result(name: str, estimator: OnlineEstimator, streams: StreamCounts, truth: dict | None = None) -> dict:
+    """The result.json document of a trial; ``truth`` the emulator's injected errors, for comparison."""
     final = estimator.solution()
     snapshots = estimator.snapshots
     duration = final.t
@@ -42,13 +53,19 @@ def build_result(
         "trial": {"name": name, "duration_s": duration, "samples": final.samples},
         "streams": streams.as_dict(),
         "estimate": {
+            "bias_model": estimator.bias_model,
             "accel_bias_ug": to_ug(final.full.bias),
             "accel_bias_sigma_ug": to_ug(final.full.bias_sigma),
+            **({"accel_bias_t0_ug": to_ug(final.full.bias_t0), "accel_bias_t0_sigma_ug": to_ug(final.full.bias_t0_sigma),
+                "accel_bias_drift_ug_per_h": to_ug_per_h(final.full.drift),
+                "accel_bias_drift_sigma_ug_per_h": to_ug_per_h(final.full.drift_sigma),
+                "drift_converged_at_s": estimator.drift_converged_at()} if estimator.bias_model == "drift" else {}),
             "observable": final.full.observable,
             "gram_rank": final.full.observability.rank,
             "gram_condition": final.full.observability.condition,
-            "converged_at_s": convergence_time(snapshots),
+            "converged_at_s": estimator.bias_converged_at(),
             "noise_ug": final.full.noise_sigma / UG,
+            "drift_check": _drift_check(final.drift_check),
         },
         "table_reference": {
             "accel_bias_ug": to_ug(table.bias),
@@ -61,31 +78,32 @@ def build_result(
             "theoretical": _angles(_tail_mean(snapshots, "error_theoretical", duration), ("pitch", "roll")),
         },
     }
-    if truth_bias_ug is not None:
-        result["truth"] = {"accel_bias_ug": list(truth_bias_ug)}
+    if truth is not None:
+        result["truth"] = dict(truth)
     return result
 
 
-def trial_result(name: str, estimator: OnlineEstimator | None, streams: StreamCounts,
-                 truth_bias_ug: list[float] | None = None) -> dict:
+def trial_result(name: str, estimator: OnlineEstimator | None, streams: StreamCounts, truth: dict | None = None,
+                 bias_model: str = "constant") -> dict:
     """The result.json document of a trial; estimates null when no IMU sample reached the estimator."""
     if estimator is None:
-        return empty_result(name, streams, truth_bias_ug)
-    return build_result(name, estimator, streams, truth_bias_ug)
+        return empty_result(name, streams, truth, bias_model)
+    return build_result(name, estimator, streams, truth)
 
 
-def empty_result(name: str, streams: StreamCounts, truth_bias_ug: list[float] | None = None) -> dict:
+def empty_result(name: str, streams: StreamCounts, truth: dict | None = None, bias_model: str = "constant") -> dict:
     """The result.json document of a trial in which no IMU sample reached the estimator."""
     result = {
         "trial": {"name": name, "duration_s": 0.0, "samples": 0},
         "streams": streams.as_dict(),
-        "estimate": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False, "gram_rank": 0,
-                     "gram_condition": None, "converged_at_s": None, "noise_ug": None},
+        "estimate": {"bias_model": bias_model, "accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False,
+                     "gram_rank": 0, "gram_condition": None, "converged_at_s": None, "noise_ug": None,
+                     "drift_check": None},
         "table_reference": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "tilt_deg": None},
         "alignment_deg": {"method1": None, "method2": None, "theoretical": None},
     }
-    if truth_bias_ug is not None:
-        result["truth"] = {"accel_bias_ug": list(truth_bias_ug)}
+    if truth is not None:
+        result["truth"] = dict(truth)
     return result
 
 
@@ -112,7 +130,16 @@ def summary_text(result: dict, out: Path) -> str:
     if est["observable"]:
         bias = ", ".join(f"{b:.3f} +- {s:.3f}" for b, s in zip(est["accel_bias_ug"], est["accel_bias_sigma_ug"]))
         lines.append(f"  accelerometer bias (ug): {bias}")
-        lines.append(f"  converged at {est['converged_at_s']:.0f} s, Gram rank {est['gram_rank']}")
+        converged = "not converged" if est["converged_at_s"] is None else f"converged at {est['converged_at_s']:.0f} s"
+        lines.append(f"  {converged}, Gram rank {est['gram_rank']}")
+        if est.get("accel_bias_drift_ug_per_h"):
+            drift = ", ".join(f"{k:.3f} +- {s:.3f}" for k, s in zip(est["accel_bias_drift_ug_per_h"],
+                                                                    est["accel_bias_drift_sigma_ug_per_h"]))
+            lines.append(f"  bias drift (ug/h): {drift}")
+    check = est.get("drift_check")
+    if check and check["significant"] and est.get("bias_model") != "drift":
+        lines.append("  WARNING: the bias drifts (" + ", ".join(f"{k:.2f}" for k in check["drift_ug_per_h"])
+                     + " ug/h, beyond 4 sigma): set estimator.bias_model: drift")
     else:
         lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
     table = result["table_reference"]["accel_bias_ug"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.estimation.online import Snapshot
-from hil.outputs.result import to_ug
+from hil.outputs.result import to_ug, to_ug_per_h
 from hil.units import DEG
 
 SERIES_NAME = "series.csv"
@@ -19,6 +19,8 @@ SERIES_COLUMNS = (
     "method1_pitch_deg", "method1_roll_deg", "method1_yaw_deg",
     "method2_pitch_deg", "method2_roll_deg", "method2_yaw_deg",
     "theoretical_pitch_deg", "theoretical_roll_deg",
+    "drift_x_ug_per_h", "drift_y_ug_per_h", "drift_z_ug_per_h",
+    "drift_sigma_x_ug_per_h", "drift_sigma_y_ug_per_h", "drift_sigma_z_ug_per_h",
 )  # fmt: skip
 
 
@@ -32,10 +34,12 @@ def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
         m1 = list(s.error_method1 / DEG) if s.error_method1 is not None else nan3
         m2 = list(s.error_method2 / DEG) if s.error_method2 is not None else nan3
         theo = list(s.error_theoretical / DEG) if s.error_theoretical is not None else nan3[:2]
+        drift = to_ug_per_h(s.drift_check.drift) if s.drift_check is not None else nan3
+        drift_sigma = to_ug_per_h(s.drift_check.sigma) if s.drift_check is not None else nan3
         obs = s.full.observability
         rows.append(
             [s.t, s.samples, *bias, *sigma, int(s.full.observable), obs.rank, obs.condition,
-             s.gravity_only.observability.rank, *m1, *m2, *theo]
+             s.gravity_only.observability.rank, *m1, *m2, *theo, *drift, *drift_sigma]
         )  # fmt: skip
     return rows
 

@@ -117,7 +117,8 @@ class TrialProcessor:
 
     def _start(self, t0: float) -> None:
         self.estimator = OnlineEstimator(self.earth, self.geometry, 1.0 / self.cfg.estimator.solve_rate_hz,
-                                         self.cfg.estimator.rank_tolerance, t0=t0)
+                                         self.cfg.estimator.rank_tolerance, t0=t0,
+                                         bias_model=self.cfg.estimator.bias_model)
 
     def _snapshots_from(self, before: int) -> None:
         if self._on_snapshot is not None and len(self.estimator.snapshots) > before:

@@ -15,15 +15,14 @@ import dataclasses
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent
+from drivers.latency import LatencyHistogram
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
@@ -35,6 +34,7 @@ from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
 
+LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
@@ -70,30 +70,30 @@ class Fanout(RawListener):
             self._queue.put(item)
 
 
-@dataclass
 class LatencyStats:
-    """How fresh the estimate is, over the last 100 000 estimator updates (ms):
+    """How fresh the estimate is (ms), in constant memory however long the trial:
 
     - ``latency``: from the arrival of the frame that completed a block of samples to the estimator
       having taken the block;
     - ``age``: from the arrival of the first frame of that block (the oldest sample it held).
     """
 
-    latency: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
-    age: deque = dataclasses.field(default_factory=lambda: deque(maxlen=100_000))
+    def __init__(self) -> None:
+        self.latency = LatencyHistogram(bins=LATENCY_BINS)
+        self.age = LatencyHistogram(bins=LATENCY_BINS)
 
     def add(self, first_arrival: float, last_arrival: float) -> None:
         now = time.time()
-        self.latency.append(now - last_arrival)
-        self.age.append(now - first_arrival)
+        self.latency.add(now - last_arrival)
+        self.age.add(now - first_arrival)
 
     def percentiles_ms(self) -> dict[str, float]:
-        if not self.latency:
+        if not self.latency.count:
             return {}
         out = {}
         for name, values in (("latency", self.latency), ("age", self.age)):
-            p50, p99, worst = np.percentile(np.fromiter(values, float), [50, 99, 100]) * 1e3
-            out.update({f"{name}_p50_ms": float(p50), f"{name}_p99_ms": float(p99), f"{name}_max_ms": float(worst)})
+            out.update({f"{name}_p50_ms": values.percentile_ms(50), f"{name}_p99_ms": values.percentile_ms(99),
+                        f"{name}_max_ms": values.max_ms()})
         return out
 
 

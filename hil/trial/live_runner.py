@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from hil.config import Config
-from hil.trial.outcome import TrialOutcome, TrialSetupError, truth_bias_ug
+from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.viewer_feed import ViewerOptions, open_viewer
 
 
@@ -24,7 +24,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
              viewer: ViewerOptions, quiet: bool = False) -> tuple[TrialOutcome, object]:
     """Acquire, record and estimate until the trial ends; returns the outcome and the viewer (still open
     for a ``serve`` viewer to keep serving)."""
-    from emulators.emulate import parse_speed
+    from emulators.process import parse_speed
     from hil.trial.stop_signals import StopSignals
 
     is_emulated = emulated(cfg)
@@ -43,7 +43,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     with StopSignals() as signals:
         trial, ended = _acquire(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet,
                                 lambda: signals.received)
-        outcome = TrialOutcome.of(trial.processor, cfg, config_text, out, ended, truth_bias_ug(cfg))
+        outcome = TrialOutcome.of(trial.processor, cfg, config_text, out, ended, emulated_truth(cfg))
     return outcome, trial.viewer
 
 
@@ -51,7 +51,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
              time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested):
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
     from drivers.table_client import InterlockError, LimitError, TableError
-    from emulators.emulate import EmulatorError, spawn_emulator, stop_emulator
+    from emulators.process import EmulatorError, spawn_emulator, stop_emulator
     from hil.trial.live import LiveTrial
     from hil.trial.table_control import MotionCheck, TableControl
     from hil.viewer.progress import ConsoleProgress

@@ -11,7 +11,7 @@ from hil.config import Config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
 from hil.recording.recorder import Recording
-from hil.trial.outcome import TrialOutcome, truth_bias_ug
+from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
 
@@ -26,7 +26,7 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
     if recording.truncated:
         print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
     ended = recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
-    outcome = TrialOutcome.of(processor, cfg, recording.metadata["config"], out, ended, truth_bias_ug(cfg))
+    outcome = TrialOutcome.of(processor, cfg, recording.metadata["config"], out, ended, emulated_truth(cfg))
     return outcome, viewer
 
 
@@ -56,7 +56,7 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
     processor = TrialProcessor(cfg, on_snapshot=feed.on_snapshot, on_table=feed.on_table)
     for batch in sim.batches():
         processor.feed_batch(batch)
-    return TrialOutcome.of(processor, cfg, config_text, out, truth=truth_bias_ug(cfg)), viewer
+    return TrialOutcome.of(processor, cfg, config_text, out, truth=emulated_truth(cfg)), viewer
 
 
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:

@@ -17,9 +17,13 @@ class TrialSetupError(ValueError):
     """A trial that cannot start as asked (arguments, ports, viewer, table); the message says why."""
 
 
-def truth_bias_ug(cfg: Config) -> list[float] | None:
-    """The accelerometer bias the emulator injects (µg), for comparison in the outputs; None for real devices."""
-    return list(cfg.imu.errors.accel_bias_ug) if cfg.imu.source == "emulator" else None
+def emulated_truth(cfg: Config) -> dict | None:
+    """result.json's ``truth``: the accelerometer bias (µg) and its drift (µg/h) the emulator injects, for
+    comparison in the outputs; None for real devices."""
+    if cfg.imu.source != "emulator":
+        return None
+    errors = cfg.imu.errors
+    return {"accel_bias_ug": list(errors.accel_bias_ug), "accel_drift_ug_per_h": list(errors.accel_drift_ug_per_h)}
 
 
 def output_dir(out: str | Path | None, cfg: Config) -> Path:
@@ -45,9 +49,9 @@ class TrialOutcome:
 
     @classmethod
     def of(cls, processor: TrialProcessor, cfg: Config, config_text: str, out: Path, ended: str = COMPLETED,
-           truth: list[float] | None = None) -> TrialOutcome:
+           truth: dict | None = None) -> TrialOutcome:
         """The outcome of a finished processor; ``ended`` says how the trial ended."""
-        result = trial_result(cfg.trial.name, processor.estimator, processor.streams(), truth)
+        result = trial_result(cfg.trial.name, processor.estimator, processor.streams(), truth, cfg.estimator.bias_model)
         result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
         snapshots = processor.estimator.snapshots if processor.estimator is not None else []
         return cls(cfg, config_text, out, result, snapshots)

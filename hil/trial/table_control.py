@@ -16,8 +16,10 @@ from collections import deque
 
 import numpy as np
 
-from drivers.table_client import GIMBALS, TableCommandClient, TableError
+from drivers.acl import MOTION_MODES
+from drivers.table_client import TableCommandClient, TableError
 from hil.config import TurntableConfig
+from hil.samples import GIMBAL_AXES
 from hil.units import DEG
 
 SETTLE_S = 2.0  # beyond the longest period, for the table to reach the commanded motion
@@ -52,18 +54,16 @@ class TableControl:
         """Limits, interlock check, the configured motion on every axis, sync output on."""
         client, motion = self.client, self.table.motion
         client.apply_limits()
-        for gimbal in GIMBALS:
+        for gimbal in GIMBAL_AXES:
             axis = getattr(motion.axes, gimbal)
-            if motion.kind == "rate":
-                client.set_mode(gimbal, "Rate")
+            mode = MOTION_MODES[motion.kind] if motion.kind != "swing" or axis.amplitude_deg else "Position"
+            if mode != "Rate":
+                client.demand_position(gimbal, axis.center_deg)
+            client.set_mode(gimbal, mode)
+            if mode == "Rate":
                 client.demand_rate(gimbal, axis.rate_dps)
-                continue
-            client.demand_position(gimbal, axis.center_deg)
-            if motion.kind == "swing" and axis.amplitude_deg:
-                client.set_mode(gimbal, "Synthesis")
+            elif mode == "Synthesis":
                 client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
-            else:
-                client.set_mode(gimbal, "Position")
         client.configure_sync(True)
 
     def stop(self) -> None:
@@ -83,7 +83,7 @@ class MotionCheck:
     def __init__(self, table: TurntableConfig, rate_hz: float) -> None:
         motion = table.motion
         self.kind = motion.kind
-        self.axes = [getattr(motion.axes, g) for g in GIMBALS]
+        self.axes = [getattr(motion.axes, g) for g in GIMBAL_AXES]
         periods = [a.period_s for a in self.axes if a.period_s and a.amplitude_deg]
         self.window = max(periods, default=2.0)
         self.settle = self.window + SETTLE_S
@@ -113,7 +113,7 @@ class MotionCheck:
     def _check(self) -> str | None:
         times = np.array([t for t, _ in self._samples])
         angles = np.unwrap(np.array([a for _, a in self._samples]), axis=0) / DEG
-        for k, (gimbal, axis) in enumerate(zip(GIMBALS, self.axes)):
+        for k, (gimbal, axis) in enumerate(zip(GIMBAL_AXES, self.axes)):
             if self.kind == "rate":
                 rate = (angles[-1, k] - angles[0, k]) / (times[-1] - times[0])
                 if abs(rate - axis.rate_dps) > RATE_TOLERANCE * max(abs(axis.rate_dps), 1.0):

@@ -15,8 +15,8 @@ import numpy as np
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
-from hil.trial.outcome import TrialSetupError, truth_bias_ug
-from hil.units import UG
+from hil.trial.outcome import TrialSetupError, emulated_truth
+from hil.units import HOUR, UG
 
 Health = dict[str, dict[str, float]]
 
@@ -53,11 +53,12 @@ def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) 
         TrialViewer,  # rerun only when a viewer is asked for
     )
 
-    truth = truth_bias_ug(cfg)
+    truth = emulated_truth(cfg)
     try:
         viewer = TrialViewer(options.mode, out, geometry=TableGeometry.from_config(cfg.turntable),
-                             truth_bias=None if truth is None else np.array(truth) * UG, bind=options.bind,
-                             recording_name=cfg.trial.name, blocking=blocking)
+                             truth_bias=None if truth is None else np.array(truth["accel_bias_ug"]) * UG,
+                             truth_drift=None if truth is None else np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR,
+                             bind=options.bind, recording_name=cfg.trial.name, blocking=blocking)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:

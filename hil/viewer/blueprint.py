@@ -35,6 +35,8 @@ def default_blueprint() -> rrb.Blueprint:
         for a in AXES
     ]
     bias.append(rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg)"))
+    bias += [rrb.TimeSeriesView(origin=f"/drift/{a}", name=f"bias drift {a} (µg/h)",
+                                plot_legend=rrb.PlotLegend(visible=False)) for a in AXES]
     observability = [
         rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank", axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
         rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
@@ -74,6 +76,7 @@ def log_series_styles(rec: rr.RecordingStream, with_truth: bool) -> None:
         if with_truth:
             names, colors, widths = names + ["truth"], colors + [TRUTH_COLOR], widths + [1.5]
         rec.log(f"bias/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+        rec.log(f"drift/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
     rec.log("sigma", rr.SeriesLines(names=list(AXES), colors=[AXIS_COLORS[a] for a in AXES]), static=True)
     rec.log("observability/rank", rr.SeriesLines(names=["12-state (with bias)", "9-state (method 1)"],
                                                  colors=[(55, 126, 184), (230, 85, 13)]), static=True)  # fmt: skip

@@ -30,7 +30,7 @@ import rerun as rr
 
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
-from hil.units import DEG, UG
+from hil.units import DEG, HOUR, UG
 from hil.viewer.blueprint import (
     ANGLES,
     AXES,
@@ -63,6 +63,7 @@ class TrialViewer:
         *,
         geometry: TableGeometry,
         truth_bias: np.ndarray | None = None,
+        truth_drift: np.ndarray | None = None,
         bind: str = "127.0.0.1",
         recording_name: str = "trial",
         blocking: bool = False,
@@ -75,6 +76,7 @@ class TrialViewer:
         self.out_dir = Path(out_dir)
         self.geometry = geometry
         self.truth_bias = None if truth_bias is None else np.asarray(truth_bias, dtype=float)
+        self.truth_drift = None if truth_drift is None else np.asarray(truth_drift, dtype=float)
         self.bind = bind
         self.blocking = blocking
         self.table_rate_hz = table_rate_hz
@@ -231,6 +233,13 @@ class TrialViewer:
                 series.append(np.where(np.isnan(bias[:, k]), np.nan, self.truth_bias[k] / UG))
             self._scalars(f"bias/{a}", t, np.column_stack(series))
         self._scalars("sigma", t, sigma)
+        drift = np.array([s.drift_check.drift if s.drift_check is not None else nan3 for s in snaps]) / UG * HOUR
+        drift_sigma = np.array([s.drift_check.sigma if s.drift_check is not None else nan3 for s in snaps]) / UG * HOUR
+        for k, a in enumerate(AXES):
+            series = [drift[:, k], drift[:, k] - 3.0 * drift_sigma[:, k], drift[:, k] + 3.0 * drift_sigma[:, k]]
+            if self.truth_drift is not None:
+                series.append(np.where(np.isnan(drift[:, k]), np.nan, self.truth_drift[k] / UG * HOUR))
+            self._scalars(f"drift/{a}", t, np.column_stack(series))
         ranks = [(s.full.observability.rank, s.gravity_only.observability.rank) for s in snaps]
         self._scalars("observability/rank", t, np.array(ranks, float))
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,4 +1,4 @@
-"""The emulator in the caller's process: :func:`emulators.emulate.run_emulator` on a thread.
+"""The emulator in the caller's process: :func:`emulators.process.run_emulator` on a thread.
 
 For a harness that wants the devices beside it (the in-process ``virtual`` CAN bus needs that) and
 for tests: the ports are known once the constructor returns, the statistics once :meth:`join` does.
@@ -6,14 +6,13 @@ for tests: the ports are known once the constructor returns, the statistics once
 
 from __future__ import annotations
 
-import json
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Self
 
-from emulators.emulate import EmulatorStats, run_emulator
+from emulators.bench import EmulatorStats
+from emulators.process import run_emulator, wait_for_ports
 from hil.config import Config
 
 
@@ -30,24 +29,18 @@ class EmulatorThread:
         self.thread = threading.Thread(target=self._run, args=(cfg, speed, duration, wait_readers),
                                        name="emulator", daemon=True)
         self.thread.start()
-        deadline = time.monotonic() + timeout_s
-        while not self.ports_file.exists():
+        ports = wait_for_ports(self.ports_file, lambda: self.error is None and self.thread.is_alive(), timeout_s)
+        if ports is None:
             if self.error is not None:
                 raise self.error
-            if not self.thread.is_alive() or time.monotonic() > deadline:
-                raise RuntimeError("the emulator did not open its ports")
-            time.sleep(0.01)
-        self.ports: dict = json.loads(self.ports_file.read_text())
+            raise RuntimeError("the emulator did not open its ports")
+        self.ports: dict = ports
 
     def _run(self, cfg: Config, speed: float | None, duration: float | None, wait_readers: bool) -> None:
         try:
             self.stats = run_emulator(cfg, self.ports_file, speed, duration, self.stop, wait_readers)
         except Exception as exc:  # noqa: BLE001 - raised again by join()
             self.error = exc
-
-    def current_ports(self) -> dict:
-        """The ports as now published (a replugged pty that could not keep its name has a new one)."""
-        return json.loads(self.ports_file.read_text()) if self.ports_file.exists() else self.ports
 
     def join(self, timeout_s: float = 30.0) -> EmulatorStats:
         """Wait for the run to end; its statistics."""

@@ -1,0 +1,46 @@
+"""Latency statistics in constant memory: a histogram of fixed bins, however long the run.
+
+Values are added in seconds and read back in milliseconds: percentiles at the resolution of a bin
+(the upper edge of the bin the percentile falls in), the maximum exactly. A value beyond the last
+bin is counted in the last bin (its percentile then reads as the histogram's range); a negative
+value in the first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+BIN_S = 10e-6  # default resolution: 10 us
+BINS = 10_000  # default range: up to 100 ms
+
+
+class LatencyHistogram:
+    """Latencies (s) counted in ``bins`` bins of ``bin_s``; percentiles and maximum in ms."""
+
+    def __init__(self, bin_s: float = BIN_S, bins: int = BINS) -> None:
+        if not bin_s > 0 or bins < 1:
+            raise ValueError(f"latency histogram: bin_s must be positive and bins at least 1, got {bin_s}, {bins}")
+        self.bin_s, self.bins = bin_s, bins
+        self.counts = np.zeros(bins, dtype=np.int64)
+        self._max: float | None = None
+
+    @property
+    def count(self) -> int:
+        """Values added so far."""
+        return int(self.counts.sum())
+
+    def add(self, seconds: float) -> None:
+        self.counts[min(max(int(seconds / self.bin_s), 0), self.bins - 1)] += 1
+        self._max = seconds if self._max is None else max(self._max, seconds)
+
+    def percentile_ms(self, q: float) -> float | None:
+        """The q-th percentile (0-100), ms rounded to the microsecond; None before the first value."""
+        total = self.count
+        if total == 0:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * total))
+        return round((k + 1) * self.bin_s * 1e3, 3)
+
+    def max_ms(self) -> float | None:
+        """The largest value added, ms; None before the first value."""
+        return None if self._max is None else self._max * 1e3

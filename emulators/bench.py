@@ -1,0 +1,187 @@
+"""The pulse-train bench: the emulated IMU and table of one run, driven by one sync pulse train.
+
+:class:`Bench` assembles the devices from the config (servo, frame streams of :mod:`emulators.sources`,
+ports of :mod:`emulators.ports`, writers of :mod:`emulators.writer`, the ``acl`` command server);
+:meth:`Bench.pulse_loop` emits every device's frames in time order, paced by a :class:`SyncClock`;
+:meth:`Bench.stats` sums the run up as :class:`EmulatorStats`. :mod:`emulators.process` runs it.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from drivers.acl import AclCommand
+from drivers.registry import imu_codec
+from emulators.acl_server import AclServer
+from emulators.clocks import DeviceClock
+from emulators.faults import ByteDamage, CanDamage, FaultInjector
+from emulators.ports import CanPort, PtyPort
+from emulators.servo import Servo
+from emulators.simulation import Simulation
+from emulators.sources import DeviceStream, ImuSource, TableSource
+from emulators.writer import DeviceWriter
+from hil.config import Config, ConfigError
+from hil.samples import ImuSample
+
+CHUNK_S = 0.25  # frames computed ahead, trial seconds
+BITS_PER_BYTE = 10  # 8N1
+PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
+
+
+@dataclass(frozen=True)
+class DeviceStats:
+    """What one emulated device wrote: frames, injected faults per kind, pulse-to-write latency, and the
+    frames lost because no reader took them (``hil emulate`` without ``--wait-readers``)."""
+
+    frames: int
+    faults: dict[str, int]
+    latency_p50_ms: float | None  # None when unpaced (speed max)
+    latency_p99_ms: float | None
+    lost_unread: int = 0
+
+
+@dataclass(frozen=True)
+class EmulatorStats:
+    """What one emulator run produced."""
+
+    pulses: int
+    elapsed_s: float
+    stopped: bool  # True when stopped by a signal or the stop event before the duration
+    devices: dict[str, DeviceStats] = field(default_factory=dict)  # keys "imu", "turntable_data"
+    table_commands: dict[str, int] = field(default_factory=dict)  # acl commands received, by header
+    table_modes_off: int = 0  # ``:Mode ALL,Off`` commands the table accepted
+    table_modes: str = ""  # the table's modes at the end (``:Mode? ALL``: inner, middle, outer)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class SyncClock:
+    """Paces trial time at ``speed`` times real time on the monotonic clock; ``speed`` None: no pacing."""
+
+    def __init__(self, speed: float | None) -> None:
+        if speed is not None and not speed > 0:
+            raise ValueError(f"speed must be positive, got {speed}")
+        self.speed = speed
+        self.start = time.monotonic()
+
+    def due(self, t: float) -> float | None:
+        """The monotonic time at which trial time t is due (None: unpaced)."""
+        return None if self.speed is None else self.start + t / self.speed
+
+    def wait_until(self, t: float, stop: threading.Event) -> bool:
+        """Wait until trial time t is due; False if stopped first."""
+        due = self.due(t)
+        delay = 0.0 if due is None else due - time.monotonic()
+        return not stop.wait(delay) if delay > 0 else not stop.is_set()
+
+
+def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
+    """Raise :class:`ConfigError` when frames of ``frame_bytes`` at ``rate_hz`` do not fit the line."""
+    needed = frame_bytes * BITS_PER_BYTE * rate_hz
+    if needed > baudrate:
+        raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "
+                          f"(8N1), more than the configured {baudrate}; raise the baudrate or lower the rate")
+
+
+class Bench:
+    """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
+
+    def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
+                 wait_readers: bool) -> None:
+        rate = cfg.imu_rate_hz
+        sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
+            update={"duration_s": duration})}))
+        imu_cfg = cfg.imu
+        codec = imu_codec(imu_cfg, rate)
+        imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
+        table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
+                                  cfg.turntable.timing, cfg.table_counts_per_frame)
+        seed = cfg.trial.seed
+        imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
+        table_source = TableSource(table_clock, seed)
+        self.servo = Servo(cfg.turntable, rate, sim.truth.motion)
+        self.streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
+                                           max(1, round(CHUNK_S / source.clock.period)))
+                        for name, source in (("imu", imu_source), ("turntable_data", table_source))}
+        self.synced = [n for n, c in (("imu", imu_clock), ("turntable_data", table_clock))
+                       if not c.timing.free_running] or ["imu"]
+        self.ports: dict = {}
+        self.writers: dict[str, DeviceWriter] = {}
+        self.server: AclServer | None = None
+        unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
+        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if any(unplugging) else None
+
+        def pty(name: str, unplugs: bool) -> PtyPort:
+            return PtyPort(Path(self._links.name) / name if unplugs else None)
+
+        try:
+            if imu_cfg.protocol == "can-dbc":
+                imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
+            else:
+                check_baudrate("imu", len(codec.encode(codec.from_sample(PROBE))), rate, imu_cfg.baudrate)
+                imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
+            self.ports["imu"] = imu_port
+            check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)
+            self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
+            self.server = AclServer(self.servo)
+            for k, (name, damage, baud, faults) in enumerate((
+                    ("imu", imu_damage, imu_baud, imu_cfg.faults),
+                    ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
+                self.writers[name] = DeviceWriter(name, self.ports[name], FaultInjector(faults, damage, seed, k),
+                                                  baud, speed, stop, wait_readers)
+        except BaseException:
+            self.close()
+            raise
+
+    def names(self) -> dict:
+        """The ports JSON."""
+        return {"imu": self.ports["imu"].path, "turntable_data": self.ports["turntable_data"].path,
+                "turntable_cmd": self.server.url}
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+        for port in self.ports.values():
+            port.close()
+        if self._links is not None:
+            self._links.cleanup()
+
+    def ptys(self) -> list[PtyPort]:
+        """The serial ports (a reader opens them; a CAN bus has no reader to wait for)."""
+        return [p for p in self.ports.values() if isinstance(p, PtyPort)]
+
+    def pulse_loop(self, clock: SyncClock, stop: threading.Event) -> int:
+        """Emit every device's frames in time order until done or stopped; returns the sync pulses emitted."""
+        streams, servo, pulses = self.streams, self.servo, 0
+        while not stop.is_set():
+            live = [name for name, s in streams.items() if not s.done()]
+            if not live:
+                break
+            name = min(live, key=lambda n: streams[n].next_time())
+            t = streams[name].next_time()
+            if not clock.wait_until(t, stop):
+                break
+            with servo.lock:
+                servo.advance(t)
+                emission = streams[name].pop(servo)
+                servo.commit(emission.latest)
+                send = name != "turntable_data" or servo.sync_output
+            if send and not self.writers[name].put(emission, clock.due(t)):
+                break
+            if name in self.synced:
+                pulses = max(pulses, emission.tick)
+        return pulses
+
+    def stats(self, pulses: int, elapsed: float, stopped: bool) -> EmulatorStats:
+        """The run so far: ``pulses`` emitted in ``elapsed`` s, and whether it was ``stopped`` early."""
+        server = self.server
+        return EmulatorStats(pulses, elapsed, stopped, {
+            name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50),
+                              w.latency.percentile_ms(99), w.lost_unread)
+            for name, w in self.writers.items()},
+            dict(server.received), server.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text)

@@ -1,0 +1,219 @@
+"""The emulator as a process (``hil emulate``): run the emulated devices until stopped, signalled or done.
+
+Run it in its own process (``python -m emulators CONFIG [--ports-file PATH] [--stats-file PATH]
+[--speed X|max] [--duration S]``, or :func:`spawn_emulator`, which waits for the ports with
+:func:`wait_for_ports`); clients find the ports in the JSON ports file or on stdout::
+
+    {"imu": "/dev/pts/N" | {"interface": "udp_multicast", "channel": "239.0.0.1"},
+     "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT"}
+
+A device configured to unplug (``faults.unplug_at_s``) is published as a stable symbolic link to its
+pty, ``/tmp/hil-emulate-XXXX/imu`` or ``.../turntable_data`` (as udev's by-id names), which the replug
+points at the new pty. The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on
+the python-can bus of ``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP
+port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as JSON at exit, and
+to ``--stats-file``. The devices themselves are :class:`emulators.bench.Bench`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from emulators.bench import Bench, EmulatorStats, SyncClock
+from emulators.ports import wait_for_readers
+from emulators.writer import DRAIN_S
+from hil.config import Config, ConfigError
+
+PR_SET_PDEATHSIG = 1  # prctl option: a signal for the child when its parent dies
+POLL_S = 0.01  # how often the ports file is looked for
+
+
+def _write_json(path: Path, data: dict) -> None:
+    """Write JSON atomically, so a reader never sees a partial file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data) + "\n")
+    os.replace(tmp, path)
+
+
+def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
+                 duration: float | None = None, stop_event: threading.Event | None = None,
+                 wait_readers: bool = False, stats_file: Path | None = None, hold: bool = False) -> EmulatorStats:
+    """Emulate the IMU and the turntable until the duration, a signal or ``stop_event``.
+
+    ``speed`` is the multiple of real time (None: as fast as the readers take the bytes); ``duration``
+    (s) defaults to ``trial.duration_s``. With ``wait_readers`` the pulse train starts once a client has
+    opened each pty (as a table enables its sync output when the host is ready), and resumes after an
+    unplug once a client has reopened the port; otherwise at once, and a port nobody reads loses its
+    frames (counted). From the main thread, SIGTERM, SIGINT and SIGHUP set the stop event. The
+    statistics go to ``stats_file`` when the pulse train has ended; with ``hold`` the devices then stay
+    powered (the table answers ``acl``, the data ports are silent) until stopped, as a table stays on
+    its base after a trial, and the file is rewritten with the commands received meanwhile. Ports,
+    command socket and ports file are released on return.
+    """
+    duration = cfg.trial.duration_s if duration is None else duration
+    if duration is None:
+        raise ConfigError("trial.duration_s: required key is missing (or give --duration)")
+    stop = stop_event or threading.Event()
+    bench: Bench | None = None
+    with _SignalsStop(stop):
+        try:
+            bench = Bench(cfg, duration, speed, stop, wait_readers)
+            print(json.dumps(bench.names()), flush=True)
+            if ports_file is not None:
+                _write_json(ports_file, bench.names())
+            if wait_readers and not wait_for_readers(bench.ptys(), stop):
+                return bench.stats(0, 0.0, True)
+            clock = SyncClock(speed)
+            pulses = bench.pulse_loop(clock, stop)
+            # held devices wait for their reader however slow: the stats file then means "all was read"
+            for writer in bench.writers.values():
+                writer.finish(None if hold else DRAIN_S)
+            for port in bench.ports.values():
+                port.drain(stop, math.inf if hold else DRAIN_S)
+            elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
+            stats = bench.stats(pulses, elapsed, stopped)
+            if hold:
+                if stats_file is not None:
+                    _write_json(stats_file, stats.as_dict())  # tells that the pulse train has ended
+                stop.wait()
+                stats = bench.stats(pulses, elapsed, stopped)  # with the commands received meanwhile
+            if stats_file is not None:
+                _write_json(stats_file, stats.as_dict())
+            return stats
+        finally:
+            if bench is not None:
+                bench.close()
+            if ports_file is not None:
+                ports_file.unlink(missing_ok=True)
+
+
+class _SignalsStop:
+    """From the main thread, SIGTERM, SIGINT and SIGHUP set ``stop``. The handler itself does nothing: the
+    interpreter writes the signal to a wake-up pipe that a watcher thread turns into ``stop.set()``, since
+    a handler calling ``Event.set`` while the main thread is inside that Event's lock would deadlock."""
+
+    SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop = stop
+        self._previous: dict[int, object] = {}
+        self._pipe: tuple[int, int] | None = None
+        self._wakeup = -1
+
+    def __enter__(self) -> _SignalsStop:
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        self._pipe = os.pipe()
+        os.set_blocking(self._pipe[1], False)
+        self._wakeup = signal.set_wakeup_fd(self._pipe[1], warn_on_full_buffer=False)
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, lambda *_: None)
+        threading.Thread(target=self._watch, args=(self._pipe[0],), name="emulate-signals", daemon=True).start()
+        return self
+
+    def _watch(self, fd: int) -> None:
+        while data := os.read(fd, 64):
+            if any(b in self.SIGNALS for b in data):
+                self.stop.set()
+        os.close(fd)
+
+    def __exit__(self, *exc: object) -> None:
+        if self._pipe is None:
+            return
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        signal.set_wakeup_fd(self._wakeup)
+        os.close(self._pipe[1])  # the watcher reads end-of-file and ends
+        self._pipe = None
+
+
+def parse_speed(text: str) -> float | None:
+    """``max`` -> None (no pacing), otherwise a positive multiple of real time."""
+    if text == "max":
+        return None
+    value = float(text)
+    if not value > 0:
+        raise ValueError(f"speed must be positive or 'max', got {text!r}")
+    return value
+
+
+class EmulatorError(RuntimeError):
+    """The emulator process could not start its devices; the message is the emulator's own."""
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: receive SIGTERM when the parent dies (Linux), so no emulator outlives
+    a harness that was killed outright."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration: float | None = None,
+                   timeout_s: float = 20.0, stats_file: Path | None = None, log_file: Path | None = None,
+                   wait_readers: bool = True, hold: bool = False) -> tuple[subprocess.Popen, dict]:
+    """Start ``python -m emulators`` in its own process; returns it and its ports once open.
+
+    The child runs in its own session, so a Ctrl-C or a hang-up of the terminal reaches only the
+    harness, which turns the table off before it stops the devices; it ends with the harness. With
+    ``hold`` it keeps its devices up after the pulse train until stopped (see :func:`run_emulator`). Its
+    stderr (the stats at the end, any error) goes to ``log_file`` when given. Raises
+    :class:`EmulatorError` with the emulator's last line when it exits before opening its ports.
+    """
+    ports_file.unlink(missing_ok=True)
+    if stats_file is not None:
+        stats_file.unlink(missing_ok=True)  # its appearance tells that the pulse train has ended
+    cmd = [sys.executable, "-m", "emulators", str(config), "--ports-file", str(ports_file),
+           "--speed", speed]
+    if duration is not None:
+        cmd += ["--duration", str(duration)]
+    if stats_file is not None:
+        cmd += ["--stats-file", str(stats_file)]
+    if wait_readers:
+        cmd.append("--wait-readers")
+    if hold:
+        cmd.append("--hold")
+    with open(log_file, "w+b") if log_file is not None else tempfile.TemporaryFile() as log:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                                preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+        ports = wait_for_ports(ports_file, lambda: proc.poll() is None, timeout_s)
+        if ports is None:
+            proc.kill()
+            proc.wait()
+            log.seek(0)
+            lines = log.read().decode(errors="replace").strip().splitlines()
+            raise EmulatorError(lines[-1].removeprefix("emulator: error: ") if lines else
+                                f"the emulator did not open its ports (exit code {proc.returncode})")
+    return proc, ports
+
+
+def wait_for_ports(ports_file: Path, running: Callable[[], bool], timeout_s: float) -> dict | None:
+    """The ports JSON once the emulator has written ``ports_file``; None when ``running()`` turns False
+    or ``timeout_s`` passes first."""
+    deadline = time.monotonic() + timeout_s
+    while not ports_file.exists():
+        if not running() or time.monotonic() > deadline:
+            return None
+        time.sleep(POLL_S)
+    return json.loads(ports_file.read_text())
+
+
+def stop_emulator(process: subprocess.Popen) -> None:
+    """End a spawned emulator: SIGTERM, then SIGKILL if it has not gone within 5 s."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()

@@ -1,0 +1,127 @@
+"""Emulated devices' frames: what each device sends at each tick of its clock.
+
+Each device ticks on its :class:`emulators.clocks.DeviceClock` (the shared sync pulses, or its own
+clock when free-running); tick k of the IMU reports the increments over its latch interval, tick k of
+the table the gimbal angles at its latch instant; both carry their clock's counter (k, or n k for a
+table latching every n-th pulse). Frames are encoded by the drivers' codecs, so the emulator speaks
+exactly what the drivers read. The table's motion is the servo's (:mod:`emulators.servo`): a
+:class:`DeviceStream` computes its frames a chunk ahead and recomputes the chunk when the servo's
+plan changes, from a snapshot of its random state, so a command changes the frames from the next
+pulse and everything stays reproducible. :mod:`emulators.writer` puts the frames on the ports.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from drivers.kvh1750 import STATUS_ALL_VALID
+from drivers.tts1 import Status, Tts1Codec
+from emulators.clocks import DeviceClock
+from emulators.sensor_errors import SensorErrorModel
+from emulators.servo import Servo
+from emulators.truth import Truth
+from hil.samples import ImuSample, TableSample
+
+
+@dataclass(frozen=True)
+class Emission:
+    """One device frame: its tick, the trial time it is written, the latest instant it depends on."""
+
+    tick: int
+    t: float
+    latest: float
+    payload: Any
+
+
+class FrameSource:
+    """Computes one device's frames for a run of ticks; its random state is copied to replay a chunk."""
+
+    def __init__(self, clock: DeviceClock, seed: int, device: int) -> None:
+        self.clock = clock
+        self.state: dict[str, Any] = {"rng": np.random.Generator(np.random.PCG64(np.random.SeedSequence(
+            [seed, device, 1]))), "last": clock.latch_delay}  # "last": end of the previous interval
+
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        raise NotImplementedError
+
+
+class ImuSource(FrameSource):
+    """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``."""
+
+    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
+                 device_time: bool) -> None:
+        super().__init__(clock, seed, 0)
+        self.codec, self.device_time = codec, device_time
+        self.state["errors"] = errors
+        self.status = STATUS_ALL_VALID if codec.name == "kvh1750" else 0
+
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        s, codec = self.state, self.codec
+        latch = self.clock.latch_times(k, s["rng"])
+        dtheta, dv = truth.increments(s["last"], latch)
+        dtheta, dv = s["errors"].apply(latch, dtheta, dv)
+        s["last"] = float(latch[-1])
+        dev = self.clock.device_time(latch).tolist() if self.device_time else [None] * len(k)
+        ticks = self.clock.tick_times(k)
+        return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
+                    ImuSample(int(i), tuple(a), tuple(b), device_time=d, status=self.status))))
+                for i, t, end, a, b, d in zip(k, ticks, latch, dtheta.tolist(), dv.tolist(), dev)]
+
+
+class TableSource(FrameSource):
+    """``tts1`` frames: the gimbal angles and the servo's status at each latch instant, the clock's counter
+    as their sync counter and emission tick."""
+
+    def __init__(self, clock: DeviceClock, seed: int) -> None:
+        super().__init__(clock, seed, 1)
+        self.codec = Tts1Codec()
+        self.flags = int(Status.FREE_RUNNING) if clock.timing.free_running else 0
+
+    def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
+        latch = self.clock.latch_times(k, self.state["rng"])
+        angles = truth.angles(latch)
+        status = servo.motion.status(latch, servo.limits) | self.flags
+        ticks, codec, delay = self.clock.tick_times(k), self.codec, self.clock.latch_delay
+        return [Emission(int(c), float(t), float(end), codec.encode(codec.from_sample(
+                    TableSample(int(c), tuple(a), latch_delay=delay, status=int(st)))))
+                for c, t, end, a, st in zip(self.clock.counters(k), ticks, latch, angles.tolist(), status)]
+
+
+class DeviceStream:
+    """One device's emissions in tick order, computed ``chunk`` ticks ahead with the servo's current plan.
+
+    Call :meth:`pop` with the servo's lock held: a chunk computed under an older plan revision is
+    recomputed from its starting state, which leaves the frames before the change unchanged.
+    """
+
+    def __init__(self, source: FrameSource, truth: Truth, ticks: int, chunk: int) -> None:
+        self.source, self.truth, self.ticks, self.chunk = source, truth, ticks, chunk
+        self._start = 1  # first tick of the cached chunk
+        self._snapshot = copy.deepcopy(source.state)
+        self._cache: list[Emission] = []
+        self._pos = 0
+        self._revision = -1
+
+    def done(self) -> bool:
+        return self._start + self._pos > self.ticks
+
+    def next_time(self) -> float:
+        """Write time of the next tick (trial time)."""
+        return (self._start + self._pos) * self.source.clock.period
+
+    def pop(self, servo: Servo) -> Emission:
+        if self._pos == len(self._cache):
+            self._start += self._pos
+            self._snapshot = copy.deepcopy(self.source.state)
+            self._cache, self._pos = [], 0
+        if not self._cache or self._revision != servo.revision:
+            self.source.state = copy.deepcopy(self._snapshot)
+            k = np.arange(self._start, min(self._start + self.chunk, self.ticks + 1))
+            self._cache = self.source.compute(k, replace(self.truth, motion=servo.motion), servo)
+            self._revision = servo.revision
+        self._pos += 1
+        return self._cache[self._pos - 1]

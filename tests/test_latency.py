@@ -1,0 +1,35 @@
+"""drivers.latency: the bounded latency histogram the emulator's writers (and the harness) keep."""
+
+from __future__ import annotations
+
+import pytest
+
+from drivers.latency import LatencyHistogram
+
+
+def test_an_empty_histogram_has_no_percentiles_and_no_maximum():
+    h = LatencyHistogram()
+    assert h.count == 0 and h.percentile_ms(50) is None and h.max_ms() is None
+
+
+def test_percentiles_read_the_upper_edge_of_their_bin_and_the_maximum_is_exact():
+    h = LatencyHistogram()  # 10 us bins
+    for ms in (0.105, 0.205, 0.305, 0.405):
+        h.add(ms * 1e-3)
+    assert h.count == 4
+    assert h.percentile_ms(50) == 0.21 and h.percentile_ms(99) == 0.41
+    assert h.max_ms() == pytest.approx(0.405)
+
+
+def test_values_beyond_the_range_land_in_the_end_bins_but_keep_their_maximum():
+    h = LatencyHistogram(bin_s=1e-3, bins=10)
+    h.add(-0.5)
+    h.add(5.0)
+    assert h.percentile_ms(1) == 1.0 and h.percentile_ms(100) == 10.0
+    assert h.max_ms() == pytest.approx(5000.0)
+    assert int(h.counts.sum()) == 2 and len(h.counts) == 10
+
+
+def test_a_histogram_needs_positive_bins():
+    with pytest.raises(ValueError):
+        LatencyHistogram(bin_s=0.0)
