@@ -80,6 +80,20 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, output_dir(args.out, cfg)))
 
 
+def cmd_noise(args: argparse.Namespace) -> int:
+    from hil.trial.noise_runner import run_noise
+
+    out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
+    doc = run_noise(args.source, out, config=args.config, figure=not args.no_figures, export=args.export,
+                    rerun=args.rerun)
+    gyro, accel = doc["gyro"], doc["accel"]
+    print(f"noise of {doc['samples']} samples ({doc['duration_s']:.0f} s): outputs in {out}")
+    for sensor, terms in (("gyro", gyro), ("accel", accel)):
+        for key, values in terms.items():
+            print(f"  {sensor} {key}: " + ", ".join("not resolved" if v is None else f"{v:.4g}" for v in values))
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from hil.outputs.report import write_report
 
@@ -155,6 +169,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=cmd_estimate)
+
+    p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (simulated), run or CSV")
+    p.add_argument("source", help="a trial config (simulated), a run directory or recording, or a CSV of increments")
+    p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
+    p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
+    p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")
+    p.add_argument("--no-figures", action="store_true", help="skip allan.png")
+    p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
+    p.set_defaults(func=cmd_noise)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
     _config_argument(p)

@@ -64,9 +64,11 @@ def noise_document(gyro: AllanAnalysis, accel: AllanAnalysis) -> dict:
     return doc
 
 
-def write_noise(out: Path, gyro: AllanAnalysis, accel: AllanAnalysis, figure: bool = True) -> dict:
-    """Writes OUT/noise.json (and OUT/allan.png unless figure is False); returns the document."""
-    doc = noise_document(gyro, accel)
+def write_noise(out: Path, gyro: AllanAnalysis, accel: AllanAnalysis, figure: bool = True,
+                extra: dict | None = None) -> dict:
+    """Writes OUT/noise.json (with the ``extra`` keys: where the data came from) and OUT/allan.png unless
+    figure is False; returns the document."""
+    doc = {**noise_document(gyro, accel), **(extra or {})}
     out.mkdir(parents=True, exist_ok=True)
     (out / NOISE_JSON).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if figure:

@@ -27,6 +27,8 @@ from hil.outputs.measurements import (
     measurements,
     overall,
 )
+from hil.outputs.noise import ALLAN_PNG, NOISE_JSON
+from hil.outputs.noise_section import noise_section
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
 REPORT_NAME = "report.html"
@@ -35,6 +37,7 @@ _CAPTIONS = {
     "observability.png": "Rank and condition number of the scaled Gram matrix (cf. Liu 2019 Fig. 2)",
     "alignment.png": "Alignment error against the turntable, methods 1 and 2 and the theoretical error "
     "(cf. Liu 2019 Fig. 4)",
+    "allan.png": "Overlapping Allan deviation with its intervals, the fitted terms' slopes and read-off points",
 }
 
 
@@ -71,11 +74,28 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     if not any(m.outcome != NOT_JUDGED for m in results):
         notes.append("No limits are set (output.limits in the trial config): the verdict judges nothing.")
     series = read_series(out_dir / SERIES_NAME)
-    page = _render(result, results, _figures(out_dir, series, result), series, notes)
+    page = _render(result, results, _figures(out_dir, series, result), series, notes, _noise(out_dir))
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     write_junit(out_dir, result, results)
     return path
+
+
+def write_noise_report(out_dir: Path) -> Path:
+    """report.html of a noise characterisation: the trial's report with its noise section when the
+    directory holds a trial's result.json, else a page of the noise section and allan.png alone."""
+    if (out_dir / "result.json").exists():
+        return write_report(out_dir)
+    figures = [(n, (out_dir / n).read_bytes()) for n in (ALLAN_PNG,) if (out_dir / n).exists()]
+    page = _page("Noise characterisation", "", _noise(out_dir) + "<h2>Figures</h2>" + _figure_html(figures))
+    path = out_dir / REPORT_NAME
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
+def _noise(out_dir: Path) -> str:
+    path = out_dir / NOISE_JSON
+    return noise_section(json.loads(path.read_text(encoding="utf-8"))) if path.exists() else ""
 
 
 # --- page ------------------------------------------------------------------------------------------
@@ -140,7 +160,7 @@ figcaption { color: #555; font-size: 0.9em; }
 
 
 def _render(result: dict, results: list[Measurement], figures: list[tuple[str, bytes]],
-            series: dict[str, np.ndarray] | None, notes: list[str]) -> str:  # fmt: skip
+            series: dict[str, np.ndarray] | None, notes: list[str], noise: str = "") -> str:  # fmt: skip
     trial = result.get("trial", {})
     verdict = overall(results)
     judged = [m for m in results if m.outcome != NOT_JUDGED]
@@ -154,19 +174,10 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
             f"<td class='num'>{e(format_value(m.value))}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
             f"<td class='outcome {outcome_class}'>{e(m.outcome)}</td></tr>"
         )
-    figure_html = "".join(
-        f"<figure><img alt='{e(name)}' src='data:image/png;base64,{base64.b64encode(data).decode()}'>"
-        f"<figcaption>{e(_CAPTIONS.get(name, name))}</figcaption></figure>"
-        for name, data in figures
-    )
     summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
                + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{e(str(trial.get("name", "trial")))}: {verdict}</title><style>{_CSS}</style></head>
-<body>
-<h1>Trial report: {e(str(trial.get("name", "trial")))}</h1>
-<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
+    name = e(str(trial.get("name", "trial")))
+    body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <div class="verdict {verdict}">{verdict}</div>
 <p>{e(summary)}.</p>
@@ -175,9 +186,30 @@ Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <table><thead><tr><th>measurement</th><th>value</th><th>unit</th><th>limit</th><th>outcome</th></tr></thead>
 <tbody>{"".join(rows)}</tbody></table>
 {_history(series)}
+{noise}
 <h2>Figures</h2>
-{figure_html or "<p>No figures in this directory.</p>"}
+{_figure_html(figures) or "<p>No figures in this directory.</p>"}
 <p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
-(recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>
+(recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
+    return _page(f"Trial report: {name}", f"{name}: {verdict}", body)
+
+
+def _figure_html(figures: list[tuple[str, bytes]]) -> str:
+    e = html.escape
+    return "".join(
+        f"<figure><img alt='{e(name)}' src='data:image/png;base64,{base64.b64encode(data).decode()}'>"
+        f"<figcaption>{e(_CAPTIONS.get(name, name))}</figcaption></figure>"
+        for name, data in figures
+    )
+
+
+def _page(heading: str, title: str, body: str) -> str:
+    """One self-contained page: inline style, nothing fetched."""
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{title or heading}</title><style>{_CSS}</style></head>
+<body>
+<h1>{heading}</h1>
+{body}
 </body></html>
 """

@@ -1,4 +1,5 @@
-"""Read increments exported from other acquisition software (the CSV layout of DESIGN.md)."""
+"""Increments as CSV (the layout of DESIGN.md): read those exported from other acquisition software, and
+write a trial's own."""
 
 from __future__ import annotations
 
@@ -53,3 +54,14 @@ def read_increments_csv(path: str | Path) -> AlignedBatch:
     t = data[:, 0]
     angles = data[:, 7:10] * DEG if has_angles else None
     return AlignedBatch(t, data[:, 1:4], data[:, 4:7], angles, t0=float(t[0] - (t[1] - t[0])))
+
+
+def write_increments_csv(path: Path, batch: AlignedBatch) -> None:
+    """The increments (and table angles) in the CSV layout ``hil estimate`` and ``hil noise`` read, every
+    number written exactly (shortest repr that reads back to the same float)."""
+    header = INCREMENT_COLUMNS + (ANGLE_COLUMNS if batch.angles is not None else ())
+    with open(path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(header)
+        columns = [batch.t[:, None], batch.dtheta, batch.dv] + ([batch.angles / DEG] if batch.angles is not None else [])
+        writer.writerows([repr(float(v)) for v in row] for row in np.hstack(columns))

@@ -24,7 +24,7 @@ _METHOD_NAMES = {"method1": "method 1", "method2": "method 2", "theoretical": "t
 STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (255, 127, 0))
 
 
-def _band_color(axis: str) -> tuple[int, int, int]:
+def band_color(axis: str) -> tuple[int, int, int]:
     return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in AXIS_COLORS[axis])
 
 
@@ -72,7 +72,7 @@ def default_blueprint() -> rrb.Blueprint:
 def log_series_styles(rec: rr.RecordingStream, with_truth: bool) -> None:
     """The names, colours and widths of every time series (static)."""
     for a in AXES:
-        names, colors, widths = ["estimate", "−3σ", "+3σ"], [AXIS_COLORS[a], _band_color(a), _band_color(a)], [2, 1, 1]
+        names, colors, widths = ["estimate", "−3σ", "+3σ"], [AXIS_COLORS[a], band_color(a), band_color(a)], [2, 1, 1]
         if with_truth:
             names, colors, widths = names + ["truth"], colors + [TRUTH_COLOR], widths + [1.5]
         rec.log(f"bias/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)

@@ -1,0 +1,37 @@
+"""The noise characterisation's section of report.html: the fitted terms with their intervals."""
+
+from __future__ import annotations
+
+import html
+
+from hil.outputs.measurements import format_value
+from hil.outputs.noise import SENSORS
+
+_TERM_NAMES = ("white (random walk of the output)", "bias instability", "rate / acceleration random walk")
+_UNITS = {"arw_deg_per_sqrt_h": "deg/√h", "bias_instability_dph": "deg/h", "rrw_deg_per_h_per_sqrt_h": "deg/h/√h",
+          "vrw_m_per_s_per_sqrt_h": "m/s/√h", "bias_instability_ug": "µg", "rrw_m_per_s2_per_sqrt_h": "m/s²/√h"}
+
+
+def noise_section(doc: dict) -> str:
+    """An HTML section of a noise.json document: per sensor and term, each axis's value and interval."""
+    e = html.escape
+    level = doc.get("ci", {}).get("level")
+    rows = []
+    for sensor, _, keys in SENSORS:
+        for key, name in zip(keys, _TERM_NAMES):
+            values = doc[sensor][key]
+            bounds = doc.get("ci", {}).get(sensor, {}).get(key, {})
+            cells = "".join(
+                f"<td class='num'>{e(format_value(v))}"
+                + (f"<br><small>[{e(format_value(lo))}, {e(format_value(hi))}]</small>" if v is not None else
+                   "<br><small>not resolved</small>") + "</td>"
+                for v, lo, hi in zip(values, bounds.get("lower", [None] * 3), bounds.get("upper", [None] * 3)))
+            rows.append(f"<tr><td>{e(sensor)} {e(name)}</td>{cells}<td>{e(_UNITS[key])}</td></tr>")
+    motion = ("the table's motion was taken out with its angles" if doc.get("motion_removed")
+              else "a static record, analysed as it is")
+    return (f"<h2>Noise characterisation</h2><p class='meta'>Overlapping Allan deviation of "
+            f"{format_value(doc.get('samples'))} samples ({format_value(doc.get('duration_s'))} s, "
+            f"{e(str(doc.get('source', '')))}; {motion}); terms from a joint weighted fit (IEEE Std 952 / 1293), "
+            f"intervals at {format_value(level)} two-sided.</p>"
+            "<table><thead><tr><th>term</th><th>x</th><th>y</th><th>z</th><th>unit</th></tr></thead>"
+            f"<tbody>{''.join(rows)}</tbody></table>")

@@ -1,0 +1,93 @@
+"""``hil noise`` on its three kinds of source: a simulated config, a recording replayed, its CSV export."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+from rerun.chunk import RrdReader
+
+from hil.cli import main
+
+WHITE_DPH = 0.02  # gyro white noise, 1-sigma per sample
+WALK_UG = 40.0  # accelerometer white noise, 1-sigma per sample
+
+
+def _static(tmp_path, duration=2000.0, rate=50.0, source="emulator"):
+    data = yaml.safe_load(open("configs/emulated_swing.yaml"))
+    data["trial"].update(duration_s=duration, rate_hz=rate, name="static-noise")
+    data["turntable"]["motion"] = {"kind": "static"}
+    data["output"] = {}  # a static trial cannot meet the swing's bias limits
+    data["imu"]["errors"] = {"gyro_noise_dph": [WHITE_DPH] * 3, "accel_noise_ug": [WALK_UG] * 3,
+                             "gyro_random_walk_dph_per_sqrt_h": [2.0] * 3}
+    path = tmp_path / "static.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_simulated_static_trial_gives_the_configured_white_noise_and_random_walk(tmp_path, capsys):
+    rate = 50.0
+    assert main(["noise", str(_static(tmp_path, rate=rate)), "--out", str(tmp_path / "out"), "--rerun"]) == 0
+    doc = json.loads((tmp_path / "out" / "noise.json").read_text())
+    assert doc["source"] == "simulation" and doc["motion_removed"] is False
+    # white rate noise sigma per sample -> ARW = sigma sqrt(T) (deg/h sqrt(s)), / 60 for deg/sqrt(h)
+    arw = WHITE_DPH * math.sqrt(1.0 / rate) / 60.0
+    vrw = WALK_UG * 9.80665e-6 * math.sqrt(1.0 / rate) * 60.0
+    lower, upper = doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["lower"], doc["ci"]["gyro"]["arw_deg_per_sqrt_h"]["upper"]
+    for k in range(3):
+        assert doc["gyro"]["arw_deg_per_sqrt_h"][k] == pytest.approx(arw, rel=0.05)
+        assert lower[k] <= arw <= upper[k] or abs(doc["gyro"]["arw_deg_per_sqrt_h"][k] / arw - 1) < 0.02
+        assert doc["accel"]["vrw_m_per_s_per_sqrt_h"][k] == pytest.approx(vrw, rel=0.05)
+        assert doc["gyro"]["rrw_deg_per_h_per_sqrt_h"][k] == pytest.approx(2.0, rel=0.6)
+    assert (tmp_path / "out" / "allan.png").stat().st_size > 0
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "Noise characterisation" in page and "data:image/png;base64," in page
+    assert "gyro arw_deg_per_sqrt_h" in capsys.readouterr().out
+    curves = {}
+    for chunk in RrdReader(tmp_path / "out" / "noise.rrd").stream():
+        batch = chunk.to_record_batch()
+        if not chunk.is_static and "Scalars:scalars" in batch.schema.names:
+            curves[chunk.entity_path] = np.array(batch.column("Scalars:scalars").to_pylist())
+    assert set(curves) == {f"/allan/{s}/{a}" for s in ("gyro", "accel") for a in "xyz"}
+    np.testing.assert_allclose(curves["/allan/gyro/x"][:, 0], np.log10(doc["adev"]["gyro"][0]))
+
+
+@pytest.mark.slow
+def test_a_recorded_trial_and_its_csv_export_give_identical_terms(tmp_path):
+    config = _static(tmp_path, duration=60.0, rate=200.0)
+    run = tmp_path / "run"
+    assert main(["run", str(config), "--speed", "max", "--quiet", "--viewer", "none", "--no-figures",
+                 "--out", str(run)]) == 0
+    csv_path = tmp_path / "increments.csv"
+    assert main(["noise", str(run), "--out", str(tmp_path / "n1"), "--export", str(csv_path), "--no-figures"]) == 0
+    assert main(["noise", str(csv_path), "--out", str(tmp_path / "n2"), "--no-figures"]) == 0
+    recorded, exported = (json.loads((tmp_path / d / "noise.json").read_text()) for d in ("n1", "n2"))
+    assert recorded["source"] == "recording" and exported["source"] == "csv"
+    for sensor in ("gyro", "accel"):
+        assert recorded[sensor] == exported[sensor]
+    assert recorded["samples"] == exported["samples"] == 12000
+    arw = WHITE_DPH * math.sqrt(1.0 / 200.0) / 60.0
+    assert np.allclose(recorded["gyro"]["arw_deg_per_sqrt_h"], arw, rtol=0.1)
+
+
+def test_bad_sources_get_one_line(tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    rows = ["t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps"]
+    rows += [f"{k * 0.01},{1e-7 * k},0,0,0,0,0.098" for k in range(1, 11)]
+    short.write_text("\n".join(rows) + "\n")
+    assert main(["noise", str(short), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "short.csv" in err and "record a longer trial" in err
+
+    moving = tmp_path / "moving.csv"
+    t = np.arange(1, 2001) * 0.01
+    rate = 0.3 * np.sin(2 * np.pi * t / 8.0)  # rad/s: a swing, without table angles
+    rows = ["t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps"]
+    rows += [f"{ti},{r * 0.01},0,0,0,0,0.098" for ti, r in zip(t, rate)]
+    moving.write_text("\n".join(rows) + "\n")
+    assert main(["noise", str(moving), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no table angles" in err
