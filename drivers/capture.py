@@ -22,7 +22,7 @@ from drivers.codec import RawChunk
 from drivers.decoder import StreamDecoder
 from drivers.registry import codec_class
 from drivers.tap import message_to_chunk
-from hil.config import CanConfig
+from hil.config import CanConfig, InputError
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
 DEFAULT_DBC = CanConfig().dbc  # the shipped DBC the config defaults to
@@ -31,7 +31,7 @@ CHUNK = 1 << 16
 _LOG_ERRORS = (struct.error, zlib.error, ValueError, IndexError, BLFParseError, NotImplementedError)
 
 
-class CaptureError(ValueError):
+class CaptureError(InputError, ValueError):
     """A capture that cannot be decoded as asked; the message names the file or argument and the reason."""
 
 
@@ -46,6 +46,8 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     when the capture, the protocol, the DBC or the CSV cannot be used.
     """
     path = Path(path)
+    if dbc and protocol != "can-dbc":
+        raise CaptureError(f"--dbc {dbc}: only for protocol can-dbc, not {protocol}")
     if not path.is_file():
         raise CaptureError(f"{path}: {'a directory, not a capture' if path.is_dir() else 'no such file'}")
     if path.stat().st_size == 0:

@@ -22,11 +22,12 @@ import serial
 
 from drivers.codec import RawChunk
 from drivers.tap import message_to_chunk
+from hil.config import InputError
 
 POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request promptly
 
 
-class TransportError(OSError):
+class TransportError(InputError, OSError):
     """The transport cannot be opened or has gone away (unplugged, remote closed)."""
 
 

@@ -16,6 +16,7 @@ EXIT_CODES = """exit codes:
   3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
 
 
+
 def _config_path(text: str) -> Path:
     """:func:`hil.config.resolve_path`, imported when an argument is converted: ``--help`` needs no pydantic."""
     from hil.config import resolve_path
@@ -30,29 +31,31 @@ def _viewer(args: argparse.Namespace):
 
 
 def _finish(args: argparse.Namespace, outcome, viewer=None) -> int:
-    """Write the outputs, close the viewer of a completed trial; DESIGN.md's exit code: 1 a trial that
-    ended early or was interrupted, 3 one that FAILs its limits."""
-    from hil.outputs.measurements import FAIL
-    from hil.outputs.result import COMPLETED
+    """Write the outputs, close the viewer of a completed trial; the exit code of the outcome."""
     from hil.trial.viewer_feed import finish_viewer
 
-    verdict = outcome.write(figures=not args.no_figures)
-    if outcome.ended != COMPLETED:
+    code = outcome.exit_code(outcome.write(figures=not args.no_figures))
+    if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
-        return 1
-    finish_viewer(viewer)
-    return 3 if verdict == FAIL else 0
+    else:
+        finish_viewer(viewer)
+    return code
 
 
-def cmd_run(args: argparse.Namespace) -> int:
+def _trial_config(args: argparse.Namespace):
+    """The trial config the arguments name, and the trial's output directory."""
     from hil.config import load_config
-    from hil.trial.live_runner import run_live
     from hil.trial.outcome import output_dir
 
     cfg = load_config(args.config)
-    outcome, viewer = run_live(cfg, Path(args.config), output_dir(args.out, cfg), args.duration, args.speed,
-                               _viewer(args), quiet=args.quiet)
-    return _finish(args, outcome, viewer)
+    return cfg, output_dir(args.out, cfg)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from hil.trial.live_runner import run_live
+
+    cfg, out = _trial_config(args)
+    return _finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, _viewer(args), args.quiet))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -62,35 +65,26 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from hil.config import load_config
     from hil.trial.offline import run_simulation
-    from hil.trial.outcome import output_dir
 
-    cfg = load_config(args.config)
-    out = output_dir(args.out, cfg)
+    cfg, out = _trial_config(args)
     return _finish(args, *run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)))
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
-    from hil.config import load_config
     from hil.trial.offline import run_csv
-    from hil.trial.outcome import output_dir
 
-    cfg = load_config(args.config)
-    return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, output_dir(args.out, cfg)))
+    cfg, out = _trial_config(args)
+    return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out))
 
 
 def cmd_noise(args: argparse.Namespace) -> int:
+    from hil.outputs.noise import noise_summary
     from hil.trial.noise_runner import run_noise
 
     out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
-    doc = run_noise(args.source, out, config=args.config, figure=not args.no_figures, export=args.export,
-                    rerun=args.rerun)
-    gyro, accel = doc["gyro"], doc["accel"]
-    print(f"noise of {doc['samples']} samples ({doc['duration_s']:.0f} s): outputs in {out}")
-    for sensor, terms in (("gyro", gyro), ("accel", accel)):
-        for key, values in terms.items():
-            print(f"  {sensor} {key}: " + ", ".join("not resolved" if v is None else f"{v:.4g}" for v in values))
+    print(noise_summary(run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
+                                  rerun=args.rerun), out))
     return 0
 
 
@@ -102,10 +96,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    from drivers.capture import CaptureError, decode_capture
+    from drivers.capture import decode_capture
 
-    if args.dbc and args.protocol != "can-dbc":
-        raise CaptureError(f"--dbc {args.dbc}: only for protocol can-dbc, not {args.protocol}")
     print(json.dumps(decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)))
     return 0
 
@@ -113,14 +105,21 @@ def cmd_decode(args: argparse.Namespace) -> int:
 def cmd_emulate(args: argparse.Namespace) -> int:
     from emulators.process import parse_speed, run_emulator
     from hil.config import load_config
-    from hil.trial.outcome import TrialSetupError
+
+    run_emulator(load_config(args.config), args.ports_file, parse_speed(args.speed), args.duration,
+                 wait_readers=args.wait_readers)
+    return 0
+
+
+def _speed(text: str) -> str:
+    """``--speed``: X times real time or ``max``, checked as it is parsed (a bad one is a usage error)."""
+    from emulators.process import parse_speed
 
     try:
-        speed = parse_speed(args.speed)
+        parse_speed(text)
     except ValueError as exc:
-        raise TrialSetupError(f"--speed: {exc}") from None
-    run_emulator(load_config(args.config), args.ports_file, speed, args.duration, wait_readers=args.wait_readers)
-    return 0
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def _config_argument(p: argparse.ArgumentParser) -> None:
@@ -149,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p)
     _trial_options(p)
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
-    p.add_argument("--speed", default="1", help="emulated trials: X times real time, or 'max' (default 1)")
+    p.add_argument("--speed", default="1", type=_speed, help="emulated trials: X times real time, or 'max' (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=cmd_run)
 
@@ -182,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
     _config_argument(p)
     p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
-    p.add_argument("--speed", default="1", help="X times real time, or 'max' (default 1)")
+    p.add_argument("--speed", default="1", type=_speed, help="X times real time, or 'max' (default 1)")
     p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
     p.add_argument("--wait-readers", action="store_true",
                    help="hold the pulse train until every port has a reader (default: stream at once, as hardware "
@@ -204,17 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    # imported after parsing: --help needs none of them
-    from drivers.capture import CaptureError
-    from drivers.transport import TransportError
-    from hil.config import ConfigError
-    from hil.outputs.report import ReportError
-    from hil.recording.csv_input import DataError
-    from hil.trial.outcome import TrialSetupError
+    from hil.config import InputError  # after parsing: --help needs no pydantic
 
     try:
         return args.func(args)
-    except (ConfigError, DataError, TrialSetupError, TransportError, CaptureError, ReportError) as exc:
+    except InputError as exc:
         print(f"hil: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -39,7 +39,11 @@ def resolve_path(path: str | Path) -> Path:
     return shipped if shipped.is_file() else path
 
 
-class ConfigError(ValueError):
+class InputError(Exception):
+    """Input that cannot be used (config, data, port, arguments): one line naming it and why, exit 2."""
+
+
+class ConfigError(InputError, ValueError):
     """A configuration that cannot be used; the message names the key path and the reason."""
 
 
@@ -365,11 +369,8 @@ def _describe(error: ValidationError) -> str:
     lines = []
     for item in error.errors():
         path = ".".join(str(p) for p in item["loc"])
-        msg = item["msg"].removeprefix("Value error, ")
-        if item["type"] == "extra_forbidden":
-            msg = "unknown key"
-        elif item["type"] == "missing":
-            msg = "required key is missing"
+        msg = {"extra_forbidden": "unknown key", "missing": "required key is missing"}.get(
+            item["type"], item["msg"].removeprefix("Value error, "))
         lines.append(f"{path}: {msg}" if path else msg)
     return "; ".join(lines)
 

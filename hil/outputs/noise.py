@@ -76,6 +76,16 @@ def write_noise(out: Path, gyro: AllanAnalysis, accel: AllanAnalysis, figure: bo
     return doc
 
 
+def noise_summary(doc: dict, out: Path) -> str:
+    """The console summary of a noise.json document: every term per axis in datasheet units."""
+    lines = [f"noise of {doc['samples']} samples ({doc['duration_s']:.0f} s): outputs in {out}"]
+    for sensor, _, keys in SENSORS:
+        for key in keys:
+            values = doc[sensor][key]
+            lines.append(f"  {sensor} {key}: " + ", ".join("not resolved" if v is None else f"{v:.4g}" for v in values))
+    return "\n".join(lines)
+
+
 def plot_allan(path: Path, gyro: AllanAnalysis, accel: AllanAnalysis) -> None:
     """Log-log Allan deviation, one panel per sensor kind: the three axes with their intervals, each
     fitted term as its slope line (-1/2, 0, +1/2) and the points the terms are read at."""

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import ReportLimits, load_config
+from hil.config import InputError, ReportLimits, load_config
 from hil.outputs.figures import FIGURES
 from hil.outputs.junit import write_junit
 from hil.outputs.measurements import (
@@ -41,7 +41,7 @@ _CAPTIONS = {
 }
 
 
-class ReportError(ValueError):
+class ReportError(InputError, ValueError):
     """A report that cannot be built from the directory given."""
 
 

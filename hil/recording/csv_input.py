@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.config import InputError
 from hil.samples import AlignedBatch
 from hil.units import DEG
 
@@ -15,7 +16,7 @@ INCREMENT_COLUMNS = ("t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_
 ANGLE_COLUMNS = ("outer_deg", "middle_deg", "inner_deg")
 
 
-class DataError(ValueError):
+class DataError(InputError, ValueError):
     """Input data that cannot be used; the message names the file, line and reason."""
 
 

@@ -6,14 +6,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from hil.config import Config
+from hil.config import Config, InputError
 from hil.estimation.online import Snapshot
+from hil.outputs.measurements import FAIL
 from hil.outputs.result import COMPLETED, summary_text, trial_result
 from hil.outputs.writer import write_trial_outputs
 from hil.pipeline.processor import TrialProcessor
 
 
-class TrialSetupError(ValueError):
+class TrialSetupError(InputError, ValueError):
     """A trial that cannot start as asked (arguments, ports, viewer, table); the message says why."""
 
 
@@ -55,6 +56,13 @@ class TrialOutcome:
         result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
         snapshots = processor.estimator.snapshots if processor.estimator is not None else []
         return cls(cfg, config_text, out, result, snapshots)
+
+    def exit_code(self, verdict: str) -> int:
+        """DESIGN.md's exit code: 1 a trial that ended early or was interrupted, 3 one that completed but
+        FAILs its limits, 0 otherwise."""
+        if self.ended != COMPLETED:
+            return 1
+        return 3 if verdict == FAIL else 0
 
     def write(self, figures: bool = True) -> str:
         """Write every output and print the summary; returns PASS or FAIL against ``output.limits``."""
