@@ -20,12 +20,15 @@ from drivers.table_client import (
     TableError,
 )
 from drivers.tts1 import Mode, Status, Tts1Codec
+from emulators.clocks import DeviceClock
 from emulators.in_process import EmulatorThread
 from emulators.motion import motion_from_config
 from emulators.servo import Servo
+from emulators.sources import TableSource
 from emulators.truth import Truth
 from hil.config import parse_config
 from hil.frames import Earth, TableGeometry
+from hil.units import ARCSEC
 
 RATE = 200.0
 DEG = math.pi / 180.0
@@ -232,3 +235,19 @@ def test_the_table_performs_each_motion_kind_in_the_acl_mode_named_for_it(kind, 
     servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
     letter = MODES[MOTION_MODES[kind]]
     assert servo.handle(AclCommand(":Mode?", ("ALL",))).text == ",".join([letter] * 3)
+
+
+def test_the_table_reports_the_true_angles_minus_the_zero_offsets():
+    # true gimbal angles (5, 2, 10) deg; zero offsets (36, -72, 18) arcsec = (0.01, -0.02, 0.005) deg, the true
+    # angle minus the encoder reading: the encoders read (4.99, 2.02, 9.995) deg
+    cfg = static_config(zero_offset_arcsec=[36.0, -72.0, 18.0])
+    servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
+    truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(cfg.turntable), servo.motion)
+    clock = DeviceClock(RATE, 50e-6, cfg.turntable.timing)
+    source = TableSource(clock, 2, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
+    codec = Tts1Codec()
+    frames = [codec.decode(e.payload) for e in source.compute(np.arange(1, 6), truth, servo)]
+    assert {f.angles_udeg for f in frames} == {(4_990_000, 2_020_000, 9_995_000)}
+    assert np.allclose(truth.angles(np.array([0.1]))[0] / DEG, [5.0, 2.0, 10.0])  # the IMU moves with the truth
+    replies = servo.handle(AclCommand(":Read:Position?", ("ALL",))).text  # acl order: inner, middle, outer
+    assert [float(v) for v in replies.split(",")] == [9.995, 2.02, 4.99]
