@@ -39,12 +39,8 @@ from hil.estimation.calibration_schedule import (
 )
 from hil.estimation.gyro_calibration import calibrate_gyros
 from hil.frames import EARTH_RATE, Earth, TableGeometry
-from hil.outputs.calibration import (
-    CalibrationFileError,
-    calibration_document,
-    load_calibration,
-    write_calibration,
-)
+from hil.outputs.calibration import calibration_document, write_calibration
+from hil.pipeline.compensation import CalibrationFileError, load_calibration
 from hil.units import ARCSEC, DEG, DEG_PER_H, G0, PPM, UG
 
 LATITUDE = 39.9 * DEG

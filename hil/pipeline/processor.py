@@ -18,6 +18,7 @@ from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
 from hil.pipeline.aligner import Aligner
+from hil.pipeline.compensation import Compensation
 from hil.pipeline.plausibility import (
     RATE_MARGIN,
     GyroTableGate,
@@ -81,6 +82,7 @@ class TrialProcessor:
         self._on_snapshot = on_snapshot
         self._on_table = on_table
         self._on_samples = on_samples
+        self.compensation = Compensation(cfg.imu.calibration, 1.0 / cfg.imu_rate_hz) if cfg.imu.calibration else None
         self._batched = 0  # samples fed as aligned batches
         self._batched_angles = 0  # ... of which with table angles
 
@@ -97,7 +99,10 @@ class TrialProcessor:
             decoder.event(item)
             return
         ready: list[AlignedSample | ImuGap] = []
-        for sample in decoder.feed(item):
+        samples = decoder.feed(item)
+        if self.compensation is not None and item.stream == IMU:
+            samples = self.compensation.samples(samples)
+        for sample in samples:
             if item.stream == TABLE:
                 ready += self.aligner.add_table(sample)
             elif self.plausibility.ok(sample):
@@ -108,6 +113,8 @@ class TrialProcessor:
 
     def feed_batch(self, batch: AlignedBatch) -> None:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
+        if self.compensation is not None:
+            batch = self.compensation.batch(batch)
         if self.estimator is None:
             self._start(batch.t0)
         before = len(self.estimator.snapshots)
