@@ -14,6 +14,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from drivers.acl import AclCommand
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
@@ -26,6 +28,7 @@ from emulators.sources import DeviceStream, ImuSource, TableSource
 from emulators.writer import DeviceWriter
 from hil.config import Config, ConfigError
 from hil.samples import ImuSample
+from hil.units import ARCSEC
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
 BITS_PER_BYTE = 10  # 8N1
@@ -103,7 +106,7 @@ class Bench:
                                   cfg.turntable.timing, cfg.table_counts_per_frame)
         seed = cfg.trial.seed
         imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
-        table_source = TableSource(table_clock, seed)
+        table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
         self.servo = Servo(cfg.turntable, rate, sim.truth.motion)
         self.streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
                                            max(1, round(CHUNK_S / source.clock.period)))

@@ -15,6 +15,10 @@ at the first sync pulse after everything already emitted (:meth:`Servo.commit`);
   it arrives. The oscillation starts with a rate step of ``amplitude 2 pi f cos(phase)`` (an ideal
   velocity loop), which the demand checks keep within the rate limit.
 
+Demands and the planned motion are true gimbal angles; what the table reports (``:Read:Position?``
+here, the ``tts1`` frames in :mod:`emulators.sources`) is the encoder reading, the true angle minus
+``turntable.zero_offset_arcsec``.
+
 A demand outside the limits is refused (``?200``), a mode other than Off with open interlocks too
 (``?201``). An interlock trip (``turntable.interlock_trip_at_s``) opens every axis' interlocks and
 latches a fault: the axes switch Off and brake; ``:Interlock:Reset`` clears the fault and
@@ -51,7 +55,7 @@ from emulators.motion import (
 )
 from hil.config import LimitsConfig, MotionConfig, TurntableConfig
 from hil.samples import GIMBAL_AXES
-from hil.units import DEG
+from hil.units import ARCSEC, DEG
 
 IDN = "turntable-hil,emulated three-axis table,0,1"
 _AXIS_INDEX = {AXIS_NUMBER[g]: k for k, g in enumerate(GIMBAL_AXES)}  # acl axis "1".."3" -> column
@@ -164,6 +168,7 @@ class Servo:
         self.sync_output = True
         self.horizon = -1.0 / rate_hz  # latest trial time already emitted
         self.trip_at = table.interlock_trip_at_s
+        self.zero_offset_deg = np.array(table.zero_offset_arcsec) * ARCSEC / DEG
         mode = MODES[MOTION_MODES[table.motion.kind]]
         self.demands = [_configured_demand(table.motion, axis) for axis in GIMBAL_AXES]
         self.motion = ServoMotion(tuple((Piece(0.0, 0.0, initial, k, mode),) for k in range(3)))
@@ -242,7 +247,8 @@ class Servo:
         if header == ":Mode?":
             return self.demands[k].mode
         if header == ":Read:Position?":
-            return f"{math.degrees(float(self.motion(np.array([max(self.horizon, 0.0)]))[0][0, k])):.6f}"
+            true = math.degrees(float(self.motion(np.array([max(self.horizon, 0.0)]))[0][0, k]))
+            return f"{true - self.zero_offset_deg[k]:.6f}"
         if header == ":Interlock?":
             return "Closed" if self._state(k, t).interlocks_closed else "Open"
         if header == ":Limit:Position?":

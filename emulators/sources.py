@@ -73,17 +73,22 @@ class ImuSource(FrameSource):
 
 
 class TableSource(FrameSource):
-    """``tts1`` frames: the gimbal angles and the servo's status at each latch instant, the clock's counter
-    as their sync counter and emission tick."""
+    """``tts1`` frames: the encoder angles and the servo's status at each latch instant, the clock's counter
+    as their sync counter and emission tick.
 
-    def __init__(self, clock: DeviceClock, seed: int) -> None:
+    ``zero_offset`` (outer, middle, inner) rad is ``turntable.zero_offset_arcsec``, the true gimbal angle
+    minus the encoder reading: the frames report ``true - zero_offset``.
+    """
+
+    def __init__(self, clock: DeviceClock, seed: int, zero_offset: np.ndarray | None = None) -> None:
         super().__init__(clock, seed, 1)
         self.codec = Tts1Codec()
         self.flags = int(Status.FREE_RUNNING) if clock.timing.free_running else 0
+        self.zero_offset = np.zeros(3) if zero_offset is None else np.asarray(zero_offset, dtype=float)
 
     def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
         latch = self.clock.latch_times(k, self.state["rng"])
-        angles = truth.angles(latch)
+        angles = truth.angles(latch) - self.zero_offset
         status = servo.motion.status(latch, servo.limits) | self.flags
         ticks, codec, delay = self.clock.tick_times(k), self.codec, self.clock.latch_delay
         return [Emission(int(c), float(t), float(end), codec.encode(codec.from_sample(

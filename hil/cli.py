@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
+CALIBRATION_CONFIG = "configs/calibration.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
   1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
@@ -56,6 +57,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     cfg, out = _trial_config(args)
     return _finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, _viewer(args), args.quiet))
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from hil.config import load_config
+    from hil.trial.calibration_runner import run_calibration
+    from hil.trial.outcome import output_dir
+
+    cfg = load_config(args.config)
+    return _finish(args, *run_calibration(cfg, Path(args.config), output_dir(args.out, cfg), args.speed, _viewer(args),
+                                          args.quiet, figures=not args.no_figures))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -122,9 +133,14 @@ def _speed(text: str) -> str:
     return text
 
 
-def _config_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("config", nargs="?", type=_config_path, default=DEFAULT_CONFIG,
-                   help=f"trial YAML, a path or a shipped config's name (default {DEFAULT_CONFIG})")
+def _config_argument(p: argparse.ArgumentParser, default: str = DEFAULT_CONFIG) -> None:
+    p.add_argument("config", nargs="?", type=_config_path, default=default,
+                   help=f"trial YAML, a path or a shipped config's name (default {default})")
+
+
+def _live_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--speed", default="1", type=_speed, help="emulated trials: X times real time, or 'max' (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
 
 
 def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or runs/NAME-TIME",
@@ -148,9 +164,15 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p)
     _trial_options(p)
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
-    p.add_argument("--speed", default="1", type=_speed, help="emulated trials: X times real time, or 'max' (default 1)")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
+    _live_options(p)
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("calibrate", help="multi-position calibration: the harness turns the table through the "
+                                         "schedule; OUT/calibration.json")
+    _config_argument(p, CALIBRATION_CONFIG)
+    _trial_options(p)
+    _live_options(p)
+    p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
     p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")

@@ -24,8 +24,6 @@ from pydantic import (
 )
 
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
-
-
 SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
 
 
@@ -260,6 +258,7 @@ class ImuConfig(_Model):
     timing: DeviceTiming = DeviceTiming()
     errors: ImuErrors = ImuErrors()
     faults: FaultConfig = FaultConfig()
+    calibration: str | None = None  # a calibration.json: its inverse model applied to the raw increments
 
     @model_validator(mode="before")
     @classmethod
@@ -295,6 +294,8 @@ class ReportLimits(_Model):
     method2_error_deg_max: float | None = Field(None, gt=0)  # |pitch|, |roll| of the method-2 alignment
     dropped_max: int | None = Field(None, ge=0)  # frames lost in the streams
     corrupt_max: int | None = Field(None, ge=0)  # corrupt frames in the streams
+    calibration_residual_ug_max: float | None = Field(None, gt=0)  # |residual| at every calibration position
+    calibration_error_sigma_max: float | None = Field(None, gt=0)  # |estimate - truth| / sigma, every term (emulated)
 
 
 class CalibrationConfig(_Model):

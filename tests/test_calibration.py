@@ -23,6 +23,7 @@ from hil.estimation.calibration_model import (
     TERMS,
     Window,
     compensate,
+    fold_inner_rotation,
     forward,
     inverse,
     window_from_samples,
@@ -33,16 +34,13 @@ from hil.estimation.calibration_schedule import (
     Schedule,
     check_limits,
     default_schedule,
+    schedule_duration,
     schedule_from_config,
 )
 from hil.estimation.gyro_calibration import calibrate_gyros
 from hil.frames import EARTH_RATE, Earth, TableGeometry
-from hil.outputs.calibration import (
-    CalibrationFileError,
-    calibration_document,
-    load_calibration,
-    write_calibration,
-)
+from hil.outputs.calibration import calibration_document, write_calibration
+from hil.pipeline.compensation import CalibrationFileError, load_calibration
 from hil.units import ARCSEC, DEG, DEG_PER_H, G0, PPM, UG
 
 LATITUDE = 39.9 * DEG
@@ -253,6 +251,21 @@ def test_compensation_inverts_the_model():
     dt = 1.0 / RATE_HZ
     dtheta, dv = compensate(a, g, forward(g, w) * dt, forward(a, f) * dt, dt)
     assert np.allclose(dv, f * dt, rtol=0, atol=1e-15) and np.allclose(dtheta, w * dt, rtol=0, atol=1e-16)
+
+
+def test_folding_the_inner_zero_offset_gives_what_the_schedule_sees():
+    for errors in (ACCEL, GYRO):
+        assert np.allclose(fold_inner_rotation(theta(errors, ZERO), ZERO[2]), absorbed(errors, ZERO), rtol=0, atol=1e-15)
+
+
+def test_schedule_duration_adds_moves_at_the_limits_settling_and_windows():
+    limits = LimitsConfig(rate_dps=(10, 10, 10), accel_dps2=(10, 10, 10))
+    # a 90 deg inner move: 1 s ramps, 8 s cruising = 10 s, + 0.5 s arrival + 2 s settle + 20 s dwell
+    schedule = Schedule((Dwell((0.0, 0.0, 90 * DEG), 20.0, 2.0),))
+    assert schedule_duration(schedule, limits) == pytest.approx(32.5)
+    # then a 10 deg/s outer plateau from the zero position: 10 s back, 1 s ramp, arrival twice, settle, 30 s
+    schedule = Schedule(schedule.dwells, (Plateau((0.0, 0.0, 0.0), 0, 10 * DEG, 30.0, 2.0),))
+    assert schedule_duration(schedule, limits) == pytest.approx(32.5 + 10.0 + 0.5 + 2.0 + 1.0 + 0.5 + 30.0)
 
 
 # --- the emulator's forward model, inverted ------------------------------------------------------------

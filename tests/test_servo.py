@@ -20,12 +20,15 @@ from drivers.table_client import (
     TableError,
 )
 from drivers.tts1 import Mode, Status, Tts1Codec
+from emulators.clocks import DeviceClock
 from emulators.in_process import EmulatorThread
 from emulators.motion import motion_from_config
 from emulators.servo import Servo
+from emulators.sources import TableSource
 from emulators.truth import Truth
 from hil.config import parse_config
 from hil.frames import Earth, TableGeometry
+from hil.units import ARCSEC
 
 RATE = 200.0
 DEG = math.pi / 180.0
@@ -232,3 +235,63 @@ def test_the_table_performs_each_motion_kind_in_the_acl_mode_named_for_it(kind, 
     servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
     letter = MODES[MOTION_MODES[kind]]
     assert servo.handle(AclCommand(":Mode?", ("ALL",))).text == ",".join([letter] * 3)
+
+
+def test_the_table_reports_the_true_angles_minus_the_zero_offsets():
+    # true gimbal angles (5, 2, 10) deg; zero offsets (36, -72, 18) arcsec = (0.01, -0.02, 0.005) deg, the true
+    # angle minus the encoder reading: the encoders read (4.99, 2.02, 9.995) deg
+    cfg = static_config(zero_offset_arcsec=[36.0, -72.0, 18.0])
+    servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
+    truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(cfg.turntable), servo.motion)
+    clock = DeviceClock(RATE, 50e-6, cfg.turntable.timing)
+    source = TableSource(clock, 2, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
+    codec = Tts1Codec()
+    frames = [codec.decode(e.payload) for e in source.compute(np.arange(1, 6), truth, servo)]
+    assert {f.angles_udeg for f in frames} == {(4_990_000, 2_020_000, 9_995_000)}
+    assert np.allclose(truth.angles(np.array([0.1]))[0] / DEG, [5.0, 2.0, 10.0])  # the IMU moves with the truth
+    replies = servo.handle(AclCommand(":Read:Position?", ("ALL",))).text  # acl order: inner, middle, outer
+    assert [float(v) for v in replies.split(",")] == [9.995, 2.02, 4.99]
+
+
+def test_the_servo_performs_a_calibration_schedule_commanded_live_within_its_limits():
+    """Position moves with dwells, then rate plateaus of both signs about each axis, as the calibration
+    harness commands them: each command at the pulse after what was emitted, the motion within the
+    rate and acceleration limits, and the IMU's truth turning with the table."""
+    from hil.estimation.calibration_schedule import default_schedule
+
+    servo = servo_at_rest()
+    schedule = default_schedule(positions=6, dwell_s=1.0, settle_s=0.5, rate=10 * DEG, plateau_s=4.0)
+    t, holds, plateaus = 0.0, [], []
+    for step in list(schedule.dwells) + list(schedule.plateaus):
+        target = np.clip(np.array(step.angles) / DEG, [-180, -60, -180], [180, 60, 180])
+        for k, gimbal in enumerate(("3", "2", "1")):  # acl numbers: outer 3, middle 2, inner 1
+            assert servo.handle(AclCommand(":Demand:Position", (gimbal, float(target[k])))).ok
+            assert servo.handle(AclCommand(":Mode", (gimbal, "Position"))).ok
+        start = servo.next_pulse_time()
+        t = start + 8.0  # every move of this schedule ends within 8 s at 30/20/40 deg/s
+        holds.append((t, target))
+        servo.commit(t + 1.0)  # a dwell emitted
+        if hasattr(step, "rate"):
+            axis = ("3", "2", "1")[step.axis]
+            assert servo.handle(AclCommand(":Mode", (axis, "Rate"))).ok
+            assert servo.handle(AclCommand(":Demand:Rate", (axis, step.rate / DEG))).ok
+            begin = servo.next_pulse_time()
+            plateaus.append((begin + 0.5, step.axis, step.rate / DEG))  # 10 deg/s at 50 deg/s^2: 0.2 s
+            servo.commit(begin + 0.5 + step.duration_s)
+    for when, target in holds:
+        angles, rates = servo.motion(np.array([when, when + 1.0]))
+        assert np.allclose(angles / DEG, target, atol=1e-9) and not np.any(rates)
+    for begin, axis, rate in plateaus:
+        times = begin + np.linspace(0.0, 1.0, 11)
+        rates = servo.motion(times)[1] / DEG
+        assert np.allclose(rates[:, axis], rate) and np.allclose(np.delete(rates, axis, axis=1), 0.0)
+    grid = np.arange(0.0, servo.horizon, 1e-3)
+    rates = servo.motion(grid)[1] / DEG
+    assert np.all(np.abs(rates) <= np.array(LIMITS["rate_dps"]) + 1e-9)
+    assert np.all(np.abs(np.diff(rates, axis=0)) / 1e-3 <= np.array(LIMITS["accel_dps2"]) + 1e-6)
+    # the truth follows the servo: over a plateau the IMU turns by the table's angle about the turning axis
+    truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(static_config().turntable), servo.motion)
+    begin, axis, rate = plateaus[0]  # outer axis, from the zero position: body z is the outer axis
+    dtheta, _ = truth.increments(begin, begin + np.arange(1, 201) / RATE)
+    earth_up = 7.2921151467e-5 * math.sin(32.0 * DEG)  # the earth rate's vertical part
+    assert np.sum(dtheta[:, 2]) == pytest.approx((rate * DEG + earth_up) * 1.0, rel=1e-9)

@@ -17,6 +17,7 @@ a combination of the columns already kept cannot be separated by the schedule; t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -115,6 +116,20 @@ def compensate(accel: np.ndarray, gyro: np.ndarray, dtheta: np.ndarray, dv: np.n
     (18,) applied to the interval-mean rate and specific force."""
     dt = np.reshape(np.asarray(dt, dtype=float), (-1, 1))
     return inverse(gyro, np.asarray(dtheta) / dt) * dt, inverse(accel, np.asarray(dv) / dt) * dt
+
+
+def fold_inner_rotation(theta: np.ndarray, inner_zero: float) -> np.ndarray:
+    """theta with the inner gimbal's zero offset (rad) folded into the scale and misalignment terms: a turn
+    of the whole triad about the inner axis (y) that no table measurement tells from the misalignment,
+    ``K' = K Ry(-inner_zero)``; the terms a calibration finds with the inner zero offset taken as zero."""
+    c, s = math.cos(inner_zero), math.sin(inner_zero)
+    k = triad_matrix(theta) @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    out = np.array(theta, dtype=float)
+    out[SCALE] = np.diag(k) - 1.0
+    normalised = k / np.diag(k)[:, None]
+    out[MIS] = [sign * normalised[row, col] for row, col, sign in MISALIGNMENT_ENTRIES]
+    out[ZERO.start + 2] = 0.0
+    return out
 
 
 def forward_jacobian(theta: np.ndarray, reference: np.ndarray,

@@ -128,3 +128,23 @@ def check_limits(schedule: Schedule, limits: LimitsConfig) -> None:
                 if not low[1] - 1e-12 <= sweep <= high[1] + 1e-12:
                     raise ValueError(f"calibration schedule {name}: the middle axis would reach {sweep / DEG:g} deg, "
                                      f"outside the table limits [{low[1] / DEG:g}, {high[1] / DEG:g}] deg")
+
+
+def schedule_duration(schedule: Schedule, limits: LimitsConfig, margin_s: float = 0.5) -> float:
+    """Seconds the table needs for the schedule from the zero position: each step's rest-to-rest move at the
+    rate and acceleration limits (the slowest axis), its settle time and window, ``margin_s`` to confirm
+    arrival; a plateau adds the ramp to its rate and leaves its axis where the turn ended."""
+    rate, accel = np.array(limits.rate_dps) * DEG, np.array(limits.accel_dps2) * DEG
+    here, total = np.zeros(3), 0.0
+    for step in list(schedule.dwells) + list(schedule.plateaus):
+        distance = np.abs(np.array(step.angles) - here)
+        move = np.where(distance > rate**2 / accel, distance / rate + rate / accel, 2.0 * np.sqrt(distance / accel))
+        total += float(np.max(move)) + margin_s + step.settle_s
+        here = np.array(step.angles, dtype=float)
+        if isinstance(step, Dwell):
+            total += step.dwell_s
+            continue
+        ramp = abs(step.rate) / accel[step.axis]
+        total += ramp + margin_s + step.duration_s
+        here[step.axis] += step.rate * (ramp / 2.0 + step.settle_s + step.duration_s)
+    return total

@@ -1,4 +1,4 @@
-"""``OUT/calibration.json``: the calibration document of DESIGN.md, and reading one back for ``imu.calibration``.
+"""``OUT/calibration.json``: the calibration document of DESIGN.md, (read back for ``imu.calibration`` by :mod:`hil.pipeline.compensation`).
 
 The ``accel`` and ``gyro`` blocks use the keys, order and signs of ``imu.errors``; a term the schedule
 could not observe, or that was not fitted, is ``null`` with its reason under ``"unobservable"`` keyed
@@ -16,28 +16,16 @@ import numpy as np
 from hil.config import ImuErrors
 from hil.estimation.accel_calibration import AccelCalibration
 from hil.estimation.calibration_model import (
-    BIAS,
     INDEX,
-    MIS,
-    NONLIN,
-    SCALE,
     TERMS,
     ZERO,
     Fit,
     Window,
 )
-from hil.units import ARCSEC, DEG, DEG_PER_H, G0, PPM, UG
+from hil.pipeline.compensation import ACCEL_KEYS, GYRO_KEYS
+from hil.units import ARCSEC, DEG, UG
 
-UG_PER_G2 = UG / G0**2  # 1/(m/s^2) per ug/g^2
-# (key, slice of theta, SI per unit)
-ACCEL_KEYS = (("bias_ug", BIAS, UG), ("scale_ppm", SCALE, PPM), ("misalignment_arcsec", MIS, ARCSEC),
-              ("nonlinearity_ug_per_g2", NONLIN, UG_PER_G2))
-GYRO_KEYS = (("bias_dph", BIAS, DEG_PER_H), ("scale_ppm", SCALE, PPM), ("misalignment_arcsec", MIS, ARCSEC))
 NOT_FITTED = "not fitted (left out of calibration.accel_terms / gyro_terms)"
-
-
-class CalibrationFileError(ValueError):
-    """A calibration file that cannot be applied; the message names the file, the key and the reason."""
 
 
 def calibration_document(accel: AccelCalibration, gyro: Fit | None, windows: list[Window],
@@ -116,45 +104,3 @@ def _nan_to_null(value):
     if isinstance(value, list):
         return [_nan_to_null(v) for v in value]
     return None if isinstance(value, float) and not math.isfinite(value) else value
-
-
-def load_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """The (accel, gyro) theta vectors (18,) in SI of a calibration.json, for
-    :func:`hil.estimation.calibration_model.compensate`; a ``null`` term is not compensated (zero).
-
-    Raises :class:`CalibrationFileError` naming the file, key and reason.
-    """
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CalibrationFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise CalibrationFileError(f"{path}: not valid JSON: {exc}") from None
-    if not isinstance(doc, dict):
-        raise CalibrationFileError(f"{path}: expected a JSON object at the top level")
-    return tuple(_theta(path, doc, block, keys) for block, keys in (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS)))
-
-
-def _theta(path: Path, doc: dict, block: str, keys: tuple) -> np.ndarray:
-    part = doc.get(block)
-    if not isinstance(part, dict):
-        raise CalibrationFileError(f"{path}: {block}: required block is missing")
-    expected = {key for key, _, _ in keys}
-    extra = sorted(set(part) - expected)
-    if extra:
-        raise CalibrationFileError(f"{path}: {block}.{extra[0]}: unknown key (expected {', '.join(sorted(expected))})")
-    theta = np.zeros(len(TERMS))
-    for key, sl, unit in keys:
-        values = part.get(key)
-        n = sl.stop - sl.start
-        if not isinstance(values, list) or len(values) != n:
-            got = f"{len(values)}" if isinstance(values, list) else type(values).__name__
-            raise CalibrationFileError(f"{path}: {block}.{key}: expected a list of {n} numbers or nulls, got {got}")
-        for i, v in enumerate(values):
-            if v is None:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise CalibrationFileError(f"{path}: {block}.{key}[{i}]: expected a finite number, got {v!r}")
-            theta[sl.start + i] = v * unit
-    return theta

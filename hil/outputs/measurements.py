@@ -111,6 +111,14 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         for k, axis in enumerate("xyz"):
             out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude"))
 
+    calibration = result.get("calibration")
+    if calibration is not None:
+        out.append(_at_most("calibration_residual_max", calibration["residual_max_ug"], "µg",
+                            limits.calibration_residual_ug_max, "largest specific-force residual at a position, "
+                            "after calibration (calibration.json)"))
+        out.append(_at_most("calibration_error_worst", calibration["worst_error_sigma"], "σ",
+                            limits.calibration_error_sigma_max if "truth" in result else None,
+                            "largest |estimate − truth| of an observable term, in its 1σ (emulated trials)"))
     streams = result.get("streams") or {}
     out.append(_at_most("frames_dropped", streams.get("dropped"), "frames", limits.dropped_max, "frames lost"))
     out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,

@@ -18,6 +18,7 @@ from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
 from hil.pipeline.aligner import Aligner
+from hil.pipeline.compensation import Compensation
 from hil.pipeline.plausibility import (
     RATE_MARGIN,
     GyroTableGate,
@@ -33,6 +34,7 @@ IMU, TABLE = "imu", "table"
 
 
 TableCallback = Callable[[np.ndarray, np.ndarray], None]
+SamplesCallback = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 class TrialProcessor:
@@ -45,13 +47,14 @@ class TrialProcessor:
 
     ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s) and
     gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion
-    check); ``on_samples`` with each run of aligned samples the estimator took (for analyses of the raw
-    increments); all run on the caller's thread.
+    check); ``on_samples`` with the trial times (N,), increments (N, 3) and angles (N, 3; NaN where the
+    table had none) of each run of aligned samples the estimator took (for the calibration's windows);
+    all run on the caller's thread.
     """
 
     def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0,
                  on_snapshot: Callable[[Snapshot, dict], None] | None = None, on_table: TableCallback | None = None,
-                 on_samples: Callable[[list[AlignedSample]], None] | None = None) -> None:
+                 on_samples: SamplesCallback | None = None) -> None:
         self.cfg = cfg
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
@@ -79,6 +82,7 @@ class TrialProcessor:
         self._on_snapshot = on_snapshot
         self._on_table = on_table
         self._on_samples = on_samples
+        self.compensation = Compensation(cfg.imu.calibration, 1.0 / cfg.imu_rate_hz) if cfg.imu.calibration else None
         self._batched = 0  # samples fed as aligned batches
         self._batched_angles = 0  # ... of which with table angles
 
@@ -95,7 +99,10 @@ class TrialProcessor:
             decoder.event(item)
             return
         ready: list[AlignedSample | ImuGap] = []
-        for sample in decoder.feed(item):
+        samples = decoder.feed(item)
+        if self.compensation is not None and item.stream == IMU:
+            samples = self.compensation.samples(samples)
+        for sample in samples:
             if item.stream == TABLE:
                 ready += self.aligner.add_table(sample)
             elif self.plausibility.ok(sample):
@@ -106,6 +113,8 @@ class TrialProcessor:
 
     def feed_batch(self, batch: AlignedBatch) -> None:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
+        if self.compensation is not None:
+            batch = self.compensation.batch(batch)
         if self.estimator is None:
             self._start(batch.t0)
         before = len(self.estimator.snapshots)
@@ -242,7 +251,9 @@ class TrialProcessor:
             self.estimator.update_samples(chunk)
             self.time_offset.add(chunk)
             if self._on_samples is not None:
-                self._on_samples(chunk)
+                self._on_samples(np.array([s.t for s in chunk]) - self.estimator.t0, np.array([s.dtheta for s in chunk]),
+                                 np.array([s.dv for s in chunk]),
+                                 np.array([s.angles or (np.nan,) * 3 for s in chunk], dtype=float))
         with_angles = [s for s in run if s.angles is not None]
         if with_angles and self._on_table is not None:
             self._on_table(np.array([s.t for s in with_angles]) - self.estimator.t0,

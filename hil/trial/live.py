@@ -29,7 +29,7 @@ from drivers.transport import Transport, open_transport
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.result import COMPLETED
-from hil.pipeline.processor import IMU, TABLE, TrialProcessor
+from hil.pipeline.processor import IMU, TABLE, SamplesCallback, TrialProcessor
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
@@ -122,7 +122,10 @@ class LiveTrial:
     is polled every step: a signal name ends the trial as interrupted. A trial whose IMU samples are
     all rejected for ``STALL_S`` ends early with the processor's diagnosis. ``on_end`` (optional) is
     called the moment acquisition ends, however it ends, before the backlog is processed: where the
-    table is turned off.
+    table is turned off. ``on_samples`` goes to the processor (:class:`TrialProcessor`); ``finished``
+    (optional) is polled every step: True ends the trial as completed (a trial whose length is set by
+    what the harness commands). ``queue_items`` bounds the processing queue: a small one holds the
+    emulated devices close behind the processing (the table then answers a command without lag).
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
@@ -131,7 +134,8 @@ class LiveTrial:
                  on_progress: Callable[[float, Snapshot | None, dict], None] | None = None,
                  source_done: Callable[[], bool] | None = None,
                  stop_requested: Callable[[], str | None] | None = None,
-                 on_end: Callable[[], None] | None = None) -> None:
+                 on_end: Callable[[], None] | None = None, on_samples: SamplesCallback | None = None,
+                 finished: Callable[[], bool] | None = None, queue_items: int = QUEUE_ITEMS) -> None:
         self.cfg = cfg
         self.out = out
         self.duration = duration
@@ -140,15 +144,16 @@ class LiveTrial:
         self.source_done = source_done or (lambda: False)
         self.stop_requested = stop_requested or (lambda: None)
         self.on_end = on_end or (lambda: None)
+        self.finished = finished or (lambda: False)
         self.interrupted: str | None = None
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale)
-        self.queue: queue.Queue = queue.Queue(QUEUE_ITEMS)
+        self.queue: queue.Queue = queue.Queue(queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
         feed = ViewerFeed(viewer, self._live_health)
         self.motion_check = motion_check
-        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed))
+        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout]) for t in transports(cfg, ports).values()]
 
     def run(self) -> str:
@@ -203,7 +208,7 @@ class LiveTrial:
         started = time.monotonic()
         next_progress = started
         first_arrival: float | None = None  # the first chunk since the estimator's last update
-        while not (self.processor.complete or self.ended_by_source):
+        while not (self.processor.complete or self.ended_by_source or self.finished()):
             self.interrupted = self.stop_requested()
             if self.interrupted:
                 return

@@ -5,6 +5,7 @@ viewer closed and the emulator reaped on every way out, signals included."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from hil.config import Config
@@ -20,10 +21,17 @@ def emulated(cfg: Config) -> bool:
     return sources == {"emulator"}
 
 
+# Given the open table control and the config, starts the table and returns what watches it (``motion_check``) and
+# further LiveTrial arguments; the default arms ``turntable.motion`` and checks it (:class:`MotionCheck`).
+Commanded = Callable[[object, Config], tuple[object, dict]]
+
+
 def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
-             viewer: ViewerOptions, quiet: bool = False) -> tuple[TrialOutcome, object]:
+             viewer: ViewerOptions, quiet: bool = False, commanded: Commanded | None = None
+             ) -> tuple[TrialOutcome, object]:
     """Acquire, record and estimate until the trial ends; returns the outcome and the viewer (still open
-    for a ``serve`` viewer to keep serving)."""
+    for a ``serve`` viewer to keep serving). ``commanded``: how the harness drives the table (see
+    :data:`Commanded`)."""
     from emulators.process import parse_speed
     from hil.trial.stop_signals import StopSignals
 
@@ -39,18 +47,18 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     config_text = config_path.read_text()
     with StopSignals() as signals:
         trial, ended = _acquire(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet,
-                                lambda: signals.received)
+                                lambda: signals.received, commanded or _arm)
         outcome = TrialOutcome.of(trial.processor, cfg, config_text, out, ended, emulated_truth(cfg))
     return outcome, trial.viewer
 
 
 def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
-             time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested):
+             time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested, commanded: Commanded):
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
     from drivers.table_client import InterlockError, LimitError, TableError
     from emulators.process import EmulatorError, spawn_emulator, stop_emulator
     from hil.trial.live import LiveTrial
-    from hil.trial.table_control import MotionCheck, TableControl
+    from hil.trial.table_control import TableControl
     from hil.viewer.progress import ConsoleProgress
 
     emulator, ports, control, viewer = None, None, None, None
@@ -65,17 +73,16 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
         viewer = open_viewer(options, cfg, out, blocking=False)
         command_url = _command_url(cfg, ports)
         with ConsoleProgress(duration, quiet=quiet) as progress:
-            check = None
+            check, extra = None, {}
             if command_url is not None:
                 control = TableControl(command_url, cfg.turntable)
                 control.open()
-                control.arm()
-                check = MotionCheck(cfg.turntable, cfg.trial.rate_hz)
+                check, extra = commanded(control, cfg)
             trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
                               motion_check=check, on_progress=progress.update, stop_requested=stop_requested,
                               on_end=control.stop if control is not None else None,
                               source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
-                              if emulator else None)
+                              if emulator else None, **extra)
             return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None
@@ -88,6 +95,14 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
                 print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
         if emulator is not None:
             stop_emulator(emulator)
+
+
+def _arm(control, cfg: Config) -> tuple[object, dict]:
+    """``hil run``: the configured motion, checked against what the table reports."""
+    from hil.trial.table_control import MotionCheck
+
+    control.arm()
+    return MotionCheck(cfg.turntable, cfg.trial.rate_hz), {}
 
 
 def _command_url(cfg: Config, ports: dict | None) -> str | None:

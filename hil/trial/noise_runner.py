@@ -17,7 +17,7 @@ from hil.config import Config, load_config, resolve_path
 from hil.estimation.allan import DEFAULT_LEVEL, analyse
 from hil.frames import Earth, TableGeometry
 from hil.recording.csv_input import DataError, read_increments_csv, write_increments_csv
-from hil.samples import AlignedBatch, AlignedSample
+from hil.samples import AlignedBatch
 from hil.trial.outcome import TrialSetupError
 from hil.units import DEG
 
@@ -53,16 +53,15 @@ def _replayed(path: Path) -> AlignedBatch:
     from hil.recording.replay import open_recording
 
     recording, cfg = open_recording(path)
-    taken: list[list[AlignedSample]] = []
-    processor = TrialProcessor(cfg, on_samples=taken.append)
+    runs: list[tuple[np.ndarray, ...]] = []
+    processor = TrialProcessor(cfg, on_samples=lambda *arrays: runs.append(arrays))
     for item in recording.items:
         processor.feed(item)
     processor.finish()
-    samples = [s for run in taken for s in run]
-    if not samples:
+    if not runs:
         raise DataError(f"{path}: no IMU sample reached the estimator: nothing to analyse")
-    t0 = processor.estimator.t0
-    return AlignedBatch.from_samples(samples, t0)
+    t, dtheta, dv, angles = (np.concatenate(column) for column in zip(*runs))
+    return AlignedBatch(t, dtheta, dv, None if np.isnan(angles).any() else angles, float(t[0] - (t[1] - t[0])))
 
 
 def _concatenated(batches: list[AlignedBatch]) -> AlignedBatch:

@@ -1,0 +1,131 @@
+"""The calibration's comparison with the emulator's truth, its summary in result.json and ``calibration.html``.
+
+The truth as the schedule sees it (``truth.as_observed`` in calibration.json): the injected errors with
+the inner gimbal's zero offset folded into the scale and misalignment terms
+(:func:`hil.estimation.calibration_model.fold_inner_rotation`), since no table measurement separates
+them; the other zero offsets as injected. Each observable term's error is then judged in its sigmas,
+an angle's sigma combined with the table encoder's resolution (``tts1``: 1e-6 deg), below which the
+reported angles say nothing.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+from hil.config import ImuErrors
+from hil.estimation.calibration_model import TERMS, fold_inner_rotation
+from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
+from hil.units import ARCSEC, UG
+
+BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))
+ENCODER_RESOLUTION_ARCSEC = 1e-6 * 3600.0
+
+
+def observed_truth(errors: ImuErrors, zero_offset_arcsec: tuple[float, float, float]) -> dict:
+    """The document's ``accel``/``gyro``/``turntable`` blocks of the injected errors as the schedule sees them."""
+    out: dict = {}
+    for block, keys in BLOCKS:
+        theta = np.zeros(len(TERMS))
+        for key, part, unit in keys:
+            theta[part] = np.array(getattr(errors, f"{block}_{key}")) * unit
+        theta = fold_inner_rotation(theta, zero_offset_arcsec[2] * ARCSEC)
+        out[block] = {key: [float(v) for v in theta[part] / unit] for key, part, unit in keys}
+    out["turntable"] = {"zero_offset_arcsec": [zero_offset_arcsec[0], zero_offset_arcsec[1], None]}
+    return out
+
+
+def comparison(doc: dict) -> list[dict]:
+    """One row a term: block, key, index, estimate, sigma, truth (as observed) and the error in sigmas."""
+    truth = (doc.get("truth") or {}).get("as_observed") or {}
+    rows = []
+    blocks = [(b, [k for k, _, _ in keys]) for b, keys in BLOCKS if b in doc] + [("turntable", ["zero_offset_arcsec"])]
+    for block, keys in blocks:
+        for key in keys:
+            values = doc[block][key]
+            sigmas = doc["turntable"]["zero_offset_sigma_arcsec"] if block == "turntable" else doc["sigma"][block][key]
+            truths = (truth.get(block) or {}).get(key) or [None] * len(values)
+            for i, (value, sigma, true) in enumerate(zip(values, sigmas, truths, strict=True)):
+                ratio = None
+                floor = ENCODER_RESOLUTION_ARCSEC if key.endswith("arcsec") else 0.0
+                if value is not None and true is not None and sigma is not None and math.isfinite(sigma) \
+                        and math.hypot(sigma, floor) > 0:
+                    ratio = (value - true) / math.hypot(sigma, floor)
+                rows.append({"term": f"{block}.{key}.{i}", "estimate": value, "sigma": sigma, "truth": true,
+                             "error_sigma": ratio, "reason": doc["unobservable"].get(f"{block}.{key}.{i}")})
+    return rows
+
+
+def calibration_summary(doc: dict) -> dict:
+    """result.json's ``calibration``: the windows, the residuals after calibration and, against the truth,
+    the largest error of an observable term in its sigmas."""
+    residuals = np.array([p["residual_ug"] for p in doc["positions"]], dtype=float)
+    ratios = [abs(r["error_sigma"]) for r in comparison(doc) if r["error_sigma"] is not None]
+    return {"file": "calibration.json", "positions": len(doc["positions"]),
+            "residual_rms_ug": float(np.sqrt(np.mean(residuals**2))) if residuals.size else None,
+            "residual_max_ug": float(np.max(np.abs(residuals))) if residuals.size else None,
+            "unobservable": sorted(doc["unobservable"]),
+            "worst_error_sigma": max(ratios) if ratios else None}
+
+
+def residual_figure(doc: dict, raw_residuals: np.ndarray) -> bytes:
+    """PNG: per-position specific-force residuals (ug) before (error-free model) and after calibration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    after = np.array([p["residual_ug"] for p in doc["positions"]], dtype=float)
+    before = np.asarray(raw_residuals) / UG
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    positions = np.arange(1, len(after) + 1)
+    for ax, values, title in ((axes[0], before, "before calibration"), (axes[1], after, "after calibration")):
+        for k, axis in enumerate("xyz"):
+            ax.bar(positions + (k - 1) * 0.27, values[:, k], width=0.27, label=axis)
+        ax.set_title(f"specific force residual per position, {title}")
+        ax.set_ylabel("µg")
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    axes[1].set_xlabel("position")
+    axes[1].set_xticks(positions)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def write_calibration_report(out: Path, doc: dict, raw_residuals: np.ndarray, figures: bool = True) -> Path:
+    """``out/calibration.html`` (self-contained: the figure inline) and ``calibration_residuals.png``."""
+    rows = "".join(
+        f"<tr><td>{html.escape(r['term'])}</td><td>{_fmt(r['estimate'])}</td><td>{_fmt(r['sigma'])}</td>"
+        f"<td>{_fmt(r['truth'])}</td><td>{_fmt(r['error_sigma'])}</td><td>{html.escape(r['reason'] or '')}</td></tr>"
+        for r in comparison(doc))
+    image = ""
+    if figures and doc["positions"]:
+        png = residual_figure(doc, raw_residuals)
+        (out / "calibration_residuals.png").write_bytes(png)
+        image = f'<img alt="residuals per position" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
+    page = (
+        "<!doctype html><html><head><meta charset='utf-8'><title>calibration</title><style>"
+        "body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #ccc;"
+        "padding:2px 6px;text-align:right}td:first-child,td:last-child{text-align:left}</style></head><body>"
+        "<h1>Multi-position calibration</h1><p>Units as in the term names (µg, ppm, arcsec, µg/g², °/h). "
+        "Truth: the injected errors as this schedule sees them (emulated trials); error / σ with an angle's σ "
+        "combined with the encoder resolution (1e-6°).</p>"
+        "<table><tr><th>term</th><th>estimate</th><th>1σ</th><th>truth</th><th>error / σ</th><th>unobservable</th>"
+        f"</tr>{rows}</table>{image}</body></html>\n")
+    path = out / "calibration.html"
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
+def _fmt(value) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    return f"{value:.4g}"
