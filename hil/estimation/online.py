@@ -31,6 +31,7 @@ from hil.estimation.apparent_gravity import (
 )
 from hil.estimation.convergence import BIAS_TOLERANCE, DRIFT_TOLERANCE, SolveTrack
 from hil.estimation.convergence import convergence_time as settled_from
+from hil.estimation.gimbal import attitude_matrices
 from hil.estimation.outlier_gate import accepted
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
@@ -219,7 +220,7 @@ class OnlineEstimator:
         series = np.unwrap(np.vstack((history, angles)), axis=0)
         mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
         n = len(series) - 1
-        c = self.geometry.attitude_matrix(np.vstack((series[1:], mid)))[0]
+        c = attitude_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
         c_end, c_mid = c[:n], c[n:]
         self._angle_history = series[-2:]
         return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0, c_end[1:]
