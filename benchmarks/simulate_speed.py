@@ -1,14 +1,20 @@
 """Speed of `hil simulate` on the 2019 paper's scenario and per-sample estimator cost beside filterpy.
 
-    .venv/bin/python benchmarks/simulate_speed.py            (filterpy is compared when installed:
+    PYTHONPATH=. .venv/bin/python benchmarks/simulate_speed.py   (filterpy is compared when installed:
                                                               pip install -e '.[bench]')
-Prints: emulation and estimation time for the 400 000 samples, samples/s, the whole command's wall
-time including start-up (with and without figures, and of ``hil --help``; best of 3 runs each), and the
-per-sample cost of the 12-state update.
+Prints: emulation and estimation time for the 400 000 samples, samples/s, the five functions the
+profile of the two spends most time in, the whole command's wall time including start-up (cold: the
+first run, compiling every module afresh; warm: best of 3; with and without figures), its peak RSS,
+the start-up time of ``hil --help``, and the per-sample cost of the 12-state update.
 """
 
 from __future__ import annotations
 
+import cProfile
+import io
+import os
+import pstats
+import resource
 import subprocess
 import sys
 import tempfile
@@ -42,22 +48,46 @@ def emulation_and_estimation() -> None:
     print(f"emulation + estimation          {t2 - t0:.3f} s   {n / (t2 - t0):,.0f} samples/s")
 
 
+def profile_top_five() -> None:
+    """The five functions with the most own time in emulation + estimation of the scenario."""
+    cfg = load_config(CONFIG)
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0 / cfg.estimator.solve_rate_hz)
+    profile = cProfile.Profile()
+    profile.enable()
+    for batch in sim.batches():
+        est.update_many(batch)
+    profile.disable()
+    text = io.StringIO()
+    pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(5)
+    rows = [line for line in text.getvalue().splitlines() if line.strip()[:1].isdigit() and "function calls" not in line]
+    print("profile, top five by own time (ncalls tottime percall cumtime percall function):")
+    for line in rows[:5]:
+        print(f"    {line.strip()}")
+
+
+def _run(*args: str, out: bool = False, env: dict[str, str] | None = None) -> float:
+    """Wall time of one run of ``hil ARGS`` as a subprocess; ``out``: with a fresh ``--out``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "hil.cli", *args, *(("--out", tmp) if out else ())], check=True,
+                       capture_output=True, env=env)  # fmt: skip
+        return time.perf_counter() - t0
+
+
 def _best_of_3(*args: str, out: bool = False) -> float:
-    """Best wall time of three runs of ``hil ARGS`` as a subprocess; ``out``: each with a fresh ``--out``."""
-    times = []
-    for _ in range(3):
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "hil.cli", *args, *(("--out", tmp) if out else ())], check=True,
-                           capture_output=True)  # fmt: skip
-            times.append(time.perf_counter() - t0)
-    return min(times)
+    return min(_run(*args, out=out) for _ in range(3))
 
 
 def whole_command() -> None:
-    print(f"hil simulate (start-up, figures) {_best_of_3('simulate', CONFIG, out=True):.3f} s   best of 3")
+    with tempfile.TemporaryDirectory() as cache:  # no compiled modules yet: every import compiles
+        cold = _run("simulate", CONFIG, out=True, env={**os.environ, "PYTHONPYCACHEPREFIX": cache})
+    print(f"hil simulate (start-up, figures) {cold:.3f} s   cold (first run, modules compiled afresh)")
+    print(f"hil simulate (start-up, figures) {_best_of_3('simulate', CONFIG, out=True):.3f} s   warm, best of 3")
     print(f"hil simulate --no-figures        {_best_of_3('simulate', CONFIG, '--no-figures', out=True):.3f} s"
-          "   best of 3")  # fmt: skip
+          "   warm, best of 3")  # fmt: skip
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # KiB on Linux
+    print(f"hil simulate peak RSS            {peak:.0f} MiB")
     print(f"hil --help                       {_best_of_3('--help'):.3f} s   best of 3")
 
 
@@ -99,5 +129,6 @@ def per_sample_cost() -> None:
 
 if __name__ == "__main__":
     emulation_and_estimation()
+    profile_top_five()
     whole_command()
     per_sample_cost()

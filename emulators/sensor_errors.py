@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 
 from hil.config import ImuErrors
 from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG
@@ -100,6 +99,9 @@ class BiasInstability:
 
     def __call__(self, n: int) -> np.ndarray:
         """The next n samples of the bias (n, columns), in the coefficients' unit."""
+        # scipy.signal here, not with the module: ~1 s of start-up for trials without a bias instability
+        from scipy import signal
+
         # Drawn sample-major, so that the stream does not depend on how the series is chunked.
         draws = self._rng.standard_normal((n,) + self._state.shape)
         total = np.zeros((self._state.shape[1], n))

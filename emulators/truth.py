@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from emulators.motion import MotionProfile, motion_breaks
+from hil.estimation.gimbal import attitude_matrices
 from hil.frames import Earth, TableGeometry, site_specific_force
 
 QUADRATURE_NODES = 3  # exact for polynomials of degree 5 over one sample interval
@@ -51,8 +52,9 @@ class Truth:
     def rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """omega_ib^b (rad/s) and f^b (m/s^2) at instants t, each (N, 3)."""
         angles, angle_rates = self.motion(np.asarray(t, dtype=float))
-        c_bn, middle_inner, inner = self.geometry.attitude_matrix(angles)
-        omega = self.geometry.body_rate_from(middle_inner, inner, angle_rates) + self.earth.omega_n @ c_bn
+        c_bn, middle_inner = attitude_matrices(self.geometry, angles)
+        # row 0 of Rx Ry is row 0 of Ry, all that body_rate_from takes of the inner rotation
+        omega = self.geometry.body_rate_from(middle_inner, middle_inner, angle_rates) + self.earth.omega_n @ c_bn
         return omega, self.f_n @ c_bn
 
     def increments(self, t_start: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

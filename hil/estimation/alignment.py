@@ -10,33 +10,53 @@ gravity part is free of the accelerometer bias (2019 Sec. IV).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hil.frames import Earth, euler_from_matrix
 
 
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u x v of two 3-vectors, as ``np.cross`` forms it (without its axis handling)."""
+    return np.array([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]])
+
+
 def dual_vector(v1_b: np.ndarray, v2_b: np.ndarray, v1_n: np.ndarray, v2_n: np.ndarray) -> np.ndarray:
     """C such that v_n = C v_b, from two non-collinear vector pairs (2014 eqs. 8-9), orthogonalised."""
 
     def triad(v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
-        c = np.cross(v1, v2)
-        return np.vstack((v1, c, np.cross(c, v1)))
+        c = _cross(v1, v2)
+        return np.vstack((v1, c, _cross(c, v1)))
 
     c = np.linalg.solve(triad(v1_b, v2_b), triad(v1_n, v2_n)).T
     u, _, vt = np.linalg.svd(c)
     return u @ vt  # the orthogonal polar factor, C (C^T C)^(-1/2)
 
 
-def alignment_matrix(apparent_gravity_0: np.ndarray, apparent_gravity_t: np.ndarray, t: float, earth: Earth) -> np.ndarray:
+@dataclass(frozen=True)
+class EarthTurn:
+    """What the alignment at time t needs of the earth's rotation since the start (formed once per solve)."""
+
+    f_n0_t: np.ndarray  # (3,) the specific force at rest at t, in n0
+    c_n0_n: np.ndarray  # (3, 3) C_n0^n(t)
+
+    @classmethod
+    def at(cls, t: float, earth: Earth) -> EarthTurn:
+        turn = earth.n_to_n0(t)
+        return cls(turn.apply(earth.f_n)[0], turn.inv().as_matrix()[0])
+
+
+def alignment_matrix(apparent_gravity_0: np.ndarray, apparent_gravity_t: np.ndarray, turn: EarthTurn,
+                     earth: Earth) -> np.ndarray:
     """C_ib0^n0 from the reconstructed apparent gravity at 0 and t (each (3,))."""
-    f_n0_t = earth.n_to_n0(t).apply(earth.f_n)[0]
-    return dual_vector(apparent_gravity_0, apparent_gravity_t, earth.f_n, f_n0_t)
+    return dual_vector(apparent_gravity_0, apparent_gravity_t, earth.f_n, turn.f_n0_t)
 
 
-def body_attitude(c_ib0_n0: np.ndarray, c_b_ib0: np.ndarray, t: float, earth: Earth) -> np.ndarray:
+def body_attitude(c_ib0_n0: np.ndarray, c_b_ib0: np.ndarray, turn: EarthTurn) -> np.ndarray:
     """C_b^n(t) = C_n0^n(t) C_ib0^n0 C_b^ib0(t)."""
-    return earth.n_to_n0(t).inv().as_matrix()[0] @ c_ib0_n0 @ c_b_ib0
+    return turn.c_n0_n @ c_ib0_n0 @ c_b_ib0
 
 
 def attitude_error(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:

@@ -30,9 +30,14 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, eigh
 
-from hil.estimation.normal_equations import NormalEquations, unit_diagonal
+from hil.estimation.normal_equations import (
+    NormalEquations,
+    cholesky,
+    cholesky_solve,
+    symmetric_eigenvalues,
+    unit_diagonal,
+)
 from hil.frames import EARTH_RATE
 
 N_GRAVITY = 9  # A11..A33
@@ -184,9 +189,9 @@ class ApparentGravityEstimator:
         rhs = rhs * scale
         observable = obs.full(n)
         if observable:
-            factor = cho_factor(scaled)
-            y = cho_solve(factor, rhs)
-            cov_scaled = cho_solve(factor, np.eye(n))
+            factor = cholesky(scaled)
+            y = cholesky_solve(factor, rhs)
+            cov_scaled = cholesky_solve(factor, np.eye(n))
         else:
             y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
             cov_scaled = np.full((n, n), np.nan)
@@ -235,7 +240,7 @@ class ApparentGravityEstimator:
         return info, rhs
 
     def _observability(self, scaled: np.ndarray) -> Observability:
-        eig = eigh(scaled, eigvals_only=True)
+        eig = symmetric_eigenvalues(scaled)
         top = max(float(eig[-1]), np.finfo(float).tiny)
         rank = int(np.sum(eig > self.rank_tolerance * top))
         condition = top / float(eig[0]) if eig[0] > 0 else float("inf")

@@ -13,9 +13,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from hil.estimation.alignment import (
+    EarthTurn,
     alignment_matrix,
     attitude_error,
     body_attitude,
@@ -31,6 +31,8 @@ from hil.estimation.apparent_gravity import (
 )
 from hil.estimation.convergence import BIAS_TOLERANCE, DRIFT_TOLERANCE, SolveTrack
 from hil.estimation.convergence import convergence_time as settled_from
+from hil.estimation.gimbal import attitude_matrices
+from hil.estimation.outlier_gate import accepted
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
 from hil.frames import Earth, TableGeometry, table_body_rotation
@@ -204,11 +206,7 @@ class OnlineEstimator:
         accept = np.ones(len(f_ib0), dtype=bool)
         if first < len(f_ib0):
             start = len(history) + first - OUTLIER_WINDOW
-            windows = sliding_window_view(series[start:-1], OUTLIER_WINDOW, axis=0)  # (M, 3, K)
-            centre = np.median(windows, axis=-1)
-            spread = 1.4826 * np.median(np.abs(windows - centre[..., None]), axis=-1)
-            limit = np.maximum(self.outlier_sigmas * spread, OUTLIER_FLOOR)
-            accept[first:] = np.all(np.abs(f_ib0[first:] - centre) <= limit, axis=1)
+            accept[first:] = accepted(series[start:], OUTLIER_WINDOW, self.outlier_sigmas, OUTLIER_FLOOR)
         self.outliers += int(len(accept) - accept.sum())
         return accept
 
@@ -222,7 +220,7 @@ class OnlineEstimator:
         series = np.unwrap(np.vstack((history, angles)), axis=0)
         mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
         n = len(series) - 1
-        c = self.geometry.attitude_matrix(np.vstack((series[1:], mid)))[0]
+        c = attitude_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
         c_end, c_mid = c[:n], c[n:]
         self._angle_history = series[-2:]
         return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0, c_end[1:]
@@ -235,10 +233,11 @@ class OnlineEstimator:
         errors: list[np.ndarray | None] = [None, None, None]
         reference = self._reference
         if reference is not None and t > 0:
+            turn = EarthTurn.at(t, self.earth)
             for k, solution in enumerate((gravity_only, full)):
                 vectors = solution.apparent_gravity(np.array([0.0, t]))
-                c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], t, self.earth)
-                errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, t, self.earth), reference)
+                c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], turn, self.earth)
+                errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, turn), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
         nan3 = np.full(3, np.nan)

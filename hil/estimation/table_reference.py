@@ -14,9 +14,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import eigh
 
-from hil.estimation.normal_equations import NormalEquations
+from hil.estimation.normal_equations import NormalEquations, symmetric_eigenvalues
 from hil.frames import skew
 
 
@@ -62,5 +61,5 @@ class TableReferenceEstimator:
 
     def _tilt_observable(self) -> bool:
         scaled, _ = self.normal.scaled(5)
-        eig = eigh(scaled, eigvals_only=True)
+        eig = symmetric_eigenvalues(scaled)
         return bool(eig[0] > self.rank_tolerance * eig[-1])
