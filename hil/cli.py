@@ -17,7 +17,6 @@ EXIT_CODES = """exit codes:
   3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
 
 
-
 def _config_path(text: str) -> Path:
     """:func:`hil.config.resolve_path`, imported when an argument is converted: ``--help`` needs no pydantic."""
     from hil.config import resolve_path
@@ -60,13 +59,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from hil.config import load_config
     from hil.trial.calibration_runner import run_calibration
-    from hil.trial.outcome import output_dir
 
-    cfg = load_config(args.config)
-    return _finish(args, *run_calibration(cfg, Path(args.config), output_dir(args.out, cfg), args.speed, _viewer(args),
-                                          args.quiet, figures=not args.no_figures))
+    cfg, out = _trial_config(args)
+    return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet,
+                                          figures=not args.no_figures))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:

@@ -52,7 +52,9 @@ def test_an_emulated_calibration_recovers_every_observable_term_within_three_sig
     errors = np.array([r["error_sigma"] for r in judged])
     assert np.all(np.abs(errors) < 4.0), [(r["term"], r["error_sigma"]) for r in judged]
     assert np.sqrt(np.mean(errors**2)) < 1.5  # and as a whole they are errors of the size their sigmas say
-    assert len(doc["positions"]) == 18 and all(799 <= p["samples"] <= 800 for p in doc["positions"])
+    # each window holds its dwell's 800 samples, less any the gates took out on a loaded machine
+    samples = [p["samples"] for p in doc["positions"]]
+    assert len(samples) == 18 and all(720 <= n <= 800 for n in samples), samples
     result = json.loads((out / "result.json").read_text())
     assert result["ended"] == "completed" and result["calibration"]["residual_max_ug"] < 30
     assert (out / "calibration.html").exists() and (out / "junit.xml").exists()
