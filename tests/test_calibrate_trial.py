@@ -38,7 +38,7 @@ def calibration_config(tmp_path, **calibration):
 
 
 @pytest.mark.slow
-def test_an_emulated_calibration_recovers_every_observable_term_within_three_sigma(tmp_path, capsys):
+def test_an_emulated_calibration_recovers_every_term_and_removes_the_bias_of_a_later_swing(tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["calibrate", str(calibration_config(tmp_path)), "--speed", "max", "--viewer", "none",
                  "--out", str(out), "--quiet", "--no-figures"])
@@ -60,6 +60,23 @@ def test_an_emulated_calibration_recovers_every_observable_term_within_three_sig
     assert (out / "calibration.html").exists() and (out / "junit.xml").exists()
     stats = json.loads((out / "emulator.json").read_text())
     assert stats["table_modes"] == "O,O,O"  # sent Off at the end
+    # the positions' specific force after the calibration matches gravity to the noise: 50 ug over each
+    # window's samples (and the accelerometers' share of the fit's own uncertainty)
+    residuals = np.array([p["residual_ug"] for p in doc["positions"]])
+    assert np.sqrt(np.mean(residuals**2)) < 3 * 50.0 / np.sqrt(720)
+    # round trip: the same IMU swung with its calibration applied has no bias left, within 4 sigma
+    swing = yaml.safe_load(Path("configs/emulated_swing.yaml").read_text())
+    swing["trial"]["duration_s"] = 300
+    swing["imu"]["errors"] = IMU_ERRORS
+    swing["imu"]["calibration"] = str(out / "calibration.json")
+    swing.pop("output", None)
+    (tmp_path / "swing.yaml").write_text(yaml.safe_dump(swing))
+    assert main(["simulate", str(tmp_path / "swing.yaml"), "--out", str(tmp_path / "swing"), "--no-figures"]) == 0
+    estimate = json.loads((tmp_path / "swing" / "result.json").read_text())["estimate"]
+    calibration_sigma = doc["sigma"]["accel"]["bias_ug"]  # the bias the calibration took out is uncertain too
+    for bias, sigma, cal in zip(estimate["accel_bias_ug"], estimate["accel_bias_sigma_ug"], calibration_sigma,
+                                strict=True):
+        assert abs(bias) < 4 * np.hypot(sigma, cal), (estimate["accel_bias_ug"], estimate["accel_bias_sigma_ug"])
 
 
 def test_a_schedule_outside_the_table_limits_is_refused_naming_the_position(tmp_path, capsys):
