@@ -1,7 +1,7 @@
 """The trial report: ``report.html`` beside result.json, readable offline, and ``junit.xml`` for CI.
 
-The page lists the trial's measurements (:mod:`hil.outputs.measurements`). Limits come from ``output.limits`` of the trial config (the copy ``config.yaml``
-in the output directory) unless given. The page is one self-contained file: the figures are
+The page lists the trial's measurements (:mod:`hil.outputs.measurements`). Limits come from
+``output.limits`` of the trial config (the copy ``config.yaml`` in the output directory) unless given. The page is one self-contained file: the figures are
 embedded as PNG data URIs, the style sheet is inline, nothing is fetched from anywhere.
 """
 
@@ -27,7 +27,7 @@ from hil.outputs.measurements import (
     measurements,
     overall,
 )
-from hil.outputs.noise import ALLAN_PNG, NOISE_JSON
+from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
@@ -86,8 +86,8 @@ def write_noise_report(out_dir: Path) -> Path:
     directory holds a trial's result.json, else a page of the noise section and allan.png alone."""
     if (out_dir / "result.json").exists():
         return write_report(out_dir)
-    figures = [(n, (out_dir / n).read_bytes()) for n in (ALLAN_PNG,) if (out_dir / n).exists()]
-    page = _page("Noise characterisation", "", _noise(out_dir) + "<h2>Figures</h2>" + _figure_html(figures))
+    figures = _figure_html(_figures(out_dir, None, {}))
+    page = _page("Noise characterisation", "", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     return path
@@ -127,7 +127,8 @@ def _history(series: dict[str, np.ndarray] | None) -> str:
     for frac in (0.1, 0.25, 0.5, 1.0):
         k = min(int(np.searchsorted(t, frac * t[-1])), len(t) - 1)
         cells = "".join(
-            f"<td>{format_value(float(series[f'bias_{a}_ug'][k]))} ± {format_value(float(series[f'sigma_{a}_ug'][k]))}</td>"
+            f"<td>{format_value(float(series[f'bias_{a}_ug'][k]))} ± "
+            f"{format_value(float(series[f'sigma_{a}_ug'][k]))}</td>"
             if np.isfinite(series[f"bias_{a}_ug"][k]) else "<td>not observable</td>"
             for a in "xyz"
         )  # fmt: skip

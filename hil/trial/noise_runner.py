@@ -31,24 +31,27 @@ class NoiseRecord:
 
     batch: AlignedBatch
     source: str  # "simulation", "recording" or "csv"
-    cfg: Config | None  # the trial's config (site, table), None for a CSV without --config
+    cfg: Config | None  # the trial's config (site, table): --config, else the recorded or simulated one
 
 
 def read_source(source: str | Path, config: str | Path | None = None) -> NoiseRecord:
     """The increments of ``source``: a config, a run directory or recording, or a CSV (with ``config`` for
     its site and table, needed when it moves)."""
     path = Path(source)
+    given = None if config is None else load_config(config)
     if path.is_dir() or path.suffix == ".mcap":
-        return NoiseRecord(_replayed(path), "recording", None if config is None else load_config(config))
+        batch, recorded = _replayed(path)
+        return NoiseRecord(batch, "recording", given or recorded)
     if path.suffix == ".csv":
-        return NoiseRecord(read_increments_csv(path), "csv", None if config is None else load_config(config))
+        return NoiseRecord(read_increments_csv(path), "csv", given)
     from emulators.simulation import Simulation
 
     cfg = load_config(resolve_path(path))
     return NoiseRecord(_concatenated(list(Simulation.from_config(cfg).batches())), "simulation", cfg)
 
 
-def _replayed(path: Path) -> AlignedBatch:
+def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
+    """The samples the estimator took in a replay of the recording, and the recorded config."""
     from hil.pipeline.processor import TrialProcessor
     from hil.recording.replay import open_recording
 
@@ -60,22 +63,14 @@ def _replayed(path: Path) -> AlignedBatch:
     processor.finish()
     if not runs:
         raise DataError(f"{path}: no IMU sample reached the estimator: nothing to analyse")
-    t, dtheta, dv, angles = (np.concatenate(column) for column in zip(*runs))
-    return AlignedBatch(t, dtheta, dv, None if np.isnan(angles).any() else angles, float(t[0] - (t[1] - t[0])))
+    t, dtheta, dv, angles = (np.concatenate(column) for column in zip(*runs))  # t: trial time
+    return AlignedBatch(t, dtheta, dv, None if np.isnan(angles).any() else angles), cfg
 
 
 def _concatenated(batches: list[AlignedBatch]) -> AlignedBatch:
     angles = None if any(b.angles is None for b in batches) else np.vstack([b.angles for b in batches])
     return AlignedBatch(np.concatenate([b.t for b in batches]), np.vstack([b.dtheta for b in batches]),
                         np.vstack([b.dv for b in batches]), angles, batches[0].t0)
-
-
-def _record_cfg(record: NoiseRecord, source: str | Path) -> Config | None:
-    if record.cfg is not None or record.source != "recording":
-        return record.cfg
-    from hil.recording.replay import open_recording
-
-    return open_recording(source)[1]
 
 
 def moving(batch: AlignedBatch, period: float) -> bool:
@@ -110,7 +105,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
         if batch.angles is None:
             raise TrialSetupError(f"{source}: the IMU moves and there are no table angles to take the motion out: "
                                   "the noise terms need a static trial, or the table's angles with the increments")
-        cfg = _record_cfg(record, source)
+        cfg = record.cfg
         if cfg is None:
             raise TrialSetupError(f"{source}: a moving trial's CSV needs --config for the site and the table geometry")
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)

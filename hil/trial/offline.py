@@ -15,7 +15,8 @@ from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
 
-def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions) -> tuple[TrialOutcome, Viewer | None]:
+def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
+               ) -> tuple[TrialOutcome, Viewer | None]:
     """A recording's chunks through the processing of the live run, in the same order."""
     from hil.recording.replay import open_recording, recording_path
 
@@ -52,10 +53,11 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
 
     sim = Simulation.from_config(cfg)
     viewer = open_viewer(options, cfg, out, blocking=True)
-    feed = ViewerFeed(viewer)
-    processor = TrialProcessor(cfg, on_snapshot=feed.on_snapshot, on_table=feed.on_table)
+    processor = TrialProcessor(cfg, on_table=ViewerFeed(viewer).on_table)
     for batch in sim.batches():
         processor.feed_batch(batch)
+    if viewer is not None and processor.estimator is not None:
+        viewer.log_snapshots(processor.estimator.snapshots)  # as columns, in one go
     return TrialOutcome.of(processor, cfg, config_text, out, truth=emulated_truth(cfg)), viewer
 
 

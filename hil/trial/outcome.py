@@ -31,7 +31,9 @@ def output_dir(out: str | Path | None, cfg: Config) -> Path:
     """``--out``, else ``output.dir``, else ``runs/NAME-TIME``."""
     if out:
         return Path(out)
-    return Path(cfg.output.dir) if cfg.output.dir else Path("runs") / f"{cfg.trial.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if cfg.output.dir:
+        return Path(cfg.output.dir)
+    return Path("runs") / f"{cfg.trial.name}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 @dataclass
