@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy import optimize, stats
 
 from hil.units import DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_SQRT_H, PER_SQRT_H, UG
 
@@ -144,6 +143,8 @@ def mixed_edf(parts: np.ndarray, edfs: np.ndarray) -> np.ndarray:
 
 def chi2_interval(avar: np.ndarray, nu: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided interval of a variance estimated with nu degrees of freedom (SP 1065 Eq. 68)."""
+    from scipy import stats  # here, not with the module: 0.5 s of start-up for every trial's report
+
     return (
         nu * avar / stats.chi2.ppf(0.5 + level / 2.0, nu),
         nu * avar / stats.chi2.ppf(0.5 - level / 2.0, nu),
@@ -168,6 +169,8 @@ def fit_terms(tau: np.ndarray, avar: np.ndarray, n_phase: int, m: np.ndarray) ->
     of each coefficient is bounded by sum_j |G_ij| sd_j, G the weighted pseudo-inverse and sd_j =
     AVAR_j sqrt(2 / nu_j): a bound that holds whatever the correlation between the overlapping estimates.
     """
+    from scipy import optimize  # here, not with the module: see chi2_interval
+
     design = np.column_stack([1.0 / tau, np.full_like(tau, FLICKER_FLOOR), tau / 3.0])
     edfs = np.column_stack([edf(noise, n_phase, m) for noise in NOISES])
     if not np.any(avar > 0.0):
