@@ -20,10 +20,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from emulators.motion import MotionProfile, motion_breaks
-from hil.estimation.gimbal import attitude_matrices
+from hil.estimation.gimbal import gimbal_matrices, row_times
 from hil.frames import Earth, TableGeometry, site_specific_force
 
 QUADRATURE_NODES = 3  # exact for polynomials of degree 5 over one sample interval
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
 
 
 @dataclass(frozen=True)
@@ -51,11 +52,19 @@ class Truth:
 
     def rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """omega_ib^b (rad/s) and f^b (m/s^2) at instants t, each (N, 3)."""
-        angles, angle_rates = self.motion(np.asarray(t, dtype=float))
-        c_bn, middle_inner = attitude_matrices(self.geometry, angles)
-        # row 0 of Rx Ry is row 0 of Ry, all that body_rate_from takes of the inner rotation
-        omega = self.geometry.body_rate_from(middle_inner, middle_inner, angle_rates) + self.earth.omega_n @ c_bn
-        return omega, self.f_n @ c_bn
+        omega, force = self._rates_and_forces(np.asarray(t, dtype=float))
+        return omega.T, force.T
+
+    def _rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`rates_and_forces`, component-major (3, N); the body rate as
+        :meth:`hil.frames.TableGeometry.body_rate_from` forms it."""
+        angles, angle_rates = self.motion(t)
+        c_bn, middle_inner = gimbal_matrices(self.geometry, angles)
+        rates = angle_rates.T
+        w_mount = middle_inner[2] * rates[0] + middle_inner[0] * rates[1]
+        w_mount[1] += rates[2]
+        omega = self.geometry.body_to_mount.as_matrix().T @ w_mount + row_times(self.earth.omega_n, c_bn)
+        return omega, row_times(self.f_n, c_bn)
 
     def increments(self, t_start: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ideal (dtheta, dv) over the intervals (t[k-1], t[k]], with t[-1] = t_start; each (N, 3)."""
@@ -65,13 +74,12 @@ class Truth:
         edges = np.union1d(ends, breaks) if len(breaks) else ends
         half = 0.5 * np.diff(edges)
         mid = 0.5 * (edges[1:] + edges[:-1])
-        nodes, weights = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
-        times = (mid[:, None] + half[:, None] * nodes[None, :]).ravel()
-        omega, force = self.rates_and_forces(times)
-        w = (half[:, None] * weights[None, :])[..., None]
+        times = (mid[:, None] + half[:, None] * _NODES[None, :]).ravel()
+        omega, force = self._rates_and_forces(times)
+        w = half[:, None] * _WEIGHTS[None, :]
         n = len(edges) - 1
-        dtheta = (omega.reshape(n, QUADRATURE_NODES, 3) * w).sum(axis=1)
-        dv = (force.reshape(n, QUADRATURE_NODES, 3) * w).sum(axis=1)
+        dtheta = (omega.reshape(3, n, QUADRATURE_NODES) * w).sum(axis=-1).T
+        dv = (force.reshape(3, n, QUADRATURE_NODES) * w).sum(axis=-1).T
         if len(breaks):  # sum the pieces of each split interval
             first = np.searchsorted(edges, ends[:-1])
             dtheta, dv = np.add.reduceat(dtheta, first), np.add.reduceat(dv, first)

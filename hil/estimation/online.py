@@ -31,7 +31,7 @@ from hil.estimation.apparent_gravity import (
 )
 from hil.estimation.convergence import BIAS_TOLERANCE, DRIFT_TOLERANCE, SolveTrack
 from hil.estimation.convergence import convergence_time as settled_from
-from hil.estimation.gimbal import attitude_matrices
+from hil.estimation.gimbal import as_stacked, gimbal_matrices
 from hil.estimation.outlier_gate import accepted
 from hil.estimation.strapdown import Strapdown
 from hil.estimation.table_reference import TableReferencedBias, TableReferenceEstimator
@@ -211,7 +211,8 @@ class OnlineEstimator:
         return accept
 
     def _table_attitudes(self, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """C_b^n over each interval (mean, by Simpson's rule) and at its end, from the latched angles.
+        """C_b^n over each interval (mean, by Simpson's rule; (3, 3, N) component-major) and at its end
+        ((N, 3, 3)), from the latched angles.
 
         The mid-interval angles come from the quadratic through the last three latched angles
         (weights -1/8, 3/4, 3/8).
@@ -220,10 +221,10 @@ class OnlineEstimator:
         series = np.unwrap(np.vstack((history, angles)), axis=0)
         mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
         n = len(series) - 1
-        c = attitude_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
-        c_end, c_mid = c[:n], c[n:]
+        c = gimbal_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
+        c_end, c_mid = c[..., :n], c[..., n:]
         self._angle_history = series[-2:]
-        return (c_end[:-1] + 4.0 * c_mid + c_end[1:]) / 6.0, c_end[1:]
+        return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, as_stacked(c_end[..., 1:])
 
     def _snapshot(self) -> Snapshot:
         drift = self.gravity.solve(N_DRIFT)

@@ -52,20 +52,34 @@ def cumulative_product(steps: np.ndarray) -> np.ndarray:
     return out
 
 
+def _rodrigues_factors(rotvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sin(a)/a`` and ``(1 - cos a)/a^2`` of (N, 3) rotation vectors, both from ``np.sinc`` (no loss at small a)."""
+    angle = np.sqrt(np.einsum("ni,ni->n", rotvec, rotvec))
+    return np.sinc(angle / np.pi), 0.5 * np.sinc(angle / (2.0 * np.pi)) ** 2
+
+
 def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
     """exp([phi x]) for (N, 3) rotation vectors (Rodrigues), (N, 3, 3).
 
-    ``I + sin(a)/a K + (1 - cos a)/a^2 K^2`` with both factors from ``np.sinc``, so small angles lose
-    no precision; equal to scipy's ``Rotation.from_rotvec(...).as_matrix()`` to rounding at a few
+    ``I + sin(a)/a K + (1 - cos a)/a^2 K^2`` with ``K^2 = phi phi^T - a^2 I`` written out element by
+    element; equal to scipy's ``Rotation.from_rotvec(...).as_matrix()`` to rounding at a few
     microseconds per call where scipy's input handling costs ~100 us for small batches.
     """
-    angle = np.sqrt(np.einsum("ni,ni->n", rotvec, rotvec))
-    a = np.sinc(angle / np.pi)  # sin(a)/a
-    b = 0.5 * np.sinc(angle / (2.0 * np.pi)) ** 2  # (1 - cos a)/a^2 = 2 sin^2(a/2)/a^2
+    a, b = _rodrigues_factors(rotvec)
     x, y, z = rotvec[:, 0], rotvec[:, 1], rotvec[:, 2]
-    zero = np.zeros_like(x)
-    k = np.stack((zero, -z, y, z, zero, -x, -y, x, zero), axis=-1).reshape(-1, 3, 3)
-    return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
+    ax, ay, az = a * x, a * y, a * z
+    bxy, bxz, byz = b * x * y, b * x * z, b * y * z
+    xx, yy, zz = x * x, y * y, z * z
+    return np.stack((1.0 - b * (yy + zz), bxy - az, bxz + ay,
+                     bxy + az, 1.0 - b * (xx + zz), byz - ax,
+                     bxz - ay, byz + ax, 1.0 - b * (xx + yy)), axis=-1).reshape(-1, 3, 3)
+
+
+def rotate(rotvec: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """exp([phi x]) v for (N, 3) rotation vectors and vectors: ``v + sin(a)/a phi x v + (1 - cos a)/a^2 phi x (phi x v)``."""
+    a, b = _rodrigues_factors(rotvec)
+    pv = cross(rotvec, v)
+    return v + a[:, None] * pv + b[:, None] * cross(rotvec, pv)
 
 
 def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -127,8 +141,9 @@ class Strapdown:
         alpha = a_th[:, None] * s + b_th[:, None] * s**2 / 2.0 + c_th[:, None] * s**3 / 3.0  # (N, 3 nodes, 3)
         force = a_v[:, None] + b_v[:, None] * s + c_v[:, None] * s**2
         n = len(dtheta)
-        rot = rotation_matrices(alpha.reshape(-1, 3)).reshape(n, 3, 3, 3)  # (N, node, 3, 3)
-        dv_body = np.einsum("nkij,nkj,k->ni", rot, force, WEIGHTS)
+        nodes = alpha.reshape(-1, 3)
+        rot = rotation_matrices(nodes).reshape(n, 3, 3, 3)  # (N, node, 3, 3)
+        dv_body = np.einsum("nki,k->ni", rotate(nodes, force.reshape(-1, 3)).reshape(n, 3, 3), WEIGHTS)
         r_mean = np.einsum("nkij,k->nij", rot, WEIGHTS)
 
         # Re-orthonormalise the carried attitude so rounding cannot build up over a long trial.

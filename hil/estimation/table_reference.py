@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hil.estimation.gimbal import row_times
 from hil.estimation.normal_equations import NormalEquations, symmetric_eigenvalues
 from hil.frames import skew
 
@@ -38,12 +39,14 @@ class TableReferenceEstimator:
     def update_segments(self, f_b: np.ndarray, c_bn_mean: np.ndarray, stops: Sequence[int],
                         accept: np.ndarray | None = None) -> Iterator[int]:
         """Add N measured mean specific forces (N, 3) with the mean table attitude C_b^n over each interval
-        (N, 3, 3), yielding after the samples up to each stop are in; ``accept`` False leaves a sample out."""
-        c_nb = np.swapaxes(c_bn_mean, 1, 2)
-        z = f_b - c_nb @ self.f_n
+        ((3, 3, N), component-major: :mod:`hil.estimation.gimbal`), yielding after the samples up to each
+        stop are in; ``accept`` False leaves a sample out."""
+        z = f_b - row_times(self.f_n, c_bn_mean).T  # C_n^b f^n
+        tilt = skew(self.f_n)
         h = np.zeros((len(z), 3, 5))
         h[:, :, :3] = np.eye(3)
-        h[:, :, 3:] = (c_nb @ skew(self.f_n))[:, :, :2]
+        for j in range(2):  # (C_n^b [f^n x])[:, j] = C^T column j
+            h[:, :, 3 + j] = row_times(tilt[:, j], c_bn_mean).T
         yield from self.normal.add_segments(h, z, stops, accept)
 
     def solve(self) -> TableReferencedBias:
