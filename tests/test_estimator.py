@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hil.estimation.alignment import attitude_error, dual_vector, theoretical_error
+from hil.estimation.alignment import EarthTurn, attitude_error, dual_vector, theoretical_error
 from hil.estimation.apparent_gravity import ApparentGravityEstimator
 from hil.estimation.strapdown import cumulative_product
-from hil.frames import EARTH_RATE, TableGeometry, euler_rotation
+from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_rotation
 from hil.samples import AlignedBatch
 from hil.units import DEG, UG
 from tests.conftest import PAPER_ERRORS, make_config, run_estimator
@@ -206,3 +206,12 @@ def test_snapshot_history_stays_bounded_and_keeps_the_latest():
     times = [s.t for s in est.snapshots]
     assert len(times) <= 16 and times[-1] == pytest.approx(100.0) and times == sorted(times)
     assert times[0] == pytest.approx(1.0)  # the start of the trial is kept, at a coarser spacing
+
+
+def test_earth_turn_is_the_earth_rotation_since_the_start():
+    """EarthTurn.at against scipy's rotation about the earth axis (frames.Earth.n_to_n0)."""
+    earth = Earth.from_degrees(34.2, 400.0)
+    turn = EarthTurn.at(5400.0, earth)
+    c_n_n0 = earth.n_to_n0(5400.0).as_matrix()[0]
+    np.testing.assert_allclose(turn.c_n0_n, c_n_n0.T, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(turn.f_n0_t, c_n_n0 @ earth.f_n, rtol=0, atol=1e-14)

@@ -13,8 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from hil.estimation.strapdown import rotation_matrices
 from hil.frames import Earth, euler_from_matrix
 
 
@@ -44,8 +44,8 @@ class EarthTurn:
 
     @classmethod
     def at(cls, t: float, earth: Earth) -> EarthTurn:
-        turn = earth.n_to_n0(t)
-        return cls(turn.apply(earth.f_n)[0], turn.inv().as_matrix()[0])
+        c_n_n0 = rotation_matrices((t * earth.omega_n)[None])[0]  # earth.n_to_n0(t), without scipy's input handling
+        return cls(c_n_n0 @ earth.f_n, c_n_n0.T)
 
 
 def alignment_matrix(apparent_gravity_0: np.ndarray, apparent_gravity_t: np.ndarray, turn: EarthTurn,
@@ -73,5 +73,5 @@ def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.nda
     """
     b_n = c_b_n @ bias_b
     phi = np.array([b_n[1] / g, -b_n[0] / g, 0.0])
-    tilted = Rotation.from_rotvec(phi).as_matrix() @ c_b_n
+    tilted = rotation_matrices(phi[None])[0] @ c_b_n
     return attitude_error(tilted, c_b_n)[:2]

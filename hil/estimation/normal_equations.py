@@ -92,24 +92,25 @@ class NormalEquations:
         for stop in stops:
             if stop > start:
                 hs, zs = h[start:stop], z[start:stop]
-                self.info[:n, :n] += np.einsum("nri,nrj->ij", hs, hs)
-                self.rhs[:n] += np.einsum("nri,nr->i", hs, zs)
-                self.zz += float(np.einsum("ni,ni->", zs, zs))
+                rows, values = hs.reshape(-1, n), zs.reshape(-1)  # the stacked rows: one BLAS product each
+                self.info[:n, :n] += rows.T @ rows
+                self.rhs[:n] += rows.T @ values
+                self.zz += float(values @ values)
                 if g is not None:
-                    self._add_border(hs, zs, g[start:stop])
+                    self._add_border(rows, values, g[start:stop])
                 self.samples += stop - start if accept is None else int(accept[start:stop].sum())
             start = stop
             yield stop
 
-    def _add_border(self, hs: np.ndarray, zs: np.ndarray, gs: np.ndarray) -> None:
+    def _add_border(self, rows_h: np.ndarray, values: np.ndarray, gs: np.ndarray) -> None:
         """The border sums ``H^T G``, ``G^T G``, ``G^T z`` as matrix products of the stacked rows."""
         n = self.n
-        rows_h, rows_g = hs.reshape(-1, n), gs.reshape(-1, gs.shape[-1])
+        rows_g = gs.reshape(-1, gs.shape[-1])
         cross = rows_h.T @ rows_g
         self.info[:n, n:] += cross
         self.info[n:, :n] += cross.T
         self.info[n:, n:] += rows_g.T @ rows_g
-        self.rhs[n:] += rows_g.T @ zs.reshape(-1)
+        self.rhs[n:] += rows_g.T @ values
 
     def scaled(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The leading n x n block scaled to unit diagonal, and the scale factors."""
