@@ -187,7 +187,8 @@ def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
     est = run_estimator(cfg, solve_period=1.0)
     n = est.solution().samples
     result = build_result("static", est, StreamCounts(n, n, n), {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"]})
-    assert result["estimate"]["gram_condition"] == math.inf  # not observable: a singular Gram matrix
+    assert result["estimate"]["observable"] is False  # static: a singular Gram matrix
+    result["estimate"]["gram_condition"] = math.inf  # what a Gram matrix with a zero eigenvalue reports
     result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
     write_trial_outputs(tmp_path, result, est.snapshots, ReportLimits(), figures=False)
     loaded = json.loads((tmp_path / "result.json").read_text(), parse_constant=_no_constant)
