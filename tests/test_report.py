@@ -17,7 +17,7 @@ from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES
 from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, measurements, overall
 from hil.outputs.report import ReportError, write_report
-from hil.outputs.result import build_result
+from hil.outputs.result import build_result, summary_text
 from hil.outputs.writer import write_trial_outputs
 from hil.samples import StreamCounts
 
@@ -199,3 +199,15 @@ def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
     outcomes = _outcomes(page)
     assert outcomes["gram_condition"] == NOT_JUDGED and outcomes["accel_bias_sigma_x"] == FAIL
     assert len(re.findall(r"src='data:image/png;base64,", page)) == len(FIGURES)
+
+
+@pytest.mark.parametrize("kind, observable", [("swing", True), ("static", False)])
+def test_the_summary_says_not_observable_only_when_it_is_not(tmp_path, kind, observable):
+    cfg = make_config(duration=120.0, rate=100.0, kind=kind, errors=PAPER_ERRORS)
+    est = run_estimator(cfg, solve_period=1.0)
+    n = est.solution().samples
+    result = build_result(kind, est, StreamCounts(n, n, n), None)
+    assert result["estimate"]["observable"] is observable
+    text = summary_text(result, tmp_path)
+    assert ("NOT observable" in text) is not observable
+    assert ("accelerometer bias (ug):" in text) is observable

@@ -136,12 +136,12 @@ def summary_text(result: dict, out: Path) -> str:
             drift = ", ".join(f"{k:.3f} +- {s:.3f}" for k, s in zip(est["accel_bias_drift_ug_per_h"],
                                                                     est["accel_bias_drift_sigma_ug_per_h"]))
             lines.append(f"  bias drift (ug/h): {drift}")
+    else:
+        lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
     check = est.get("drift_check")
     if check and check["significant"] and est.get("bias_model") != "drift":
         lines.append("  WARNING: the bias drifts (" + ", ".join(f"{k:.2f}" for k in check["drift_ug_per_h"])
                      + " ug/h, beyond 4 sigma): set estimator.bias_model: drift")
-    else:
-        lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
     table = result["table_reference"]["accel_bias_ug"]
     if table is not None:
         lines.append("  table-referenced bias (ug): " + ", ".join(f"{b:.3f}" for b in table))
