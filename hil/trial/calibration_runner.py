@@ -73,6 +73,7 @@ def _calibrate(cfg: Config, sequence, out: Path, figures: bool, is_emulated: boo
     from hil.outputs.calibration_report import (
         calibration_summary,
         observed_truth,
+        window_residuals,
         write_calibration_report,
     )
 
@@ -92,5 +93,5 @@ def _calibrate(cfg: Config, sequence, out: Path, figures: bool, is_emulated: boo
     if truth is not None:
         doc["truth"]["as_observed"] = observed_truth(truth, zero)
     write_calibration(out / "calibration.json", doc)
-    write_calibration_report(out, doc, accel.raw_residuals, figures)
+    write_calibration_report(out, doc, window_residuals(windows, accel, gyro, earth, geometry), figures)
     return calibration_summary(doc)
