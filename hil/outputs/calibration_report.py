@@ -23,7 +23,7 @@ import numpy as np
 from hil.config import ImuErrors
 from hil.estimation.accel_calibration import AccelCalibration
 from hil.estimation.calibration_model import TERMS, Fit, Window, fold_inner_rotation
-from hil.estimation.gyro_calibration import angular_rate_reference
+from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
 from hil.units import ARCSEC, DEG_PER_H, UG
@@ -96,7 +96,7 @@ def window_residuals(windows: Sequence[Window], accel: AccelCalibration, gyro: F
     calibration against the earth and gimbal rates at the encoder angles."""
     if gyro is None:
         return Residuals(accel.raw_residuals, accel.refined.residuals)
-    raw = np.array([w.angular_rate for w in windows]) - angular_rate_reference(windows, earth, geometry, np.zeros(3))
+    raw = raw_rate_residuals(windows, earth, geometry)
     return Residuals(accel.raw_residuals, accel.refined.residuals, raw, gyro.residuals)
 
 
