@@ -8,11 +8,9 @@ shipped one with ``--shipped-schedule``). Per term (calibration.json against ``t
 the fraction of seeds with |error| <= 3 sigma (an angle's sigma combined with the encoder resolution, as
 calibration.html), the worst |error| / sigma and the RMS of error / sigma; then the fraction over all
 terms and seeds (target >= 95 %; the exit code says whether it was met). A last run without the
-configured noise prints the worst relative errors with their sigmas: the live pipeline is not free of
-errors without it (float32 increments of the KVH 1750 format, the servo's residual motion in a dwell,
-the encoder's 1e-6 deg), and the terms only the earth rate gives (gyro bias, outer zero offset) stay off
-by about their reported sigma. The runs are not bit-reproducible: at ``--speed max`` the windows'
-sample counts depend on the machine's load.
+configured noise prints the worst relative errors with their sigmas (docs/calibration.md, Validation:
+on this short schedule the terms only the earth rate gives keep a small deterministic error there). The
+runs are not bit-reproducible: at ``--speed max`` the windows' sample counts depend on the machine's load.
 
     .venv/bin/python benchmarks/validate_calibration.py [--seeds 20] [--shipped-schedule]
 """
