@@ -74,6 +74,13 @@ def specific_force_reference(windows: Sequence[Window], earth: Earth, geometry: 
     return window_means(windows, zero_offsets, lambda angles, _: earth.f_n @ geometry.attitude_matrix(angles)[0])
 
 
+def raw_force_residuals(windows: Sequence[Window], earth: Earth, geometry: TableGeometry) -> np.ndarray:
+    """(N, 3) m/s^2: each window's specific force minus gravity at its encoder angles, the error-free model
+    with zero offsets zero (the residual before calibration)."""
+    y = np.array([w.specific_force for w in windows])
+    return y - specific_force_reference(windows, earth, geometry, np.zeros(3))
+
+
 def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: TableGeometry,
                              fit: Sequence[str] = ACCEL_GROUPS,
                              tolerance: float = DEFAULT_TOLERANCE) -> AccelCalibration:
@@ -104,8 +111,7 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
     coarse = vector_fit(np.zeros(len(TERMS)), [g for g in fit if g != "nonlinearity"])
     fine = _fine_stage(coarse, y, samples, earth.g, fit, tolerance)
     refined = vector_fit(fine.theta, fit)
-    raw = y - reference_at(np.zeros(3))
-    return AccelCalibration(coarse, fine, refined, earth.g, raw)
+    return AccelCalibration(coarse, fine, refined, earth.g, raw_force_residuals(static, earth, geometry))
 
 
 def _fine_stage(coarse: Fit, y: np.ndarray, samples: np.ndarray, gravity: float, fit: Sequence[str],

@@ -41,6 +41,13 @@ def angular_rate_reference(windows: Sequence[Window], earth: Earth, geometry: Ta
     return window_means(windows, zero_offsets, omega)
 
 
+def raw_rate_residuals(windows: Sequence[Window], earth: Earth, geometry: TableGeometry) -> np.ndarray:
+    """(N, 3) rad/s: each window's angular rate minus the earth and gimbal rates at its encoder angles, the
+    error-free model with zero offsets zero (the residual before calibration)."""
+    y = np.array([w.angular_rate for w in windows])
+    return y - angular_rate_reference(windows, earth, geometry, np.zeros(3))
+
+
 def calibrate_gyros(windows: Sequence[Window], earth: Earth, geometry: TableGeometry,
                     zero_offsets: Sequence[float] = (0.0, 0.0, 0.0), zero_offset_covariance: np.ndarray | None = None,
                     fit: Sequence[str] = GYRO_GROUPS, tolerance: float = DEFAULT_TOLERANCE) -> Fit:

@@ -14,14 +14,19 @@ import base64
 import html
 import io
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hil.config import ImuErrors
-from hil.estimation.calibration_model import TERMS, fold_inner_rotation
+from hil.estimation.accel_calibration import AccelCalibration
+from hil.estimation.calibration_model import TERMS, Fit, Window, fold_inner_rotation
+from hil.estimation.gyro_calibration import raw_rate_residuals
+from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
-from hil.units import ARCSEC, UG
+from hil.units import ARCSEC, DEG_PER_H, UG
 
 BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))
 ENCODER_RESOLUTION_ARCSEC = 1e-6 * 3600.0
@@ -73,26 +78,54 @@ def calibration_summary(doc: dict) -> dict:
             "worst_error_sigma": max(ratios) if ratios else None}
 
 
-def residual_figure(doc: dict, raw_residuals: np.ndarray) -> bytes:
-    """PNG: per-position specific-force residuals (ug) before (error-free model) and after calibration."""
+@dataclass(frozen=True)
+class Residuals:
+    """Per-window residuals before (error-free model, zero offsets zero) and after calibration (the fitted
+    model), SI: accelerometers (N_dwells, 3) m/s^2; gyros (N_windows, 3) rad/s over the dwells then the
+    plateaus, None without a gyro fit."""
+
+    accel_before: np.ndarray
+    accel_after: np.ndarray
+    gyro_before: np.ndarray | None = None
+    gyro_after: np.ndarray | None = None
+
+
+def window_residuals(windows: Sequence[Window], accel: AccelCalibration, gyro: Fit | None, earth: Earth,
+                     geometry: TableGeometry) -> Residuals:
+    """The :class:`Residuals` of a calibration: the accelerometers' from its stages, the gyros' before
+    calibration against the earth and gimbal rates at the encoder angles."""
+    if gyro is None:
+        return Residuals(accel.raw_residuals, accel.refined.residuals)
+    raw = raw_rate_residuals(windows, earth, geometry)
+    return Residuals(accel.raw_residuals, accel.refined.residuals, raw, gyro.residuals)
+
+
+def residual_figure(residuals: Residuals) -> bytes:
+    """PNG: per-position specific-force residuals (µg) before and after calibration, and the gyros' (°/h)
+    per window (positions, then plateaus P1..) when they were fitted."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    after = np.array([p["residual_ug"] for p in doc["positions"]], dtype=float)
-    before = np.asarray(raw_residuals) / UG
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    positions = np.arange(1, len(after) + 1)
-    for ax, values, title in ((axes[0], before, "before calibration"), (axes[1], after, "after calibration")):
-        for k, axis in enumerate("xyz"):
-            ax.bar(positions + (k - 1) * 0.27, values[:, k], width=0.27, label=axis)
-        ax.set_title(f"specific force residual per position, {title}")
-        ax.set_ylabel("µg")
-        ax.grid(alpha=0.3)
-    axes[0].legend()
-    axes[1].set_xlabel("position")
-    axes[1].set_xticks(positions)
+    panels = [("specific force", "µg", residuals.accel_before / UG, residuals.accel_after / UG)]
+    if residuals.gyro_before is not None:
+        panels.append(("angular rate", "°/h", residuals.gyro_before / DEG_PER_H, residuals.gyro_after / DEG_PER_H))
+    fig, axes = plt.subplots(2, len(panels), figsize=(9 * len(panels), 6), squeeze=False)
+    dwells = len(residuals.accel_before)
+    for column, (quantity, unit, before, after) in enumerate(panels):
+        windows = np.arange(1, len(before) + 1)
+        labels = [str(k) if k <= dwells else f"P{k - dwells}" for k in windows]
+        for row, (values, title) in enumerate(((before, "before calibration"), (after, "after calibration"))):
+            ax = axes[row, column]
+            for k, axis in enumerate("xyz"):
+                ax.bar(windows + (k - 1) * 0.27, values[:, k], width=0.27, label=axis)
+            ax.set_title(f"{quantity} residual per {'position' if column == 0 else 'window'}, {title}")
+            ax.set_ylabel(unit)
+            ax.set_xticks(windows, labels, fontsize=7)
+            ax.grid(alpha=0.3)
+        axes[0, column].legend()
+        axes[1, column].set_xlabel("position" if column == 0 else "position / plateau")
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
@@ -100,7 +133,7 @@ def residual_figure(doc: dict, raw_residuals: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_calibration_report(out: Path, doc: dict, raw_residuals: np.ndarray, figures: bool = True) -> Path:
+def write_calibration_report(out: Path, doc: dict, residuals: Residuals, figures: bool = True) -> Path:
     """``out/calibration.html`` (self-contained: the figure inline) and ``calibration_residuals.png``."""
     rows = "".join(
         f"<tr><td>{html.escape(r['term'])}</td><td>{_fmt(r['estimate'])}</td><td>{_fmt(r['sigma'])}</td>"
@@ -108,9 +141,12 @@ def write_calibration_report(out: Path, doc: dict, raw_residuals: np.ndarray, fi
         for r in comparison(doc))
     image = ""
     if figures and doc["positions"]:
-        png = residual_figure(doc, raw_residuals)
+        png = residual_figure(residuals)
         (out / "calibration_residuals.png").write_bytes(png)
-        image = f'<img alt="residuals per position" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
+        image = (f'<figure><img alt="residuals per position" style="max-width:100%" '
+                 f'src="data:image/png;base64,{base64.b64encode(png).decode()}"><figcaption>Residual of each '
+                 "window's mean output against its reference (gravity; the earth rate plus the table's rate) "
+                 "before calibration (the error-free model) and after it (the fitted model).</figcaption></figure>")
     page = (
         "<!doctype html><html><head><meta charset='utf-8'><title>calibration</title><style>"
         "body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #ccc;"

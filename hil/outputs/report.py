@@ -29,6 +29,7 @@ from hil.outputs.measurements import (
 )
 from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
+from hil.outputs.result import calibration_applied_text
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
 REPORT_NAME = "report.html"
@@ -180,6 +181,7 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
     name = e(str(trial.get("name", "trial")))
     body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 Accelerometer bias from swinging motion (Liu et al. 2019).</p>
+<p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
 <div class="verdict {verdict}">{verdict}</div>
 <p>{e(summary)}.</p>
 {"".join(f'<p class="note">{e(n)}</p>' for n in notes)}

@@ -150,5 +150,17 @@ def summary_text(result: dict, out: Path) -> str:
     m2 = result["alignment_deg"]["method2"]
     if m2:
         lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
+    if result.get("calibration_applied"):
+        lines.append(f"  {calibration_applied_text(result['calibration_applied'])}")
     lines.append(f"  outputs in {out}")
     return "\n".join(lines)
+
+
+def calibration_applied_text(applied: dict | None) -> str:
+    """One line: which calibration file (and its digest) and which terms were applied to the increments."""
+    if not applied:
+        return "no calibration applied (imu.calibration not set)"
+    blocks = "; ".join(f"{block} " + (", ".join(k.split("_")[0] for k in keys) or "none")
+                       for block, keys in applied["terms"].items())
+    nulls = f", {len(applied['null_terms'])} null terms not applied" if applied["null_terms"] else ""
+    return f"calibration applied: {applied['path']} (sha256 {applied['sha256'][:12]}): {blocks}{nulls}"

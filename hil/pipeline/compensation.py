@@ -4,11 +4,14 @@ else of the pipeline sees them (:func:`hil.estimation.calibration_model.compensa
 The file's ``accel`` and ``gyro`` blocks use the keys, order and signs of ``imu.errors``; a ``null`` term is
 not compensated. A file that cannot be applied raises :class:`CalibrationFileError` (a
 :class:`hil.config.ConfigError`) naming the key, the file and the reason, in one line.
+:attr:`Compensation.applied` says which file (path, SHA-256 of the bytes read) and which terms were applied:
+result.json's ``calibration_applied``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -37,8 +40,10 @@ class Compensation:
 
     def __init__(self, path: str | Path, period: float) -> None:
         self.path = str(path)
-        self.accel, self.gyro = load_calibration(path)
+        data, doc = _read(Path(path))
+        self.accel, self.gyro = _thetas(Path(path), doc)
         self.period = period
+        self.applied = {"path": self.path, "sha256": hashlib.sha256(data).hexdigest(), **applied_terms(doc)}
 
     def samples(self, samples: list[ImuSample]) -> list[ImuSample]:
         """Decoded IMU samples with compensated increments (one vectorised call a chunk)."""
@@ -62,15 +67,35 @@ def load_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
     Raises :class:`CalibrationFileError` naming the file, key and reason.
     """
-    path = Path(path)
+    return _thetas(Path(path), _read(Path(path))[1])
+
+
+def applied_terms(doc: dict) -> dict:
+    """``terms``: per block the keys with a value applied; ``null_terms``: ``block.key.index`` of the terms
+    left uncompensated (``null``), of a document :func:`load_calibration` accepts."""
+    terms: dict[str, list[str]] = {}
+    nulls: list[str] = []
+    for block, keys in (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS)):
+        terms[block] = [key for key, _, _ in keys if any(v is not None for v in doc[block][key])]
+        nulls += [f"{block}.{key}.{i}" for key, _, _ in keys for i, v in enumerate(doc[block][key]) if v is None]
+    return {"terms": terms, "null_terms": nulls}
+
+
+def _read(path: Path) -> tuple[bytes, dict]:
+    """The file's bytes and its JSON object."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        data = path.read_bytes()
+        doc = json.loads(data)
     except OSError as exc:
         raise CalibrationFileError(f"imu.calibration: {path}: cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CalibrationFileError(f"imu.calibration: {path}: not valid JSON: {exc}") from None
     if not isinstance(doc, dict):
         raise CalibrationFileError(f"imu.calibration: {path}: expected a JSON object at the top level")
+    return data, doc
+
+
+def _thetas(path: Path, doc: dict) -> tuple[np.ndarray, np.ndarray]:
     return tuple(_theta(path, doc, block, keys) for block, keys in (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS)))
 
 

@@ -9,6 +9,7 @@ last window is complete). The table is turned off on every way out (:mod:`hil.tr
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from hil.config import Config
@@ -29,6 +30,8 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
         schedule_duration,
         schedule_from_config,
     )
+    from hil.frames import Earth, TableGeometry
+    from hil.trial.calibration_feed import CalibrationFeed
     from hil.trial.calibration_sequence import CalibrationSequence
     from hil.trial.live_runner import emulated, run_live
 
@@ -45,16 +48,23 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
     duration = EMULATED_MARGIN * nominal + 60.0 if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
-    def commanded(control, cfg: Config) -> tuple[object, dict]:
+    def commanded(control, cfg: Config, viewer) -> tuple[object, dict]:
         control.client.apply_limits()
-        sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz)
+        views = {}
+        if viewer is not None:
+            feed = CalibrationFeed(viewer, list(schedule.dwells) + list(schedule.plateaus),
+                                   Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
+                                   TableGeometry.from_config(cfg.turntable))
+            views = {"on_step": feed.on_step, "on_window": feed.on_window}
+        sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz, **views)
         sequence.start()
         control.client.configure_sync(True)
         sequences.append(sequence)
         return sequence, {"on_samples": sequence.on_samples, "finished": lambda: sequence.done,
                           "queue_items": QUEUE_ITEMS}
 
-    outcome, viewer = run_live(cfg, config_path, out, duration, speed, viewer, quiet, commanded)
+    outcome, viewer = run_live(cfg, config_path, out, duration, speed, dataclasses.replace(viewer, layout="calibration"),
+                               quiet, commanded)
     sequence = sequences[0] if sequences else None
     if outcome.ended == COMPLETED and (sequence is None or not sequence.done):
         where = sequence.progress if sequence is not None else "not started"
@@ -73,6 +83,7 @@ def _calibrate(cfg: Config, sequence, out: Path, figures: bool, is_emulated: boo
     from hil.outputs.calibration_report import (
         calibration_summary,
         observed_truth,
+        window_residuals,
         write_calibration_report,
     )
 
@@ -92,5 +103,5 @@ def _calibrate(cfg: Config, sequence, out: Path, figures: bool, is_emulated: boo
     if truth is not None:
         doc["truth"]["as_observed"] = observed_truth(truth, zero)
     write_calibration(out / "calibration.json", doc)
-    write_calibration_report(out, doc, accel.raw_residuals, figures)
+    write_calibration_report(out, doc, window_residuals(windows, accel, gyro, earth, geometry), figures)
     return calibration_summary(doc)

@@ -13,11 +13,16 @@ The increments come separately (the processor's ``on_samples``) and are kept; :m
 calibration windows from them at the end: the encoder angles of each IMU interval are its midpoint's,
 the mean of the readings at its two ends (across the +-180 deg seam), and a plateau's rate is the
 encoder's turn over the window's intervals divided by their length.
+
+For the live views: ``on_step(t, index)`` is called when a step is commanded (trial time t of the reading
+that closed the previous one, 0 for the first), ``on_window(t, index, window)`` once a closed window's
+samples have all arrived (t its end; the window as :meth:`windows` will cut it).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,12 +51,18 @@ class StepWindow:
 class CalibrationSequence:
     """Commands the schedule through ``client`` (a :class:`drivers.table_client.TableCommandClient`) and
     finds each step's window; :attr:`done` once every step has its window, :attr:`failure` says what
-    went wrong. ``sample_period`` is the IMU's interval (s)."""
+    went wrong. ``sample_period`` is the IMU's interval (s); ``on_step`` and ``on_window`` as in the module
+    docstring."""
 
-    def __init__(self, schedule: Schedule, client, sample_period: float) -> None:
+    def __init__(self, schedule: Schedule, client, sample_period: float,
+                 on_step: Callable[[float, int], None] | None = None,
+                 on_window: Callable[[float, int, Window], None] | None = None) -> None:
         self.steps: list[Dwell | Plateau] = list(schedule.dwells) + list(schedule.plateaus)
         self.client = client
         self.period = sample_period
+        self.on_step = on_step
+        self.on_window = on_window
+        self._reported = 0  # windows handed to on_window
         self.windows_found: list[StepWindow] = []
         self.failure: str | None = None
         self._index = -1
@@ -74,11 +85,24 @@ class CalibrationSequence:
 
     def start(self) -> None:
         """Command the first step."""
-        self._next()
+        self._next(0.0)
 
     def on_samples(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
-        """Aligned samples the estimator took (the processor's ``on_samples``), kept for :meth:`windows`."""
+        """Aligned samples the estimator took (the processor's ``on_samples``), kept for :meth:`windows`;
+        a closed window whose samples have all arrived goes to ``on_window``."""
         self._samples.append((t, dtheta, dv, angles))
+        if self.on_window is None or self._reported == len(self.windows_found) or len(t) == 0:
+            return
+        if t[-1] >= self.windows_found[self._reported].end:
+            samples = self._joined()
+            while self._reported < len(self.windows_found) and t[-1] >= self.windows_found[self._reported].end:
+                try:
+                    window = self._cut(self.windows_found[self._reported], *samples)
+                except ValueError:  # an empty window: :meth:`windows` says so at the end; the views go without it
+                    window = None
+                if window is not None:
+                    self.on_window(self.windows_found[self._reported].end, self._reported, window)
+                self._reported += 1
 
     def add(self, t: np.ndarray, angles: np.ndarray) -> None:
         """Reported gimbal angles (N, 3) rad at trial times t (N,) s: advance through the schedule."""
@@ -146,9 +170,9 @@ class CalibrationSequence:
             self.failure = f"calibration {self._name()}: the window is empty"
             return
         self.windows_found.append(StepWindow(step, self._window_start, end))
-        self._next()
+        self._next(end)
 
-    def _next(self) -> None:
+    def _next(self, t: float) -> None:
         self._index += 1
         self._phase, self._since = "moving", None
         if self.done:
@@ -157,6 +181,8 @@ class CalibrationSequence:
         for k, gimbal in enumerate(GIMBAL_AXES):
             self.client.demand_position(gimbal, step.angles[k] / DEG)
             self.client.set_mode(gimbal, "Position")
+        if self.on_step is not None:
+            self.on_step(t, self._index)
 
     def _name(self) -> str:
         step = self.steps[self._index]
@@ -169,24 +195,31 @@ class CalibrationSequence:
         intervals lie inside the window and follow their predecessor without a gap."""
         if not self._samples:
             return []
+        samples = self._joined()
+        return [self._cut(found, *samples) for found in self.windows_found]
+
+    def _joined(self) -> tuple[np.ndarray, ...]:
+        """The samples kept as (t, dtheta, dv, angles, contiguous): contiguous marks a sample that follows
+        its predecessor one period later, both with angles."""
         t, dtheta, dv, angles = (np.concatenate(parts) for parts in zip(*self._samples))
         contiguous = np.concatenate(([False], np.abs(np.diff(t) - self.period) < 0.25 * self.period))
         contiguous &= np.all(np.isfinite(angles), axis=1) & np.concatenate(([False], np.all(np.isfinite(angles[:-1]),
                                                                                              axis=1)))
-        out = []
-        for found in self.windows_found:
-            sel = np.flatnonzero(contiguous & (t - self.period >= found.start - 1e-9) & (t <= found.end + 1e-9))
-            if len(sel) == 0:
-                raise ValueError(f"calibration window {found.start:.2f}..{found.end:.2f} s holds no samples")
-            turn = _wrap(angles[sel] - angles[sel - 1])  # each interval's encoder turn
-            rates = np.zeros(3)
-            if isinstance(found.step, Plateau):
-                axis = found.step.axis
-                rates[axis] = np.sum(turn[:, axis]) / (len(sel) * self.period)
-            mid = angles[sel] - 0.5 * turn
-            dt = np.full(len(sel), self.period)
-            out.append(window_from_samples(dtheta[sel], dv[sel], dt, mid, rates))
-        return out
+        return t, dtheta, dv, angles, contiguous
+
+    def _cut(self, found: StepWindow, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray,
+             contiguous: np.ndarray) -> Window:
+        sel = np.flatnonzero(contiguous & (t - self.period >= found.start - 1e-9) & (t <= found.end + 1e-9))
+        if len(sel) == 0:
+            raise ValueError(f"calibration window {found.start:.2f}..{found.end:.2f} s holds no samples")
+        turn = _wrap(angles[sel] - angles[sel - 1])  # each interval's encoder turn
+        rates = np.zeros(3)
+        if isinstance(found.step, Plateau):
+            axis = found.step.axis
+            rates[axis] = np.sum(turn[:, axis]) / (len(sel) * self.period)
+        mid = angles[sel] - 0.5 * turn
+        dt = np.full(len(sel), self.period)
+        return window_from_samples(dtheta[sel], dv[sel], dt, mid, rates)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:

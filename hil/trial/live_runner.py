@@ -21,9 +21,10 @@ def emulated(cfg: Config) -> bool:
     return sources == {"emulator"}
 
 
-# Given the open table control and the config, starts the table and returns what watches it (``motion_check``) and
-# further LiveTrial arguments; the default arms ``turntable.motion`` and checks it (:class:`MotionCheck`).
-Commanded = Callable[[object, Config], tuple[object, dict]]
+# Given the open table control, the config and the viewer (or None), starts the table and returns what watches it
+# (``motion_check``) and further LiveTrial arguments; the default arms ``turntable.motion`` and checks it
+# (:class:`MotionCheck`).
+Commanded = Callable[[object, Config, object], tuple[object, dict]]
 
 
 def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
@@ -77,7 +78,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
             if command_url is not None:
                 control = TableControl(command_url, cfg.turntable)
                 control.open()
-                check, extra = commanded(control, cfg)
+                check, extra = commanded(control, cfg, viewer)
             trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
                               motion_check=check, on_progress=progress.update, stop_requested=stop_requested,
                               on_end=control.stop if control is not None else None,
@@ -97,7 +98,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
             stop_emulator(emulator)
 
 
-def _arm(control, cfg: Config) -> tuple[object, dict]:
+def _arm(control, cfg: Config, viewer) -> tuple[object, dict]:
     """``hil run``: the configured motion, checked against what the table reports."""
     from hil.trial.table_control import MotionCheck
 

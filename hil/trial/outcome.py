@@ -53,9 +53,12 @@ class TrialOutcome:
     @classmethod
     def of(cls, processor: TrialProcessor, cfg: Config, config_text: str, out: Path, ended: str = COMPLETED,
            truth: dict | None = None) -> TrialOutcome:
-        """The outcome of a finished processor; ``ended`` says how the trial ended."""
+        """The outcome of a finished processor; ``ended`` says how the trial ended, ``calibration_applied``
+        which ``imu.calibration`` file and terms the processor applied (null: none)."""
         result = trial_result(cfg.trial.name, processor.estimator, processor.streams(), truth, cfg.estimator.bias_model)
-        result = {"trial": result["trial"], "ended": ended, **{k: v for k, v in result.items() if k != "trial"}}
+        applied = processor.compensation.applied if processor.compensation is not None else None
+        result = {"trial": result["trial"], "ended": ended, "calibration_applied": applied,
+                  **{k: v for k, v in result.items() if k != "trial"}}
         snapshots = processor.estimator.snapshots if processor.estimator is not None else []
         return cls(cfg, config_text, out, result, snapshots)
 

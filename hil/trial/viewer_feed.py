@@ -32,16 +32,20 @@ class Viewer(Protocol):
     def log_snapshots(self, snaps: list[Snapshot]) -> None: ...
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
     def log_health(self, t: float, health: Health) -> None: ...
+    def log_calibration_step(self, t: float, index: int, steps: list) -> None: ...
+    def log_calibration_window(self, t: float, accel_ug: np.ndarray | None, gyro_dph: np.ndarray) -> None: ...
     def close(self) -> None: ...
     def stop(self) -> None: ...
 
 
 @dataclass(frozen=True)
 class ViewerOptions:
-    """``--viewer`` and ``--bind``."""
+    """``--viewer`` and ``--bind``; ``layout`` the blueprint: ``trial``, or ``calibration`` (the trial's views
+    and the calibration's, :mod:`hil.viewer.calibration_view`)."""
 
     mode: str = "none"
     bind: str = "127.0.0.1"
+    layout: str = "trial"
 
 
 def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) -> Viewer | None:
@@ -58,7 +62,8 @@ def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) 
         viewer = TrialViewer(options.mode, out, geometry=TableGeometry.from_config(cfg.turntable),
                              truth_bias=None if truth is None else np.array(truth["accel_bias_ug"]) * UG,
                              truth_drift=None if truth is None else np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR,
-                             bind=options.bind, recording_name=cfg.trial.name, blocking=blocking)
+                             bind=options.bind, recording_name=cfg.trial.name, blocking=blocking,
+                             layout=options.layout)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:

@@ -28,8 +28,9 @@ def band_color(axis: str) -> tuple[int, int, int]:
     return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in AXIS_COLORS[axis])
 
 
-def default_blueprint() -> rrb.Blueprint:
-    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and stream health."""
+def default_blueprint(extra: rrb.Container | None = None) -> rrb.Blueprint:
+    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and stream health
+    [| ``extra``, a further column]."""
     bias = [
         rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg)", plot_legend=rrb.PlotLegend(visible=a == "x"))
         for a in AXES
@@ -61,7 +62,8 @@ def default_blueprint() -> rrb.Blueprint:
                 health,
                 row_shares=[3, 2],
             ),
-            column_shares=[1, 1, 1],
+            *([extra] if extra is not None else []),
+            column_shares=[1, 1, 1] + ([1] if extra is not None else []),
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

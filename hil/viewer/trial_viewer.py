@@ -39,6 +39,7 @@ from hil.viewer.blueprint import (
     default_blueprint,
     log_series_styles,
 )
+from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.modes import VIEWER_MODES
 from hil.viewer.rerun_process import start_viewer, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
@@ -69,6 +70,7 @@ class TrialViewer:
         blocking: bool = False,
         telemetry: bool | None = None,
         table_rate_hz: float = TABLE_RATE_HZ,
+        layout: str = "trial",
     ) -> None:
         if mode not in VIEWER_MODES:
             raise ValueError(f"viewer mode {mode!r}: choose one of {', '.join(VIEWER_MODES)}")
@@ -90,6 +92,7 @@ class TrialViewer:
         self._next_table_tick = -np.inf
         self._next_cone_t = 0.0
         self._ib0_logged = False
+        self._calibration: CalibrationLog | None = None
         if mode == "none":
             self._rec = None
             return
@@ -97,7 +100,7 @@ class TrialViewer:
         self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         rr.set_log_time_enabled(False, recording=self._rec)
         rr.set_log_tick_enabled(False, recording=self._rec)
-        blueprint = default_blueprint()
+        blueprint = default_blueprint(calibration_views() if layout == "calibration" else None)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
         if mode == "save":
@@ -150,6 +153,19 @@ class TrialViewer:
         rows = [(stream, metric, float(value)) for stream, metrics in health.items() for metric, value in metrics.items()
                 if value is not None]  # fmt: skip
         self._submit(lambda: self._write_health(float(t), rows))
+
+    def log_calibration_step(self, t: float, index: int, steps: list) -> None:
+        """Calibration step ``index`` (0-based) of ``steps`` (dwells and plateaus) commanded at trial time t
+        (:mod:`hil.viewer.calibration_view`)."""
+        steps = list(steps)
+        self._submit(lambda: self._write_calibration(steps).step(float(t), index))
+
+    def log_calibration_window(self, t: float, accel_ug: np.ndarray | None, gyro_dph: np.ndarray) -> None:
+        """A calibration window's residuals before calibration at its end t: the accelerometers' (µg, a dwell;
+        None for a plateau) and the gyros' (°/h)."""
+        accel = None if accel_ug is None else np.array(accel_ug, dtype=float)
+        gyro = np.array(gyro_dph, dtype=float)
+        self._submit(lambda: self._calibration is not None and self._calibration.window(float(t), accel, gyro))
 
     def close(self) -> None:
         """Log what is queued, flush and finish the .rrd. A spawned viewer keeps running; a served one
@@ -279,6 +295,11 @@ class TrialViewer:
                 self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
                                        columns=rr.Transform3D.columns(quaternion=q))  # fmt: skip
         self._scalars("table/angles_deg", t, angles / DEG)
+
+    def _write_calibration(self, steps: list) -> CalibrationLog:
+        if self._calibration is None:
+            self._calibration = CalibrationLog(self._rec, self.geometry, steps)
+        return self._calibration
 
     def _write_health(self, t: float, rows: list[tuple[str, str, float]]) -> None:
         by_metric: dict[str, dict[str, float]] = {}
