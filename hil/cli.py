@@ -96,6 +96,13 @@ def cmd_noise(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from hil.campaign.runner import run_campaign
+
+    out = Path(args.out) if args.out else Path("runs") / f"campaign-{Path(args.spec).stem}"
+    return run_campaign(args.spec, out, args.scheduler, args.workers, args.resume)
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from hil.outputs.report import write_report
 
@@ -196,6 +203,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip allan.png")
     p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
     p.set_defaults(func=cmd_noise)
+
+    p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
+                                        "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
+    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, sweep: {dotted.key: [values]}}")
+    p.add_argument("--scheduler", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
+                                       "127.0.0.1)")
+    p.add_argument("--workers", type=int, help="LocalCluster: worker processes (default: one a core); --scheduler: "
+                                               "wait for this many")
+    p.add_argument("--out", help="output directory (default: runs/campaign-SPEC)")
+    p.add_argument("--resume", action="store_true", help="go on with OUT/runs.parquet: skip the runs done there")
+    p.set_defaults(func=cmd_campaign)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
     _config_argument(p)
