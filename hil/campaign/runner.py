@@ -112,5 +112,5 @@ def summary_text(summary: dict[str, Any], out: Path) -> str:
                          f"{p['ratio_band'][1]:.3f}), NEES {p['nees_mean']:.3f} (band {p['nees_band'][0]:.3f}-"
                          f"{p['nees_band'][1]:.3f})")
         else:
-            lines.append(f"  {values}: {p['runs'] - p['failed']} runs with an estimate: too few for statistics")
+            lines.append(f"  {values}: {p['with_estimate']} runs with an estimate: too few for statistics")
     return "\n".join(lines)

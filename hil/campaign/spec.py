@@ -125,11 +125,15 @@ def point_label(values: dict[str, Any]) -> str:
 
 
 def _check_point(config: dict, label: str, source: str) -> None:
-    """The trial config of a point, as ``hil simulate`` would take it; ConfigError names the point."""
+    """The trial config of a point, checked as ``hil simulate`` sets it up (the emulator and the processor,
+    with ``imu.calibration`` read); a ConfigError names the point."""
     from emulators.simulation import Simulation
+    from hil.pipeline.processor import TrialProcessor
 
     try:
-        Simulation.from_config(parse_config(config, source))
+        cfg = parse_config(config, source)
+        Simulation.from_config(cfg)
+        TrialProcessor(cfg)
     except ConfigError as exc:
         raise SpecError(f"{source}: sweep point {label}: {str(exc).removeprefix(source + ': ')}") from None
 

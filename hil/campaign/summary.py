@@ -62,7 +62,7 @@ def bias_error(row: dict[str, Any]) -> np.ndarray | None:
 def consistency(errors: np.ndarray, sigmas: np.ndarray) -> dict[str, Any]:
     """The statistics of M runs' errors (M, 3) against their reported sigmas (M, 3), both in µg."""
     m = len(errors)
-    out: dict[str, Any] = {"runs": m, "error_mean_ug": errors.mean(axis=0).tolist(),
+    out: dict[str, Any] = {"with_estimate": m, "error_mean_ug": errors.mean(axis=0).tolist(),
                            "sigma_mean_ug": sigmas.mean(axis=0).tolist()}
     if m < 2:
         return out
@@ -81,8 +81,7 @@ def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]
     """The summary of one sweep point's rows."""
     done = [(e, row) for row in rows if (e := bias_error(row)) is not None]
     out: dict[str, Any] = {"point": point, "values": values, "runs": len(rows),
-                           "failed": sum(row.get(ERROR) is not None for row in rows),
-                           "without_estimate": sum(row.get(ERROR) is None for row in rows) - len(done)}
+                           "failed": sum(row.get(ERROR) is not None for row in rows), "with_estimate": len(done)}
     if done:
         errors = np.array([e for e, _ in done])
         sigmas = np.array([_vector(row, SIGMA) for _, row in done], dtype=float)
