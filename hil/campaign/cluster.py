@@ -14,6 +14,9 @@ from hil.config import InputError
 LOOPBACK = "127.0.0.1"
 CONNECT_TIMEOUT_S = 20.0
 WORKERS_TIMEOUT_S = 120.0  # an existing cluster: how long to wait for --workers N to join
+# the workers' statistical profiler samples every thread's stack every 10 ms: on a short numpy-bound run it
+# doubles the run's time (benchmarks/campaign_speed.py); a LocalCluster's workers go without it
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 
 
 class ClusterError(InputError, ValueError):
@@ -39,14 +42,16 @@ def default_workers() -> int:
 def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[tuple[object, ClusterInfo]]:
     """A connected ``distributed.Client`` and what it runs on; a LocalCluster of ``workers`` processes
     (default: :func:`default_workers`) unless ``scheduler`` names one, whose ``workers`` are waited for."""
+    import dask
     from distributed import Client, LocalCluster
 
     if workers is not None and workers < 1:
         raise ClusterError(f"--workers: expected at least 1, got {workers}")
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                               host=LOOPBACK, scheduler_port=0, dashboard_address=f"{LOOPBACK}:0",
-                               worker_dashboard_address=None, silence_logs=logging.WARNING)
+        with dask.config.set(WORKER_CONFIG):  # the nannies hand their config to the worker processes
+            cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                                   host=LOOPBACK, scheduler_port=0, dashboard_address=f"{LOOPBACK}:0",
+                                   worker_dashboard_address=None, silence_logs=logging.WARNING)
         try:
             with Client(cluster) as client:
                 yield client, _info(client)
