@@ -21,6 +21,12 @@ REPORT_NAME = "campaign.html"
 AXES = "xyz"
 
 
+def _labels(points: list[dict]) -> list[str]:
+    """Short point labels for the figures: the keys that vary across the points, by their last part."""
+    varying = [k for k in points[0]["values"] if len({repr(p["values"][k]) for p in points}) > 1] if points else []
+    return [", ".join(f"{k.rsplit('.', 1)[-1]}={p['values'][k]}" for k in varying) or "all runs" for p in points]
+
+
 def _png(fig) -> bytes:
     import matplotlib.pyplot as plt
 
@@ -44,12 +50,11 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
     fig, axes = plt.subplots(1, 3, figsize=(10, 3.4), sharey=True)
     grid = np.linspace(-4.0, 4.0, 161)
     for k, ax in enumerate(axes):
-        for p in summary["points"]:
+        for p, label in zip(summary["points"], _labels(summary["points"])):
             z = _normalised(rows, p["point"])[:, k]
             z = z[np.isfinite(z)]
             if z.size:
-                ax.hist(z, bins=np.linspace(-4.0, 4.0, 25), density=True, histtype="step",
-                        label=point_label(p["values"]))
+                ax.hist(z, bins=np.linspace(-4.0, 4.0, 25), density=True, histtype="step", label=label)
         ax.plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", label="N(0, 1)")
         ax.set_xlabel(f"error {AXES[k]} / reported sigma")
     axes[0].set_ylabel("density")
@@ -70,7 +75,7 @@ def _ratios(summary: dict, plt) -> bytes:
     for k in range(3):
         ax.plot(x + (k - 1) * 0.15, [p["ratio"][k] for p in points], "o", label=f"axis {AXES[k]}")
     ax.axhline(1.0, color="k", linewidth=0.5)
-    ax.set_xticks(x, [point_label(p["values"]) for p in points], rotation=20, ha="right", fontsize=7)
+    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
     ax.set_ylabel("std(error) / mean(sigma)")
     ax.legend(fontsize=7)
     fig.suptitle("Consistency ratio per axis and sweep point")
@@ -87,7 +92,7 @@ def _nees(summary: dict, plt) -> bytes:
                         label="95 % chi-square band (3 dof)" if i == 0 else None)
     ax.plot(x, [p["nees_mean"] for p in points], "o", label="mean NEES")
     ax.axhline(3.0, color="k", linewidth=0.5)
-    ax.set_xticks(x, [point_label(p["values"]) for p in points], rotation=20, ha="right", fontsize=7)
+    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
     ax.set_ylabel("mean NEES")
     ax.legend(fontsize=7)
     fig.suptitle("Normalised estimation error squared, mean over the runs")
@@ -109,8 +114,9 @@ def _convergence(summary: dict, plt) -> bytes | None:
     if key is None:
         return None
     groups: dict[str, list[dict]] = {}
-    for p in points:
-        groups.setdefault(point_label({k: v for k, v in p["values"].items() if k != key}), []).append(p)
+    others = _labels([{"values": {k: v for k, v in p["values"].items() if k != key}} for p in points])
+    for p, label in zip(points, others):
+        groups.setdefault(label, []).append(p)
     fig, ax = plt.subplots(figsize=(7, 4))
     drawn = False
     for label, members in groups.items():

@@ -83,9 +83,9 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
     rows = resumed_rows(campaign, out) if resume else []
     done = {row["id"] for row in rows}
     pending = [task for task in campaign.tasks if task.id not in done]
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(campaign.path, out / SPEC_COPY)
     with open_client(scheduler, workers) as (client, info):
+        out.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(campaign.path, out / SPEC_COPY)
         print(f"hil: campaign of {len(campaign.tasks)} runs ({len(pending)} to do) on {info.scheduler}, "
               f"{info.workers} workers, dashboard {info.dashboard}", file=sys.stderr)
         try:
