@@ -199,7 +199,7 @@ def test_summary_per_point_counts_failures_and_gives_convergence_quantiles(tmp_p
 
 
 def test_the_shipped_example_sweeps_amplitude_and_duration_of_the_papers_swing():
-    campaign = load_campaign("configs/campaign_swing.yaml")
+    campaign = load_campaign(ROOT / "configs" / "campaign_swing.yaml")
     assert len(campaign.points) == 4 and len(campaign.tasks) == 4 * campaign.spec.runs
     assert {tuple(p) for p in campaign.points} == {("turntable.motion.axes.inner.amplitude_deg", "trial.duration_s")}
     assert campaign.tasks[0].config["imu"]["errors"]["accel_noise_ug"] == [50, 50, 50]

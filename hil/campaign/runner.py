@@ -92,7 +92,7 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
             gather(client, pending, rows, out)
         finally:
             write_runs(out, rows)
-    summary = summarise(campaign.points, rows, info.as_dict())
+    summary = {"spec": campaign.spec.model_dump(), **summarise(campaign.points, rows, info.as_dict())}
     write_summary(out, summary)
     write_campaign_report(out, summary, rows)
     print(summary_text(summary, out))
