@@ -14,9 +14,12 @@ from hil.config import InputError
 LOOPBACK = "127.0.0.1"
 CONNECT_TIMEOUT_S = 20.0
 WORKERS_TIMEOUT_S = 120.0  # an existing cluster: how long to wait for --workers N to join
-# the workers' statistical profiler samples every thread's stack every 10 ms: on a short numpy-bound run it
-# doubles the run's time (benchmarks/campaign_speed.py); a LocalCluster's workers go without it
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+# A LocalCluster's workers go without two of dask's defaults that cost a short numpy-bound run dearly
+# (benchmarks/campaign_speed.py): the statistical profiler (every thread's stack every 10 ms) and
+# MALLOC_TRIM_THRESHOLD_=65536, which hands every freed sample chunk back to the OS (5x the page faults,
+# 1.7x the run time); the memory a run takes is bounded by the simulation's chunk.
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                 "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 class ClusterError(InputError, ValueError):
