@@ -1,5 +1,6 @@
 """Speed of `hil campaign`: runs/s on a LocalCluster of 1 and 2 workers beside the same runs called serially in
-this process, and the scheduler's overhead per run (one worker's wall time minus the serial time, per run).
+this process, and the scheduler's overhead per run: one worker's wall time minus the serial time, per run,
+and the wall time per task of the same tasks mapped to a function that does nothing.
 The runs are the 2019 paper's swing, short by default so that the overhead shows; each figure is the best
 of --repeat passes (the machine's other load only ever slows a pass down).
 
@@ -21,6 +22,11 @@ from hil.campaign.runs import run_one
 from hil.campaign.spec import load_campaign
 
 BASE = Path(__file__).resolve().parent.parent / "configs" / "liu2019_sim.yaml"
+
+
+def nothing(task):
+    """A task's round trip without its run: the task shipped, a small row back."""
+    return {"id": task.id}
 
 
 def main() -> None:
@@ -57,9 +63,15 @@ def main() -> None:
                     gather(client, tasks, rows, Path(tmp))
                     wall = min(wall, time.perf_counter() - start_pass)
                     assert sorted(rows, key=lambda r: r["id"]) == serial, "the cluster's rows differ from the serial ones"
+                empty = float("inf")
+                for _ in range(args.repeat):
+                    start_pass = time.perf_counter()
+                    client.gather(client.map(nothing, tasks, pure=False))
+                    empty = min(empty, time.perf_counter() - start_pass)
             one_worker_s = one_worker_s or wall
             print(f"{workers} worker(s): {wall:7.2f} s, {args.runs / wall:6.2f} runs/s (cluster start "
-                  f"{started - start:.1f} s, worker imports {warm - started:.1f} s)")
+                  f"{started - start:.1f} s, worker imports {warm - started:.1f} s); an empty task "
+                  f"{empty / args.runs * 1e3:.1f} ms")
         print(f"scheduler overhead per run (1 worker minus serial): {(one_worker_s - serial_s) / args.runs * 1e3:.1f} ms")
 
 
