@@ -7,6 +7,7 @@ from __future__ import annotations
 import shutil
 import sys
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,8 @@ def gather(client, tasks: list[RunTask], rows: list[dict[str, Any]], out: Path) 
     completes (a run whose task is lost is a row with its error), runs.parquet rewritten on the way."""
     from distributed import as_completed
 
-    futures = client.map(run_one, tasks, key=[f"run-{t.id}" for t in tasks], pure=False)
+    batch = uuid.uuid4().hex[:8]  # keys of their own: another campaign on a shared scheduler has the same ids
+    futures = client.map(run_one, tasks, key=[f"campaign-{batch}-{t.id}" for t in tasks])
     task_of = {f.key: t for f, t in zip(futures, tasks)}
     progress, bar = _progress(len(rows) + len(tasks), len(rows))
     failed, written = 0, time.monotonic()
