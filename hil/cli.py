@@ -13,7 +13,7 @@ EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
   1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
      or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept;
-     a campaign with failed runs (their rows say why; --resume runs them again)
+     a campaign with failed runs or ended by a signal (outputs of the runs done; --resume goes on)
   2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
   3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
 

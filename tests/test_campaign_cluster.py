@@ -135,3 +135,25 @@ def test_local_and_existing_clusters_give_identical_rows_and_resume_completes_a_
     proc = _campaign(str(spec), "--scheduler", address, "--out", "partial", "--resume", cwd=tmp_path)
     assert "8 runs (5 to do)" in proc.stderr
     assert pq.read_table(partial / "runs.parquet").equals(local)
+
+
+def test_sigterm_ends_a_campaign_with_its_rows_kept_and_exit_1(tmp_path):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(yaml.safe_dump({"base": str(ROOT / "configs" / "liu2019_sim.yaml"), "runs": 2000, "seed": 1,
+                                    "sweep": {"trial.duration_s": [20.0], "trial.rate_hz": [10]}}))
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "campaign", str(spec), "--workers", "2", "--out", "o"],
+                            cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "o" / "runs.parquet").exists():  # the first checkpoint: some runs are done
+            assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read() if proc.poll() else ""
+            time.sleep(0.2)
+        proc.terminate()
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1
+    done = len(read_runs(tmp_path / "o"))
+    assert 0 < done < 2000 and f"campaign interrupted (SIGTERM): {done} of 2000 runs" in err
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["runs"] == done and summary["failed"] == 0

@@ -54,7 +54,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         with dask.config.set(WORKER_CONFIG):  # the nannies hand their config to the worker processes
             cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                                    host=LOOPBACK, scheduler_port=0, dashboard_address=f"{LOOPBACK}:0",
-                                   worker_dashboard_address=None, silence_logs=logging.WARNING)
+                                   worker_dashboard_address=None, silence_logs=logging.ERROR)
         try:
             with Client(cluster) as client:
                 yield client, _info(client)

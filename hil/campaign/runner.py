@@ -5,15 +5,20 @@ into OUT/runs.parquet (rewritten every few seconds, so an interrupted campaign k
 from __future__ import annotations
 
 import shutil
+import signal
 import sys
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, run_one, task_columns
 from hil.campaign.spec import Campaign, RunTask, SpecError, load_campaign, point_label
 from hil.campaign.table import RUNS_NAME, read_runs, write_runs
+from hil.trial.stop_signals import STOP_SIGNALS
 
 CHECKPOINT_S = 5.0  # runs.parquet is rewritten at most this often while runs complete
 SPEC_COPY = "campaign.yaml"
@@ -34,6 +39,25 @@ def resumed_rows(campaign: Campaign, out: Path) -> list[dict[str, Any]]:
         if row.get(ERROR) is None:
             kept.append(row)
     return kept
+
+
+class Interrupted(BaseException):  # as KeyboardInterrupt: no "except Exception" catches it
+    """A stop signal during the runs: the campaign keeps the rows it has."""
+
+
+@contextmanager
+def stop_signals() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` in the main thread (nothing here commands a
+    table: unwinding is safe, and runs.parquet is written on the way out)."""
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        raise Interrupted(signal.Signals(signum).name)
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _progress(total: int, done: int):
@@ -74,7 +98,7 @@ def gather(client, tasks: list[RunTask], rows: list[dict[str, Any]], out: Path) 
 def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, workers: int | None = None,
                  resume: bool = False) -> int:
     """Run (or go on with) a campaign; returns the exit code: 0 every run done, 1 some runs failed (their
-    rows say why; ``--resume`` runs them again)."""
+    rows say why; ``--resume`` runs them again) or a stop signal ended it (the outputs of the runs done)."""
     from hil.campaign.cluster import open_client
     from hil.campaign.report import write_campaign_report
     from hil.campaign.summary import summarise, write_summary
@@ -90,15 +114,22 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
         shutil.copyfile(campaign.path, out / SPEC_COPY)
         print(f"hil: campaign of {len(campaign.tasks)} runs ({len(pending)} to do) on {info.scheduler}, "
               f"{info.workers} workers, dashboard {info.dashboard}", file=sys.stderr)
+        interrupted = None
         try:
-            gather(client, pending, rows, out)
+            with stop_signals():
+                gather(client, pending, rows, out)
+        except Interrupted as exc:
+            interrupted = str(exc)
         finally:
             write_runs(out, rows)
     summary = {"spec": campaign.spec.model_dump(), **summarise(campaign.points, rows, info.as_dict())}
     write_summary(out, summary)
     write_campaign_report(out, summary, rows)
     print(summary_text(summary, out))
-    return 1 if summary["failed"] else 0
+    if interrupted:
+        print(f"hil: campaign interrupted ({interrupted}): {len(rows)} of {len(campaign.tasks)} runs in "
+              f"{out / RUNS_NAME}; --resume goes on", file=sys.stderr)
+    return 1 if summary["failed"] or interrupted else 0
 
 
 def summary_text(summary: dict[str, Any], out: Path) -> str:
