@@ -12,7 +12,8 @@ CALIBRATION_CONFIG = "configs/calibration.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
   1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
-     or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept
+     or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept;
+     a campaign with failed runs or ended by a signal (outputs of the runs done; --resume goes on)
   2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
   3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
 
@@ -94,6 +95,13 @@ def cmd_noise(args: argparse.Namespace) -> int:
     print(noise_summary(run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
                                   rerun=args.rerun), out))
     return 0
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from hil.campaign.runner import run_campaign
+
+    out = Path(args.out) if args.out else Path("runs") / f"campaign-{Path(args.spec).stem}"
+    return run_campaign(args.spec, out, args.scheduler, args.workers, args.resume)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -196,6 +204,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip allan.png")
     p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
     p.set_defaults(func=cmd_noise)
+
+    p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
+                                        "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
+    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, sweep: {dotted.key: [values]}}")
+    p.add_argument("--scheduler", metavar="ADDR", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
+                                       "127.0.0.1)")
+    p.add_argument("--workers", type=int, metavar="N", help="LocalCluster: worker processes (default: one a core); --scheduler: "
+                                               "wait for this many")
+    p.add_argument("--out", help="output directory (default: runs/campaign-SPEC)")
+    p.add_argument("--resume", action="store_true", help="go on with OUT/runs.parquet: skip the runs done there")
+    p.set_defaults(func=cmd_campaign)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
     _config_argument(p)

@@ -18,6 +18,7 @@ LAYERS = (
     ("hil.pipeline", "hil.recording"),
     ("hil.outputs", "hil.viewer"),
     ("hil.trial",),
+    ("hil.campaign",),
     ("hil.cli",),
 )
 

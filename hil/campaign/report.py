@@ -1,0 +1,191 @@
+"""``OUT/campaign.html``: one self-contained page (figures as PNG data URIs, inline style, nothing fetched),
+in the style of the trial report: the consistency table per sweep point and four figures: the normalised
+errors against N(0, 1), the ratio std(error)/mean(sigma) with its band, the mean NEES with its chi-square
+band, the convergence time against the swept value. matplotlib is imported when the page is drawn."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.campaign.spec import point_label
+from hil.campaign.summary import SIGMA, bias_error
+from hil.outputs.report import _page
+
+REPORT_NAME = "campaign.html"
+AXES = "xyz"
+
+
+def _labels(points: list[dict]) -> list[str]:
+    """Short point labels for the figures: the keys that vary across the points, by their last part."""
+    varying = [k for k in points[0]["values"] if len({repr(p["values"][k]) for p in points}) > 1] if points else []
+    return [", ".join(f"{k.rsplit('.', 1)[-1]}={p['values'][k]}" for k in varying) or "all runs" for p in points]
+
+
+def _png(fig) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def _normalised(rows: list[dict[str, Any]], point: int) -> np.ndarray:
+    """(M, 3) errors over reported sigma of a point's runs with an estimate."""
+    found = [(e, [row[f"{SIGMA}.{i}"] for i in range(3)]) for row in rows
+             if row["point"] == point and (e := bias_error(row)) is not None]
+    if not found:
+        return np.empty((0, 3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.array([e for e, _ in found]) / np.array([s for _, s in found], dtype=float)
+
+
+def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.4), sharey=True)
+    grid = np.linspace(-4.0, 4.0, 161)
+    for k, ax in enumerate(axes):
+        for p, label in zip(summary["points"], _labels(summary["points"])):
+            z = _normalised(rows, p["point"])[:, k]
+            z = z[np.isfinite(z)]
+            if z.size:
+                ax.hist(z, bins=np.linspace(-4.0, 4.0, 25), density=True, histtype="step", label=label)
+        ax.plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", label="N(0, 1)")
+        ax.set_xlabel(f"error {AXES[k]} / reported sigma")
+    axes[0].set_ylabel("density")
+    if len(summary["points"]) <= 8:
+        axes[-1].legend(fontsize=7)
+    fig.suptitle("Bias error against the reported sigma")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _ratios(summary: dict, plt) -> bytes:
+    points = [p for p in summary["points"] if "ratio" in p]
+    x = np.arange(len(points))
+    fig, ax = plt.subplots(figsize=(10, 3.6))
+    for i, p in enumerate(points):
+        ax.fill_between([i - 0.4, i + 0.4], *p["ratio_band"], color="tab:green", alpha=0.2,
+                        label="95 % band of a consistent estimator" if i == 0 else None)
+    for k in range(3):
+        ax.plot(x + (k - 1) * 0.15, [p["ratio"][k] for p in points], "o", label=f"axis {AXES[k]}")
+    ax.axhline(1.0, color="k", linewidth=0.5)
+    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
+    ax.set_ylabel("std(error) / mean(sigma)")
+    ax.legend(fontsize=7)
+    fig.suptitle("Consistency ratio per axis and sweep point")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _nees(summary: dict, plt) -> bytes:
+    points = [p for p in summary["points"] if "nees_mean" in p]
+    x = np.arange(len(points))
+    fig, ax = plt.subplots(figsize=(10, 3.6))
+    for i, p in enumerate(points):
+        ax.fill_between([i - 0.4, i + 0.4], *p["nees_band"], color="tab:green", alpha=0.2,
+                        label="95 % chi-square band (3 dof)" if i == 0 else None)
+    ax.plot(x, [p["nees_mean"] for p in points], "o", label="mean NEES")
+    ax.axhline(3.0, color="k", linewidth=0.5)
+    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
+    ax.set_ylabel("mean NEES")
+    ax.legend(fontsize=7)
+    fig.suptitle("Normalised estimation error squared, mean over the runs")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _numeric_key(points: list[dict]) -> str | None:
+    """The first swept key whose values are all numbers: the abscissa of the convergence figure."""
+    for key in points[0]["values"] if points else ():
+        if all(isinstance(p["values"][key], (int, float)) and not isinstance(p["values"][key], bool) for p in points):
+            return key
+    return None
+
+
+def _convergence(summary: dict, plt) -> bytes | None:
+    points = summary["points"]
+    key = _numeric_key(points)
+    if key is None:
+        return None
+    groups: dict[str, list[dict]] = {}
+    others = _labels([{"values": {k: v for k, v in p["values"].items() if k != key}} for p in points])
+    for p, label in zip(points, others):
+        groups.setdefault(label, []).append(p)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    drawn = False
+    for label, members in groups.items():
+        members = sorted((p for p in members if p["converged_at_s"]["q50"] is not None), key=lambda p: p["values"][key])
+        if not members:
+            continue
+        x = np.array([p["values"][key] for p in members], dtype=float)
+        q = np.array([[p["converged_at_s"][n] for n in ("q05", "q50", "q95")] for p in members])
+        ax.errorbar(x, q[:, 1], yerr=[q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]], marker="o", capsize=3, label=label)
+        drawn = True
+    if not drawn:
+        ax.text(0.5, 0.5, "no run converged", transform=ax.transAxes, ha="center")
+    ax.set_xlabel(key)
+    ax.set_ylabel("bias convergence time (s): median, 5-95 %")
+    if drawn:
+        ax.legend(fontsize=7)
+    fig.suptitle("Convergence time against the swept value")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _num(v: Any) -> str:
+    return "–" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
+
+
+def _vec(p: dict, key: str) -> str:
+    return " ".join(_num(v) for v in p[key]) if key in p else "–"
+
+
+def _band(p: dict, key: str) -> str:
+    return f"{p[key][0]:.3f}–{p[key][1]:.3f}" if key in p else "–"
+
+
+def _table(summary: dict) -> str:
+    e = html.escape
+    head = ("<tr><th>sweep point</th><th>runs</th><th>failed</th><th>error mean (µg)</th><th>error std (µg)</th>"
+            "<th>mean σ (µg)</th><th>std/σ x y z</th><th>band</th><th>mean NEES</th><th>band</th>"
+            "<th>converged (s) 5/50/95 %</th></tr>")
+    body = []
+    for p in summary["points"]:
+        conv = "/".join(_num(p["converged_at_s"][n]) for n in ("q05", "q50", "q95"))
+        flag = "" if p.get("nees_inside", True) and all(p.get("ratio_inside", [True])) else " class='row-FAIL'"
+        body.append(f"<tr{flag}><td>{e(point_label(p['values']))}</td><td class='num'>{p['runs']}</td>"
+                    f"<td class='num'>{p['failed']}</td><td class='num'>{_vec(p, 'error_mean_ug')}</td>"
+                    f"<td class='num'>{_vec(p, 'error_std_ug')}</td><td class='num'>{_vec(p, 'sigma_mean_ug')}</td>"
+                    f"<td class='num'>{_vec(p, 'ratio')}</td><td class='num'>{_band(p, 'ratio_band')}</td>"
+                    f"<td class='num'>{_num(p.get('nees_mean'))}</td><td class='num'>{_band(p, 'nees_band')}</td>"
+                    f"<td class='num'>{conv}</td></tr>")
+    return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]]) -> Path:
+    """Write ``out/campaign.html`` from the summary and the rows; returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = [("Bias error over its reported sigma, every sweep point, against N(0, 1)", _histograms(summary, rows, plt)),
+               ("std(error)/mean(sigma) per axis with the 95 % band of a consistent estimator", _ratios(summary, plt)),
+               ("Mean NEES with its 95 % chi-square band", _nees(summary, plt)),
+               ("Convergence time against the swept value", _convergence(summary, plt))]
+    cluster = summary["cluster"]
+    body = (f"<p class='meta'>{summary['runs']} runs, {summary['failed']} failed, on {html.escape(cluster['scheduler'])} "
+            f"with {cluster['workers']} workers. A row is highlighted when a statistic falls outside its band.</p>"
+            f"<h2>Consistency per sweep point</h2>{_table(summary)}<h2>Figures</h2>"
+            + "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
+                      f"{base64.b64encode(png).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
+                      for caption, png in figures if png is not None))
+    path = out / REPORT_NAME
+    path.write_text(_page("Campaign", "Campaign", body), encoding="utf-8")
+    return path

@@ -1,0 +1,54 @@
+"""One run of a campaign, as a worker executes it: the simulated trial of ``hil simulate`` (no outputs
+written, no viewer), its result.json document flattened into one row of runs.parquet."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hil.campaign.spec import RunTask
+
+SWEEP_PREFIX = "sweep."  # a swept value's column: sweep.<dotted key> (result.json has trial.* keys of its own)
+ERROR = "error"
+
+
+def flatten(value: Any, prefix: str = "") -> dict[str, Any]:
+    """Every scalar of a nested document under its dotted path; list items by index (``a.b.0``); a
+    non-finite float as None, as result.json writes it."""
+    if isinstance(value, dict):
+        return {k: v for key, item in value.items() for k, v in flatten(item, f"{prefix}{key}.").items()}
+    if isinstance(value, (list, tuple)):
+        return {k: v for i, item in enumerate(value) for k, v in flatten(item, f"{prefix}{i}.").items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        value = None
+    elif hasattr(value, "item"):  # a numpy scalar
+        value = value.item()
+    return {prefix[:-1]: value}
+
+
+def task_columns(task: RunTask) -> dict[str, Any]:
+    """The columns every row of the task has, done or failed: its id, indices, seed and swept values."""
+    return {"id": task.id, "point": task.point, "run": task.run, "seed": task.seed,
+            **flatten(task.values, SWEEP_PREFIX)}
+
+
+def failed_row(task: RunTask, error: BaseException | str) -> dict[str, Any]:
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    return {**task_columns(task), ERROR: " ".join(text.split()) or "failed"}
+
+
+def run_one(task: RunTask) -> dict[str, Any]:
+    """The row of one run: a simulated trial of the task's config; a run that raises is a row with ``error``."""
+    from hil.config import parse_config
+    from hil.trial.offline import run_simulation
+    from hil.trial.viewer_feed import ViewerOptions
+
+    try:
+        cfg = parse_config(task.config, task.id)
+        outcome, _ = run_simulation(cfg, yaml.safe_dump(task.config), Path("."), ViewerOptions("none"))
+    except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost campaign
+        return failed_row(task, exc)
+    return {**task_columns(task), ERROR: None, **flatten(outcome.result)}
