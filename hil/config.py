@@ -366,7 +366,7 @@ class Config(_Model):
         return self.trial.rate_hz if self.turntable.timing.free_running else self.imu_rate_hz
 
 
-def _describe(error: ValidationError) -> str:
+def describe_validation(error: ValidationError) -> str:
     lines = []
     for item in error.errors():
         path = ".".join(str(p) for p in item["loc"])
@@ -383,7 +383,7 @@ def parse_config(data: Any, source: str = "config") -> Config:
     try:
         return Config.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(f"{source}: {_describe(exc)}") from None
+        raise ConfigError(f"{source}: {describe_validation(exc)}") from None
 
 
 def load_config(path: str | Path) -> Config:

@@ -15,7 +15,7 @@ import numpy as np
 
 from hil.campaign.spec import point_label
 from hil.campaign.summary import SIGMA, bias_error
-from hil.outputs.report import _page
+from hil.outputs.report import html_page
 
 REPORT_NAME = "campaign.html"
 AXES = "xyz"
@@ -187,5 +187,5 @@ def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]]) 
                       f"{base64.b64encode(png).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
                       for caption, png in figures if png is not None))
     path = out / REPORT_NAME
-    path.write_text(_page("Campaign", "Campaign", body), encoding="utf-8")
+    path.write_text(html_page("Campaign", "Campaign", body), encoding="utf-8")
     return path

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from hil.config import Config, ConfigError, InputError, _describe, parse_config, resolve_path
+from hil.config import Config, ConfigError, InputError, describe_validation, parse_config, resolve_path
 
 
 class SpecError(InputError, ValueError):
@@ -147,7 +147,7 @@ def load_campaign(path: str | Path) -> Campaign:
     try:
         spec = CampaignSpec.model_validate(data)
     except ValidationError as exc:
-        raise SpecError(f"{path}: {_describe(exc)}") from None
+        raise SpecError(f"{path}: {describe_validation(exc)}") from None
     for key in spec.sweep:
         try:
             check_key(key)

@@ -20,7 +20,7 @@ import numpy as np
 from scipy import stats
 
 from hil.campaign.runs import ERROR
-from hil.outputs.result import _strict_json
+from hil.outputs.result import strict_json
 
 SUMMARY_NAME = "summary.json"
 LEVEL = 0.95  # of the bands
@@ -104,5 +104,5 @@ def summarise(points: list[dict[str, Any]], rows: list[dict[str, Any]], cluster:
 
 def write_summary(out: Path, summary: dict[str, Any]) -> Path:
     path = out / SUMMARY_NAME
-    path.write_text(json.dumps(_strict_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    path.write_text(json.dumps(strict_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return path

@@ -88,7 +88,7 @@ def write_noise_report(out_dir: Path) -> Path:
     if (out_dir / "result.json").exists():
         return write_report(out_dir)
     figures = _figure_html(_figures(out_dir, None, {}))
-    page = _page("Noise characterisation", "", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
+    page = html_page("Noise characterisation", "", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     return path
@@ -194,7 +194,7 @@ Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 {_figure_html(figures) or "<p>No figures in this directory.</p>"}
 <p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
 (recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
-    return _page(f"Trial report: {name}", f"{name}: {verdict}", body)
+    return html_page(f"Trial report: {name}", f"{name}: {verdict}", body)
 
 
 def _figure_html(figures: list[tuple[str, bytes]]) -> str:
@@ -206,7 +206,7 @@ def _figure_html(figures: list[tuple[str, bytes]]) -> str:
     )
 
 
-def _page(heading: str, title: str, body: str) -> str:
+def html_page(heading: str, title: str, body: str) -> str:
     """One self-contained page: inline style, nothing fetched."""
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">

@@ -107,20 +107,20 @@ def empty_result(name: str, streams: StreamCounts, truth: dict | None = None, bi
     return result
 
 
-def _strict_json(value: Any) -> Any:
+def strict_json(value: Any) -> Any:
     """``value`` with every non-finite float (at any depth) replaced by None: JSON has no NaN or Infinity."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _strict_json(v) for k, v in value.items()}
+        return {k: strict_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_strict_json(v) for v in value]
+        return [strict_json(v) for v in value]
     return value
 
 
 def write_result(out: Path, result: dict) -> None:
     """``out/result.json``, strict JSON: null for a non-finite number."""
-    (out / RESULT_NAME).write_text(json.dumps(_strict_json(result), indent=2, allow_nan=False) + "\n")
+    (out / RESULT_NAME).write_text(json.dumps(strict_json(result), indent=2, allow_nan=False) + "\n")
 
 
 def summary_text(result: dict, out: Path) -> str:
