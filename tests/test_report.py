@@ -211,3 +211,18 @@ def test_the_summary_says_not_observable_only_when_it_is_not(tmp_path, kind, obs
     text = summary_text(result, tmp_path)
     assert ("NOT observable" in text) is not observable
     assert ("accelerometer bias (ug):" in text) is observable
+
+
+def test_a_calibration_trial_summarises_its_calibration(tmp_path):
+    cfg = make_config(duration=60.0, rate=100.0, kind="static", errors=PAPER_ERRORS)
+    est = run_estimator(cfg, solve_period=1.0)
+    n = est.solution().samples
+    result = build_result("calibration", est, StreamCounts(n, n, n), None)
+    result["calibration"] = {"file": "calibration.json", "positions": 18, "residual_rms_ug": 0.72,
+                             "residual_max_ug": 1.63, "unobservable": ["turntable.zero_offset_arcsec.2"],
+                             "worst_error_sigma": 3.07}
+    text = summary_text(result, tmp_path)
+    assert "calibration over 18 positions: residual 0.72 ug RMS, 1.63 ug max" in text
+    assert "3.07 sigma" in text and "unobservable: turntable.zero_offset_arcsec.2" in text
+    assert str(tmp_path / "calibration.json") in text
+    assert "accelerometer bias" not in text  # the swing estimator's lines mean nothing for a static schedule

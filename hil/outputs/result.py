@@ -124,9 +124,31 @@ def write_result(out: Path, result: dict) -> None:
 
 
 def summary_text(result: dict, out: Path) -> str:
-    """The console summary of a result.json document."""
-    est = result["estimate"]
+    """The console summary of a result.json document: the calibration of a ``hil calibrate`` trial, the
+    swing estimator's results otherwise."""
     lines = [f"{result['trial']['name']}: {result['trial']['samples']} samples, {result['trial']['duration_s']:.1f} s"]
+    lines += _calibration_lines(result["calibration"], out) if "calibration" in result else _estimate_lines(result)
+    if result.get("calibration_applied"):
+        lines.append(f"  {calibration_applied_text(result['calibration_applied'])}")
+    lines.append(f"  outputs in {out}")
+    return "\n".join(lines)
+
+
+def _calibration_lines(calibration: dict, out: Path) -> list[str]:
+    lines = [f"  calibration over {calibration['positions']} positions: residual "
+             + ("n/a" if calibration["residual_rms_ug"] is None else
+                f"{calibration['residual_rms_ug']:.2f} ug RMS, {calibration['residual_max_ug']:.2f} ug max")]
+    if calibration["worst_error_sigma"] is not None:
+        lines.append(f"  largest error of a term against the emulated truth: {calibration['worst_error_sigma']:.2f} sigma")
+    if calibration["unobservable"]:
+        lines.append("  unobservable: " + ", ".join(calibration["unobservable"]))
+    lines.append(f"  terms and sigmas: {out / calibration['file']}")
+    return lines
+
+
+def _estimate_lines(result: dict) -> list[str]:
+    est = result["estimate"]
+    lines = []
     if est["observable"]:
         bias = ", ".join(f"{b:.3f} +- {s:.3f}" for b, s in zip(est["accel_bias_ug"], est["accel_bias_sigma_ug"]))
         lines.append(f"  accelerometer bias (ug): {bias}")
@@ -150,10 +172,7 @@ def summary_text(result: dict, out: Path) -> str:
     m2 = result["alignment_deg"]["method2"]
     if m2:
         lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
-    if result.get("calibration_applied"):
-        lines.append(f"  {calibration_applied_text(result['calibration_applied'])}")
-    lines.append(f"  outputs in {out}")
-    return "\n".join(lines)
+    return lines
 
 
 def calibration_applied_text(applied: dict | None) -> str:
