@@ -35,7 +35,9 @@ class SequenceUnwrapper:
     marks them with a missing count of -1. Devices never repeat a number, so when the host receive
     times say that about a counter period or more has passed, the same readings are taken as wraps.
     With the device rate known, the host receive times also resolve wraps lost in an outage longer
-    than the counter period (a 7-bit counter at 1 kHz wraps every 128 ms).
+    than the counter period (a 7-bit counter at 1 kHz wraps every 128 ms). They do so only where bytes
+    were lost: a frame whose bytes directly follow the previous frame's (``adjacent``) lost nothing in
+    between, however late it came (a writer or a host that was held up).
 
     A wide counter (16 bits and more) that jumps ahead by more than ``JUMP_LIMIT`` frames, where the
     host times do not explain the jump, is taken as damage a weak checksum let through: the frame is
@@ -67,10 +69,13 @@ class SequenceUnwrapper:
         index, missing, _ = self.next_many(None if sequence is None else np.array([sequence]), np.array([host_time]))
         return int(index[0]), int(missing[0])
 
-    def next_many(self, sequences: np.ndarray | None, host_times: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                                                      np.ndarray]:
+    def next_many(self, sequences: np.ndarray | None, host_times: np.ndarray, adjacent: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`next` for consecutive frames (``sequences`` int64, -1 or None where a frame has no counter):
         (indices, missing, repeated), ``repeated`` True where a -1 is a repeat rather than a late frame.
+
+        ``adjacent`` marks frames whose bytes directly follow the previous frame's: no byte was lost
+        between them, so their host times size nothing (a writer that was held up, not an outage).
 
         The frames are taken in runs: each run is computed at once as if every frame continued from
         the one before it, up to the first frame that does not (a repeat, a late frame, a far jump),
@@ -82,6 +87,7 @@ class SequenceUnwrapper:
         if sequences is None or self.modulus is None:
             has[:] = False
         seq = np.where(has, sequences if sequences is not None else 0, 0).astype(np.int64)
+        untimed = np.zeros(n, dtype=bool) if adjacent is None else adjacent
         i = 0
         if n and self._index is None:
             self._index = int(seq[0]) if has[0] else 0
@@ -89,11 +95,11 @@ class SequenceUnwrapper:
             index[0] = self._index
             i = 1
         while i < n:
-            i = self._run(seq[i:], has[i:], host_times[i:], index[i:], missing[i:], repeated[i:]) + i
+            i = self._run(seq[i:], has[i:], host_times[i:], untimed[i:], index[i:], missing[i:], repeated[i:]) + i
         return index, missing, repeated
 
-    def _run(self, seq: np.ndarray, has: np.ndarray, times: np.ndarray, index: np.ndarray, missing: np.ndarray,
-             repeated: np.ndarray) -> int:
+    def _run(self, seq: np.ndarray, has: np.ndarray, times: np.ndarray, untimed: np.ndarray, index: np.ndarray,
+             missing: np.ndarray, repeated: np.ndarray) -> int:
         """Settle the frames up to and including the first that does not continue from the one before it;
         returns how many were settled (filling ``index``, ``missing``, ``repeated`` from the start)."""
         n, modulus = self.counts_per_frame, self.modulus or 1
@@ -101,6 +107,7 @@ class SequenceUnwrapper:
         previous_time = np.concatenate(([self._time], times[:-1]))
         step = np.where(has, (seq - previous) % modulus, n)
         host_counts = (times - previous_time) * (self.rate_hz or math.nan) * n  # counts by the host clock
+        host_counts[untimed] = math.nan
         if (self._suspect is None and (step == n).all() and modulus - n > min(self.REORDER_WINDOW * n, modulus // 4)
                 and not ((host_counts - n) / modulus > 0.5).any()):
             # every frame the next one (no repeat, no late frame, no wrap the host times tell of)
@@ -234,6 +241,7 @@ class ByteFramer(Framer):
         self.unwrapper = SequenceUnwrapper(codec.sequence_modulus, host_rate(codec.rate_hz, time_scale),
                                            codec.sequence_step)
         self._buf = b""
+        self._joined = False  # the buffer starts right after the last frame taken, no byte lost between
 
     @property
     def buffered(self) -> int:
@@ -269,10 +277,13 @@ class ByteFramer(Framer):
         if stop is None:
             last_end = int(starts[-1] + lengths[-1]) if len(starts) else 0
             stop = max(last_end, end - len(codec.sync) + 1, 0)
+        ends = starts + lengths
+        adjacent = np.concatenate(([self._joined and len(starts) > 0 and starts[0] == 0], starts[1:] == ends[:-1]))
+        self._joined = bool(ends[-1] == stop) if len(starts) else self._joined and stop == 0
         rate = codec.rate_hz
         # A host that was held up reads a backlog at once: its frames left the device one period apart.
-        sent = np.full(len(starts), host_time) if not rate else host_time - (end - starts - lengths) / lengths / rate
-        index, missing, repeated = self.unwrapper.next_many(codec.sequences(rows), sent)
+        sent = np.full(len(starts), host_time) if not rate else host_time - (end - ends) / lengths / rate
+        index, missing, repeated = self.unwrapper.next_many(codec.sequences(rows), sent, adjacent[:len(starts)])
         deliver = self.unwrapper.count_many(counters, missing, repeated)
         sizes = lengths[deliver]
         counters.skipped_bytes += stop - int(sizes.sum())
@@ -282,6 +293,7 @@ class ByteFramer(Framer):
     def reset(self) -> None:
         self.counters.skipped_bytes += len(self._buf)
         self._buf = b""
+        self._joined = False
 
 
 def _walk(starts: np.ndarray, lengths: np.ndarray, complete: np.ndarray, valid: np.ndarray

@@ -1,8 +1,8 @@
 """The records that flow between devices, drivers, the aligner and the estimators.
 
-Decoded samples travel as struct-of-arrays batches, one per read, on the live path (single records
-remain for the emulators and the codecs' one-frame API); simulation and replay use the
-struct-of-arrays aligned batches. All quantities are SI: rad, m/s, s. Gimbal angles are always ordered
+Decoded samples travel as struct-of-arrays batches, one per read, on the live path and in replay
+(single records remain for the emulators and the codecs' one-frame API); the aligner releases runs
+of aligned samples as batches, and a simulation or a CSV import feeds aligned batches directly. All quantities are SI: rad, m/s, s. Gimbal angles are always ordered
 (outer, middle, inner).
 """
 
@@ -125,10 +125,11 @@ class ImuGap:
 
 @dataclass(frozen=True)
 class AlignedBatch:
-    """Struct-of-arrays form of consecutive aligned samples (simulation, replay, CSV import).
+    """Struct-of-arrays form of consecutive aligned samples (the aligner's runs, simulation, CSV import).
 
     ``t`` (N,) ends each increment interval; ``dtheta`` and ``dv`` are (N, 3); ``angles`` is (N, 3)
-    (outer, middle, inner) at ``t`` or None when no turntable reference exists.
+    (outer, middle, inner) at ``t`` or None when no turntable reference exists (in the aligner's runs,
+    NaN rows for the samples without angles).
     """
 
     t: np.ndarray
