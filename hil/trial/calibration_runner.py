@@ -18,7 +18,10 @@ from hil.trial.outcome import TrialOutcome, TrialSetupError
 from hil.trial.viewer_feed import ViewerOptions
 
 QUEUE_ITEMS = 4  # keeps the emulated devices close behind the processing: commands act without lag
-EMULATED_MARGIN = 2.0  # the emulated devices run for this many times the schedule's nominal length (+ 60 s)
+# The emulated devices run for this many times the schedule's nominal length (+ 120 s), and the trial ends when
+# the schedule does. Each command acts as late as the data queued between the devices and the processing, so on
+# a loaded machine the schedule takes longer in the devices' time than its nominal length (seen: beyond 2x + 60 s).
+EMULATED_MARGIN = 4.0
 
 
 def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewer: ViewerOptions,
@@ -45,7 +48,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
                               "('emulator' for the emulated table)")
     is_emulated = emulated(cfg)
     nominal = schedule_duration(schedule, cfg.turntable.limits)
-    duration = EMULATED_MARGIN * nominal + 60.0 if is_emulated else None
+    duration = EMULATED_MARGIN * nominal + 120.0 if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
     def commanded(control, cfg: Config, viewer) -> tuple[object, dict]:
