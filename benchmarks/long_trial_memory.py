@@ -15,18 +15,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from live_harness import rss_mib
+
 from emulators.simulation import Simulation
 from hil.config import load_config
 from hil.pipeline.processor import TrialProcessor
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.units import HOUR
-
-
-def rss_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def main() -> None:

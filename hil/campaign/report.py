@@ -65,39 +65,35 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
     return _png(fig)
 
 
-def _ratios(summary: dict, plt) -> bytes:
-    points = [p for p in summary["points"] if "ratio" in p]
+def _banded(points: list[dict], plt, band: str, band_label: str, ideal: float, ylabel: str, title: str, series):
+    """A statistic per sweep point over its 95 % band: ``series`` gives (x offset, values, label) per line."""
     x = np.arange(len(points))
     fig, ax = plt.subplots(figsize=(10, 3.6))
     for i, p in enumerate(points):
-        ax.fill_between([i - 0.4, i + 0.4], *p["ratio_band"], color="tab:green", alpha=0.2,
-                        label="95 % band of a consistent estimator" if i == 0 else None)
-    for k in range(3):
-        ax.plot(x + (k - 1) * 0.15, [p["ratio"][k] for p in points], "o", label=f"axis {AXES[k]}")
-    ax.axhline(1.0, color="k", linewidth=0.5)
+        ax.fill_between([i - 0.4, i + 0.4], *p[band], color="tab:green", alpha=0.2, label=band_label if i == 0 else None)
+    for offset, values, label in series:
+        ax.plot(x + offset, values, "o", label=label)
+    ax.axhline(ideal, color="k", linewidth=0.5)
     ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
-    ax.set_ylabel("std(error) / mean(sigma)")
+    ax.set_ylabel(ylabel)
     ax.legend(fontsize=7)
-    fig.suptitle("Consistency ratio per axis and sweep point")
+    fig.suptitle(title)
     fig.tight_layout()
     return _png(fig)
+
+
+def _ratios(summary: dict, plt) -> bytes:
+    points = [p for p in summary["points"] if "ratio" in p]
+    series = [((k - 1) * 0.15, [p["ratio"][k] for p in points], f"axis {AXES[k]}") for k in range(3)]
+    return _banded(points, plt, "ratio_band", "95 % band of a consistent estimator", 1.0, "std(error) / mean(sigma)",
+                   "Consistency ratio per axis and sweep point", series)
 
 
 def _nees(summary: dict, plt) -> bytes:
     points = [p for p in summary["points"] if "nees_mean" in p]
-    x = np.arange(len(points))
-    fig, ax = plt.subplots(figsize=(10, 3.6))
-    for i, p in enumerate(points):
-        ax.fill_between([i - 0.4, i + 0.4], *p["nees_band"], color="tab:green", alpha=0.2,
-                        label="95 % chi-square band (3 dof)" if i == 0 else None)
-    ax.plot(x, [p["nees_mean"] for p in points], "o", label="mean NEES")
-    ax.axhline(3.0, color="k", linewidth=0.5)
-    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
-    ax.set_ylabel("mean NEES")
-    ax.legend(fontsize=7)
-    fig.suptitle("Normalised estimation error squared, mean over the runs")
-    fig.tight_layout()
-    return _png(fig)
+    return _banded(points, plt, "nees_band", "95 % chi-square band (3 dof)", 3.0, "mean NEES",
+                   "Normalised estimation error squared, mean over the runs",
+                   [(0.0, [p["nees_mean"] for p in points], "mean NEES")])
 
 
 def _numeric_key(points: list[dict]) -> str | None:
