@@ -51,19 +51,14 @@ class Truth:
         return self.geometry.attitude(self.angles(t))
 
     def rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """omega_ib^b (rad/s) and f^b (m/s^2) at instants t, each (N, 3)."""
-        omega, force = self._rates_and_forces(np.asarray(t, dtype=float))
-        return omega.T, force.T
-
-    def _rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """As :meth:`rates_and_forces`, component-major (3, N); the body rate as
-        :meth:`hil.frames.TableGeometry.body_rate_from` forms it."""
+        """omega_ib^b (rad/s) and f^b (m/s^2) at instants t (N,), each component-major (3, N); the body rate
+        as :meth:`hil.frames.TableGeometry.body_rate_from` forms it."""
         angles, angle_rates = self.motion(t)
         c_bn, middle_inner = gimbal_matrices(self.geometry, angles)
         rates = angle_rates.T
         w_mount = middle_inner[2] * rates[0] + middle_inner[0] * rates[1]
         w_mount[1] += rates[2]
-        omega = self.geometry.body_to_mount.as_matrix().T @ w_mount + row_times(self.earth.omega_n, c_bn)
+        omega = self.geometry.body_to_mount_matrix.T @ w_mount + row_times(self.earth.omega_n, c_bn)
         return omega, row_times(self.f_n, c_bn)
 
     def increments(self, t_start: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +70,7 @@ class Truth:
         half = 0.5 * np.diff(edges)
         mid = 0.5 * (edges[1:] + edges[:-1])
         times = (mid[:, None] + half[:, None] * _NODES[None, :]).ravel()
-        omega, force = self._rates_and_forces(times)
+        omega, force = self.rates_and_forces(times)
         w = half[:, None] * _WEIGHTS[None, :]
         n = len(edges) - 1
         dtheta = (omega.reshape(3, n, QUADRATURE_NODES) * w).sum(axis=-1).T

@@ -133,11 +133,13 @@ class TableGeometry:
         return euler_rotation(np.asarray(self.mounting))
 
     @cached_property
-    def _table_to_n_matrix(self) -> np.ndarray:
+    def table_to_n_matrix(self) -> np.ndarray:
+        """:attr:`table_to_n` as a (3, 3) matrix, formed once."""
         return self.table_to_n.as_matrix()
 
     @cached_property
-    def _body_to_mount_matrix(self) -> np.ndarray:
+    def body_to_mount_matrix(self) -> np.ndarray:
+        """:attr:`body_to_mount` as a (3, 3) matrix, formed once."""
         return self.body_to_mount.as_matrix()
 
     def attitude(self, angles: np.ndarray) -> Rotation:
@@ -154,7 +156,7 @@ class TableGeometry:
         rz, rx, ry = (_axis_matrices(angles[:, k], axis) for k, axis in enumerate((2, 0, 1)))
         inner = ry
         middle_inner = rx @ ry
-        c_bn = self._table_to_n_matrix @ rz @ middle_inner @ self._body_to_mount_matrix
+        c_bn = self.table_to_n_matrix @ rz @ middle_inner @ self.body_to_mount_matrix
         return c_bn, middle_inner, inner
 
     def body_rate_from(self, middle_inner: np.ndarray, inner: np.ndarray, angle_rates: np.ndarray) -> np.ndarray:
@@ -165,7 +167,7 @@ class TableGeometry:
         rates = np.atleast_2d(angle_rates)
         w_mount = middle_inner[:, 2, :] * rates[:, 0:1] + inner[:, 0, :] * rates[:, 1:2]
         w_mount[:, 1] += rates[:, 2]
-        return w_mount @ self._body_to_mount_matrix
+        return w_mount @ self.body_to_mount_matrix
 
 
 

@@ -28,7 +28,7 @@ def gimbal_matrices(geometry: TableGeometry, angles: np.ndarray) -> tuple[np.nda
     middle_inner = np.array([[cy, zero, sy], [sx * sy, cx, -sx * cy], [-cx * sy, sx, cx * cy]])
     p0, p1 = middle_inner[0], middle_inner[1]
     c = np.array([cz * p0 - sz * p1, sz * p0 + cz * p1, middle_inner[2]])
-    table, mount = geometry.table_to_n.as_matrix(), geometry.body_to_mount.as_matrix()
+    table, mount = geometry.table_to_n_matrix, geometry.body_to_mount_matrix
     if not np.array_equal(table, np.eye(3)):
         c = (table @ c.reshape(3, -1)).reshape(c.shape)
     if not np.array_equal(mount, np.eye(3)):

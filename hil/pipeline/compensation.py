@@ -34,7 +34,6 @@ class CalibrationFileError(ConfigError):
     """A calibration file that cannot be applied; the message names the file, the key and the reason."""
 
 
-
 class Compensation:
     """The inverse model of one calibration file for increments over ``period`` s."""
 
