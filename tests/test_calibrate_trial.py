@@ -54,7 +54,7 @@ def test_an_emulated_calibration_recovers_every_term_and_removes_the_bias_of_a_l
     assert np.sqrt(np.mean(errors**2)) < 1.5  # and as a whole they are errors of the size their sigmas say
     # each window holds its dwell's 800 samples, less any the gates took out on a loaded machine
     samples = [p["samples"] for p in doc["positions"]]
-    assert len(samples) == 18 and all(720 <= n <= 800 for n in samples), samples
+    assert len(samples) == 18 and all(720 <= n <= 800 for n in samples), f"{samples}"
     result = json.loads((out / "result.json").read_text())
     assert result["ended"] == "completed" and result["calibration"]["residual_max_ug"] < 30
     assert (out / "calibration.html").exists() and (out / "junit.xml").exists()

@@ -162,7 +162,7 @@ class CalibrationSequence:
                 return
             self._close(t - BRAKE_MARGIN_S)
         elif t >= self._window_start + length - 1e-9:
-            self._close(t)
+            self._close(self._window_start + length)  # the nominal end, whatever gap in the readings came before t
 
     def _close(self, end: float) -> None:
         step = self.steps[self._index]
