@@ -33,6 +33,8 @@ import time
 from collections.abc import Callable
 from dataclasses import fields, is_dataclass
 
+import numpy as np
+
 from drivers.acl import COMMANDS, AclCodec, AclCommand, AclError
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
@@ -110,12 +112,13 @@ def _valid_windows(codec: ByteCodec, stream: bytearray, starts: list[int], ends:
     """Every (offset, length, record, slot) where a sync word starts in the damaged bytes of a slot and
     the bytes from there form a frame the codec accepts: what the protocol cannot tell from a frame."""
     sync, header_size, out = codec.sync, codec.header_size, []
+    buf = np.frombuffer(bytes(stream), np.uint8)
     for k in damaged:
         stop = ends[k] + len(sync) - 1
         p = stream.find(sync, starts[k], stop)
         while p >= 0:
             if len(stream) - p >= header_size:
-                length = codec.frame_length(stream, p)
+                length = int(codec.frame_lengths(buf, np.array([p]))[0])
                 if 0 < length <= len(stream) - p:
                     try:
                         out.append((p, length, codec.decode(bytes(stream[p:p + length])), k))

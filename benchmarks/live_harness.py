@@ -1,20 +1,27 @@
 """The live harness at real time: CPU share of the harness process, latency, memory.
 
 Runs the default emulated trial (emulated devices in their own process) through the harness in
-this process and prints: CPU time of this process over the trial (share of one core), the
-chunk-arrival -> estimator-updated latency p50/p99/max, and the resident memory every minute.
+this process and prints: CPU time of this process over the trial (share of one core), the frames
+dropped and counted corrupt, the chunk-arrival -> estimator-updated latency and age p50/p99/max, the
+resident memory every minute, and the machine's load average before and after (the machine is shared).
+``--imu-rate`` runs the IMU faster than the table (1000 or 2000 Hz: one pulse train at the IMU rate,
+the table latching every n-th pulse at ``trial.rate_hz``).
 
-    .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml] [--batch N]
+    .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml]
+        [--imu-rate HZ] [--batch N]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import tempfile
 import threading
 import time
 from pathlib import Path
+
+import yaml
 
 from emulators.process import spawn_emulator
 from hil.config import load_config
@@ -32,15 +39,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0)
     parser.add_argument("--config", default="configs/emulated_swing.yaml")
+    parser.add_argument("--imu-rate", type=float, help="imu.rate_hz (default: the config's); the table keeps its rate")
     parser.add_argument("--batch", type=int, help="estimator.batch_samples (default: the config's)")
     args = parser.parse_args()
-    cfg = load_config(args.config)
-    if args.batch is not None:
-        cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
     text = Path(args.config).read_text()
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
-        emulator, ports = spawn_emulator(Path(args.config), out / "ports.json", "1", args.duration)
+        config = Path(args.config)
+        if args.imu_rate is not None:
+            data = yaml.safe_load(text)
+            data["imu"]["rate_hz"] = args.imu_rate
+            text = yaml.safe_dump(data)
+            config = out / "config.yaml"
+            config.write_text(text)
+        cfg = load_config(config)
+        if args.batch is not None:
+            cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
+        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration)
         trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None)
         memory: list[tuple[float, float]] = []
         stop = threading.Event()
@@ -62,7 +78,10 @@ def main() -> None:
         wall = wall1 - wall0
         lat = trial.latency.percentiles_ms()
         counts = trial.processor.counts()
-        print(f"estimator.batch_samples {cfg.estimator.batch_samples}")
+        load_after = os.getloadavg()
+        print(f"imu {cfg.imu_rate_hz:g} Hz ({cfg.imu.protocol}), table {cfg.trial.rate_hz:g} Hz, "
+              f"estimator.batch_samples {cfg.estimator.batch_samples}; load average (1, 5, 15 min) before "
+              + " ".join(f"{x:.2f}" for x in load_before) + ", after " + " ".join(f"{x:.2f}" for x in load_after))
         print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
               f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")
         print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "

@@ -11,7 +11,9 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar, Generic, TypeVar
 
-from hil.samples import ImuSample, TableSample
+import numpy as np
+
+from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
 
 R = TypeVar("R")
 Sample = ImuSample | TableSample
@@ -29,6 +31,20 @@ class Decoded(Generic[R]):
     sync_index: int
     host_time: float
     size: int  # bytes the frame occupied on the wire (CAN: payload bytes of all its messages)
+
+
+@dataclass(frozen=True, slots=True)
+class FrameBatch:
+    """The valid frames of one read as arrays: the codec's fields (a structured array, one row a frame),
+    their unwrapped sync indices (int64), the read's host time and the bytes each frame occupied."""
+
+    rows: np.ndarray
+    sync_index: np.ndarray
+    host_time: float
+    size: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.sync_index)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,6 +117,12 @@ class Codec(ABC, Generic[R]):
     @abstractmethod
     def to_sample(self, decoded: Decoded[R]) -> Sample:
         """The SI sample of a decoded frame."""
+
+    def to_samples(self, decoded: list[Decoded[R]]) -> ImuSamples | TableSamples:
+        """The SI samples of decoded frames, as arrays (a byte codec converts a :class:`FrameBatch` at once
+        with ``samples``)."""
+        samples = [self.to_sample(d) for d in decoded]
+        return (ImuSamples if self.kind == "imu" else TableSamples).stack(samples)
 
     @abstractmethod
     def from_sample(self, sample: Any, **device_fields: Any) -> R:

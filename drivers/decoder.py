@@ -1,23 +1,24 @@
 """The one decode loop: a stream's raw chunks -> framer -> codec -> samples, corrupt frames counted.
 
 Used by the trial's processor (live and replay) and by ``hil decode``; a frame the codec rejects is
-counted as corrupt and skipped, and the framer resynchronises on the bytes after it.
+counted as corrupt and skipped, and the framer resynchronises on the bytes after it. A byte stream's
+chunk becomes arrays at once: frames (:class:`~drivers.codec.FrameBatch`), then SI samples.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from drivers.codec import (
     Codec,
     Counters,
     Decoded,
-    DecodeError,
     Framer,
     RawChunk,
     StreamEvent,
 )
+from drivers.framing import ByteFramer
+from hil.samples import ImuSamples, TableSamples
 
 
 @dataclass
@@ -46,20 +47,23 @@ class StreamDecoder:
 
     def frames(self, chunk: RawChunk) -> list[Decoded]:
         """The complete frames of a chunk, still in device units (for captures)."""
+        self._resumed(chunk)
+        return self.framer.feed_chunk(chunk)
+
+    def _resumed(self, chunk: RawChunk) -> None:
         if chunk.data:
             self.outages += self._reconnects  # the device is back: the outages before count
             self._reconnects = 0
-        return self.framer.feed_chunk(chunk)
 
-    def feed(self, chunk: RawChunk) -> list[Any]:
-        """The samples (SI) of a chunk's complete frames."""
-        samples = []
-        for decoded in self.frames(chunk):
-            try:
-                samples.append(self.codec.to_sample(decoded))
-            except DecodeError:
-                self.framer.counters.corrupt += 1
-        return samples
+    def feed(self, chunk: RawChunk) -> ImuSamples | TableSamples:
+        """The samples (SI) of a chunk's complete frames; frames that give no sample are counted corrupt."""
+        if isinstance(self.framer, ByteFramer):
+            self._resumed(chunk)
+            frames = self.framer.feed_batch(chunk.data, chunk.host_time)
+            samples = self.codec.samples(frames)
+            self.framer.counters.corrupt += len(frames) - len(samples)
+            return samples
+        return self.codec.to_samples(self.frames(chunk))
 
     def event(self, event: StreamEvent) -> None:
         if event.event == "reconnected":

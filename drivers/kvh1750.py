@@ -7,10 +7,12 @@ import struct
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from drivers.codec import Decoded, DecodeError
-from drivers.crc import crc32_mpeg2
-from drivers.framing import ByteCodec
-from hil.samples import ImuSample
+import numpy as np
+
+from drivers.codec import Decoded, FrameBatch
+from drivers.crc import crc32_mpeg2, crc_rows
+from drivers.framing import ByteCodec, fixed_rows
+from hil.samples import ImuSample, ImuSamples
 from hil.units import G0
 
 HEADER = b"\xfe\x81\xff\x55"
@@ -18,6 +20,8 @@ FRAME_SIZE = 36
 STATUS_ALL_VALID = 0x77  # gyro x/y/z 0x01/0x02/0x04, accel x/y/z 0x10/0x20/0x40
 _BODY = struct.Struct(">4s6fBBh")
 _CRC = struct.Struct(">I")
+FIELDS = np.dtype([("header", "S4"), ("gyro", ">f4", 3), ("accel", ">f4", 3), ("status", "u1"), ("sequence", "u1"),
+                   ("temperature", ">i2"), ("crc", ">u4")])
 
 Vec3 = tuple[float, float, float]
 
@@ -61,17 +65,18 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
         f = imu.kvh1750
         return cls(rate_hz, f.gyro_unit, f.gyro_output, f.accel_unit)
 
-    def frame_length(self, buf: bytearray, start: int) -> int:
-        return FRAME_SIZE
+    def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        return np.full(len(starts), FRAME_SIZE, dtype=np.int64)
 
-    def decode(self, frame: bytes) -> KvhFrame:
-        if len(frame) != FRAME_SIZE or not frame.startswith(HEADER):
-            raise DecodeError(f"kvh1750: expected {FRAME_SIZE} bytes starting {HEADER.hex()}")
-        (crc,) = _CRC.unpack_from(frame, 32)
-        if crc32_mpeg2(frame[:32]) != crc:
-            raise DecodeError("kvh1750: CRC mismatch")
-        _, gx, gy, gz, ax, ay, az, status, sequence, temperature = _BODY.unpack_from(frame)
-        return KvhFrame((gx, gy, gz), (ax, ay, az), status, sequence, temperature)
+    def parse(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frames = fixed_rows(buf, starts, FRAME_SIZE)
+        rows = frames.view(FIELDS)[:, 0]
+        valid = crc_rows(crc32_mpeg2, frames[:, :32]) == rows["crc"]
+        return valid, rows[valid]
+
+    def record(self, row: Any) -> KvhFrame:
+        return KvhFrame(tuple(row["gyro"].tolist()), tuple(row["accel"].tolist()), int(row["status"]),
+                        int(row["sequence"]), int(row["temperature"]))
 
     def encode(self, record: KvhFrame) -> bytes:
         body = _BODY.pack(HEADER, *record.gyro, *record.accel, record.status, record.sequence & 0x7F,
@@ -81,10 +86,23 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
     def sequence(self, record: KvhFrame) -> int:
         return record.sequence
 
+    def sequences(self, rows: np.ndarray) -> np.ndarray:
+        return rows["sequence"].astype(np.int64)
+
+    def increments(self, gyro: np.ndarray, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(dtheta rad, dv m/s) of gyro and accel readings (..., 3) in device units."""
+        return np.asarray(gyro, dtype=float) * self._gyro_scale, np.asarray(accel, dtype=float) * self._accel_scale
+
+    def samples(self, frames: FrameBatch) -> ImuSamples:
+        dtheta, dv = self.increments(frames.rows["gyro"], frames.rows["accel"])
+        return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
+                          frames.rows["status"].astype(np.int64))
+
     def to_sample(self, decoded: Decoded[KvhFrame]) -> ImuSample:
-        r, g, a = decoded.record, self._gyro_scale, self._accel_scale
-        return ImuSample(decoded.sync_index, (r.gyro[0] * g, r.gyro[1] * g, r.gyro[2] * g),
-                         (r.accel[0] * a, r.accel[1] * a, r.accel[2] * a), decoded.host_time, None, r.status)
+        r = decoded.record
+        dtheta, dv = self.increments(r.gyro, r.accel)
+        return ImuSample(decoded.sync_index, tuple(dtheta.tolist()), tuple(dv.tolist()), decoded.host_time, None,
+                         r.status)
 
     def from_sample(self, sample: ImuSample, temperature: int = 25) -> KvhFrame:
         """The frame for an SI sample; its status byte is ``sample.status`` (use STATUS_ALL_VALID)."""

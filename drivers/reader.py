@@ -3,6 +3,11 @@
 A reader only reads: framing and decoding are the consumer's (:mod:`drivers.decoder`). It survives
 unplug/replug: when the transport fails it is closed and reopened with exponential back-off until it
 returns or the reader is stopped; the listeners hear of each outage and reconnection as events.
+
+On a byte stream a read returns every byte that has arrived, so a reader given ``gather_s`` lets that
+much time pass between reads that returned data (as a USB serial adapter's latency timer does): a read
+then carries the frames of that interval, and everything downstream handles them as one batch, at the
+cost of up to ``gather_s`` of waiting in the port's buffer (:data:`GATHER_S` for a live trial).
 """
 
 from __future__ import annotations
@@ -15,15 +20,18 @@ from drivers.codec import RawChunk, StreamEvent
 from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
 
+GATHER_S = 0.01  # s between reads of a live trial's byte streams: 2 frames at 200 Hz, 20 at 2 kHz
+
 
 class DeviceReader:
     """Reads one device until stopped: transport -> raw listeners."""
 
     def __init__(self, transport: Transport, raw_listeners: Iterable[RawListener] = (),
-                 backoff_s: tuple[float, float] = (0.05, 2.0)) -> None:
+                 backoff_s: tuple[float, float] = (0.05, 2.0), gather_s: float = 0.0) -> None:
         self.transport = transport
         self.raw_listeners = list(raw_listeners)
         self.backoff_s = backoff_s
+        self.gather_s = gather_s if transport.byte_stream else 0.0
         self.outages = 0  # times the transport failed after it had been open
         self.last_error: str | None = None
         self._stop = threading.Event()
@@ -59,7 +67,10 @@ class DeviceReader:
                 self._reconnect(exc)
                 continue
             if chunk is not None:
+                returned = time.monotonic()
                 self._handle(chunk)
+                if self.gather_s:
+                    self._stop.wait(self.gather_s - (time.monotonic() - returned))
 
     def _handle(self, chunk: RawChunk) -> None:
         for listener in self.raw_listeners:

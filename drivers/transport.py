@@ -82,6 +82,7 @@ class Transport(ABC):
     """A source of raw chunks that can be reopened after it fails."""
 
     stream: str
+    byte_stream: bool = False  # a read returns all bytes that have arrived (several frames after a wait)
 
     @abstractmethod
     def open(self) -> None:
@@ -98,6 +99,8 @@ class Transport(ABC):
 
 class SerialTransport(Transport):
     """A pyserial port by URL: ``/dev/ttyUSB0``, ``socket://host:port``, ``rfc2217://host:port``, ``loop://``."""
+
+    byte_stream = True
 
     def __init__(self, url: str, baudrate: int, stream: str) -> None:
         self.url, self.baudrate, self.stream = url, baudrate, stream

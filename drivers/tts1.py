@@ -8,10 +8,12 @@ import struct
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from drivers.codec import Decoded, DecodeError
-from drivers.crc import crc16_xmodem
-from drivers.framing import ByteCodec
-from hil.samples import TableSample
+import numpy as np
+
+from drivers.codec import Decoded, FrameBatch
+from drivers.crc import crc16_xmodem, crc_rows
+from drivers.framing import ByteCodec, fixed_rows
+from hil.samples import TableSample, TableSamples
 
 SYNC = b"\x54\x53\x01"  # sync word "TS" and version 1
 FRAME_SIZE = 24
@@ -19,6 +21,8 @@ UDEG_PER_RAD = 180e6 / math.pi
 _FULL_TURN_UDEG = 360_000_000
 _BODY = struct.Struct("<2sBBIiiiH")
 _CRC = struct.Struct(">H")
+FIELDS = np.dtype([("sync", "S3"), ("status", "u1"), ("sync_counter", "<u4"), ("angles_udeg", "<i4", 3),
+                   ("latch_delay_us", "<u2"), ("crc", ">u2")])
 
 
 class Status(enum.IntFlag):
@@ -71,17 +75,18 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
     def __init__(self, pulses_per_frame: int = 1) -> None:
         self.sequence_step = pulses_per_frame
 
-    def frame_length(self, buf: bytearray, start: int) -> int:
-        return FRAME_SIZE
+    def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        return np.full(len(starts), FRAME_SIZE, dtype=np.int64)
 
-    def decode(self, frame: bytes) -> Tts1Frame:
-        if len(frame) != FRAME_SIZE or not frame.startswith(SYNC):
-            raise DecodeError(f"tts1: expected {FRAME_SIZE} bytes starting {SYNC.hex()}")
-        (crc,) = _CRC.unpack_from(frame, 22)
-        if crc16_xmodem(frame[2:22]) != crc:
-            raise DecodeError("tts1: CRC mismatch")
-        _, _, status, counter, outer, middle, inner, delay = _BODY.unpack_from(frame)
-        return Tts1Frame(status, counter, (outer, middle, inner), delay)
+    def parse(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frames = fixed_rows(buf, starts, FRAME_SIZE)
+        rows = frames.view(FIELDS)[:, 0]
+        valid = crc_rows(crc16_xmodem, frames[:, 2:22]) == rows["crc"]
+        return valid, rows[valid]
+
+    def record(self, row: Any) -> Tts1Frame:
+        return Tts1Frame(int(row["status"]), int(row["sync_counter"]), tuple(row["angles_udeg"].tolist()),
+                         int(row["latch_delay_us"]))
 
     def encode(self, record: Tts1Frame) -> bytes:
         body = _BODY.pack(SYNC[:2], SYNC[2], record.status, record.sync_counter & 0xFFFFFFFF,
@@ -91,11 +96,23 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
     def sequence(self, record: Tts1Frame) -> int:
         return record.sync_counter
 
+    def sequences(self, rows: np.ndarray) -> np.ndarray:
+        return rows["sync_counter"].astype(np.int64)
+
+    @staticmethod
+    def si(angles_udeg: Any, latch_delay_us: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(angles rad, latch delay s) of device readings (angles (..., 3))."""
+        return np.asarray(angles_udeg, dtype=float) / UDEG_PER_RAD, np.asarray(latch_delay_us, dtype=float) * 1e-6
+
+    def samples(self, frames: FrameBatch) -> TableSamples:
+        angles, delay = self.si(frames.rows["angles_udeg"], frames.rows["latch_delay_us"])
+        return TableSamples(frames.sync_index, angles, np.full(len(frames), frames.host_time), delay,
+                            frames.rows["status"].astype(np.int64))
+
     def to_sample(self, decoded: Decoded[Tts1Frame]) -> TableSample:
         r = decoded.record
-        o, m, i = (a / UDEG_PER_RAD for a in r.angles_udeg)
-        return TableSample(decoded.sync_index, (o, m, i), decoded.host_time, None, r.latch_delay_us * 1e-6,
-                           r.status)
+        angles, delay = self.si(r.angles_udeg, r.latch_delay_us)
+        return TableSample(decoded.sync_index, tuple(angles.tolist()), decoded.host_time, None, float(delay), r.status)
 
     def from_sample(self, sample: TableSample) -> Tts1Frame:
         """The frame for an SI sample; the status byte is ``sample.status`` (see :func:`status_byte`)."""

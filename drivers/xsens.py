@@ -7,9 +7,11 @@ import struct
 from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
 
-from drivers.codec import Decoded, DecodeError
+import numpy as np
+
+from drivers.codec import Decoded, DecodeError, FrameBatch
 from drivers.framing import ByteCodec
-from hil.samples import ImuSample
+from hil.samples import ImuSample, ImuSamples
 
 PREAMBLE = b"\xfa\xff\x36"  # preamble, bus id (master), message id MTData2
 MAX_PAYLOAD = 2048  # longer announced lengths are taken as a false sync
@@ -43,16 +45,45 @@ ITEMS: dict[int, tuple[str, struct.Struct]] = {
 }
 _XDI_OF = {name: (xdi, s) for xdi, (name, s) in ITEMS.items()}
 _SCALARS = ("packet_counter", "sample_time_fine", "status_word")
+# One message as a row: -1 for an absent counter or word, NaN for an absent vector.
+FIELDS = np.dtype([("packet_counter", "i8"), ("sample_time_fine", "i8"), ("status_word", "i8"),
+                   ("delta_q", "f8", 4), ("delta_v", "f8", 3), ("acceleration", "f8", 3), ("rate_of_turn", "f8", 3)])
+_EMPTY_ROW = tuple(-1 if name in _SCALARS else (math.nan,) * FIELDS[name].shape[0] for name in FIELDS.names)
 
 
-def quaternion_to_rotation_vector(q: tuple[float, float, float, float]) -> Vec3:
-    """The rotation vector (rad) of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    norm = math.sqrt(x * x + y * y + z * z)
-    if norm == 0.0:
-        return (0.0, 0.0, 0.0)
-    k = 2.0 * math.atan2(norm, w) / norm
-    return (k * x, k * y, k * z)
+def rotation_vectors(q: np.ndarray) -> np.ndarray:
+    """The rotation vectors (N, 3) rad of (N, 4) unit quaternions (w, x, y, z)."""
+    norm = np.sqrt(q[:, 1] ** 2 + q[:, 2] ** 2 + q[:, 3] ** 2)
+    k = np.where(norm == 0.0, 0.0, 2.0 * np.arctan2(norm, q[:, 0]) / np.where(norm == 0.0, 1.0, norm))
+    return k[:, None] * q[:, 1:]
+
+
+def _items(frame: bytes) -> tuple | None:
+    """The row (see FIELDS) of one complete message, or None if it is not valid."""
+    header, length = (4, frame[3]) if frame[3] < 0xFF else (6, int.from_bytes(frame[4:6], "big"))
+    if len(frame) != header + length + 1 or sum(frame, -frame[0]) & 0xFF:
+        return None
+    values: dict[str, Any] = {}
+    pos, end = header, len(frame) - 1
+    while pos < end:
+        if end - pos < 3:
+            return None  # truncated item header
+        xdi, size = (frame[pos] << 8) | frame[pos + 1], frame[pos + 2]
+        pos += 3
+        if pos + size > end:
+            return None  # the item overruns the payload
+        item = ITEMS.get(xdi)
+        if item is not None:
+            name, layout = item
+            if size != layout.size:
+                return None
+            data = layout.unpack_from(frame, pos)
+            values[name] = data[0] if name in _SCALARS else data
+        pos += size
+    q = values.get("delta_q")
+    if q is not None and not abs(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0) < 1e-5:
+        return None  # the 8-bit checksum misses some multi-bit damage; a DeltaQ is always normalised
+    return tuple(values.get(name, empty) for name, empty in zip(FIELDS.names, _EMPTY_ROW))
 
 
 def rotation_vector_to_quaternion(v: Vec3) -> tuple[float, float, float, float]:
@@ -78,42 +109,33 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     def from_config(cls, imu: Any, rate_hz: float) -> XsensCodec:
         return cls(rate_hz)
 
-    def frame_length(self, buf: bytearray, start: int) -> int:
-        length = buf[start + 3]
-        if length < 0xFF:
-            return 4 + length + 1
-        length = (buf[start + 4] << 8) | buf[start + 5]
-        return 6 + length + 1 if length <= MAX_PAYLOAD else 0
+    check_name: ClassVar[str] = "checksum"
 
-    def decode(self, frame: bytes) -> MtData2Frame:
-        if len(frame) < 5 or not frame.startswith(PREAMBLE):
-            raise DecodeError("xsens-mtdata2: expected FA FF 36 LEN")
-        header, length = (4, frame[3]) if frame[3] < 0xFF else (6, int.from_bytes(frame[4:6], "big"))
-        if len(frame) != header + length + 1:
-            raise DecodeError("xsens-mtdata2: length does not match LEN")
-        if sum(frame, -frame[0]) & 0xFF:
-            raise DecodeError("xsens-mtdata2: checksum mismatch")
-        values: dict[str, Any] = {}
-        pos, end = header, len(frame) - 1
-        while pos < end:
-            if end - pos < 3:
-                raise DecodeError("xsens-mtdata2: truncated item header")
-            xdi, size = (frame[pos] << 8) | frame[pos + 1], frame[pos + 2]
-            pos += 3
-            if pos + size > end:
-                raise DecodeError(f"xsens-mtdata2: item 0x{xdi:04X} overruns the payload")
-            item = ITEMS.get(xdi)
-            if item is not None:
-                name, layout = item
-                if size != layout.size:
-                    raise DecodeError(f"xsens-mtdata2: item 0x{xdi:04X} has {size} bytes, expected {layout.size}")
-                data = layout.unpack_from(frame, pos)
-                values[name] = data[0] if name in _SCALARS else data
-            pos += size
-        q = values.get("delta_q")
-        if q is not None and not abs(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0) < 1e-5:
-            # The 8-bit checksum misses some multi-bit damage; a DeltaQ is always normalised.
-            raise DecodeError("xsens-mtdata2: DeltaQ is not a unit quaternion")
+    def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        short = buf[starts + 3].astype(np.int64)
+        extended = short == 0xFF
+        lengths = 4 + short + 1
+        if extended.any():
+            at = starts[extended]
+            payload = (buf[at + 4].astype(np.int64) << 8) | buf[at + 5]
+            lengths[extended] = np.where(payload <= MAX_PAYLOAD, 6 + payload + 1, 0)
+        return lengths
+
+    def parse(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Messages carry any items in any order: each is checked and read on its own."""
+        data = buf.tobytes()
+        values = [_items(data[p:p + n]) for p, n in zip(starts.tolist(), lengths.tolist())]
+        valid = np.array([v is not None for v in values], dtype=bool)
+        return valid, np.array([v for v in values if v is not None], dtype=FIELDS)
+
+    def record(self, row: Any) -> MtData2Frame:
+        values = {}
+        for name in FIELDS.names:
+            value = row[name]
+            if name in _SCALARS:
+                values[name] = None if value < 0 else int(value)
+            else:
+                values[name] = None if np.isnan(value[0]) else tuple(value.tolist())
         return MtData2Frame(**values)
 
     def encode(self, record: MtData2Frame) -> bytes:
@@ -134,22 +156,34 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     def sequence(self, record: MtData2Frame) -> int | None:
         return record.packet_counter
 
+    def sequences(self, rows: np.ndarray) -> np.ndarray:
+        return rows["packet_counter"]
+
+    def increments(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dtheta (N, 3) rad, dv (N, 3) m/s, usable (N,)) of message rows: from DeltaQ and DeltaV where
+        present, else from the rates over one sample; unusable where a message has neither."""
+        dt = 1.0 / self.rate_hz
+        q = rows["delta_q"]
+        dtheta = np.where(np.isnan(q[:, :1]), rows["rate_of_turn"] * dt, rotation_vectors(q))
+        dv = np.where(np.isnan(rows["delta_v"][:, :1]), rows["acceleration"] * dt, rows["delta_v"])
+        return dtheta, dv, ~(np.isnan(dtheta[:, 0]) | np.isnan(dv[:, 0]))
+
+    def samples(self, frames: FrameBatch) -> ImuSamples:
+        """Messages with neither increments nor rates are left out (counted by the caller)."""
+        dtheta, dv, usable = self.increments(frames.rows)
+        status = np.maximum(frames.rows["status_word"], 0)
+        return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time), status).take(usable)
+
     def to_sample(self, decoded: Decoded[MtData2Frame]) -> ImuSample:
-        r, dt = decoded.record, 1.0 / self.rate_hz
-        if r.delta_q is not None:
-            dtheta = quaternion_to_rotation_vector(r.delta_q)
-        elif r.rate_of_turn is not None:
-            dtheta = tuple(w * dt for w in r.rate_of_turn)
-        else:
-            raise DecodeError("xsens-mtdata2: message has neither DeltaQ nor RateOfTurn")
-        if r.delta_v is not None:
-            dv = r.delta_v
-        elif r.acceleration is not None:
-            dv = tuple(a * dt for a in r.acceleration)
-        else:
-            raise DecodeError("xsens-mtdata2: message has neither DeltaV nor Acceleration")
+        r = decoded.record
+        row = np.array([tuple(_EMPTY_ROW[k] if getattr(r, name) is None else getattr(r, name)
+                              for k, name in enumerate(FIELDS.names))], dtype=FIELDS)
+        dtheta, dv, usable = self.increments(row)
+        if not usable[0]:
+            raise DecodeError("xsens-mtdata2: message has neither DeltaQ/DeltaV nor RateOfTurn/Acceleration")
         device_time = None if r.sample_time_fine is None else r.sample_time_fine / SAMPLE_TIME_HZ
-        return ImuSample(decoded.sync_index, dtheta, dv, decoded.host_time, device_time, r.status_word or 0)
+        return ImuSample(decoded.sync_index, tuple(dtheta[0].tolist()), tuple(dv[0].tolist()), decoded.host_time,
+                         device_time, r.status_word or 0)
 
     def from_sample(self, sample: ImuSample, outputs: str = "increments") -> MtData2Frame:
         """The message for an SI sample: ``outputs`` "increments" (DeltaQ, DeltaV) or "rates"."""

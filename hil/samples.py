@@ -1,7 +1,8 @@
 """The records that flow between devices, drivers, the aligner and the estimators.
 
-Single samples travel as small frozen records on the live path; simulation and replay use the
-struct-of-arrays batches. All quantities are SI: rad, m/s, s. Gimbal angles are always ordered
+Decoded samples travel as struct-of-arrays batches, one per read, on the live path and in replay
+(single records remain for the emulators and the codecs' one-frame API); the aligner releases runs
+of aligned samples as batches, and a simulation or a CSV import feeds aligned batches directly. All quantities are SI: rad, m/s, s. Gimbal angles are always ordered
 (outer, middle, inner).
 """
 
@@ -38,6 +39,69 @@ class TableSample:
     status: int = 0
 
 
+@dataclass(frozen=True)
+class ImuSamples:
+    """Struct-of-arrays form of decoded IMU samples (the frames of one read): sync indices (N,) int64,
+    increments (N, 3), host receive times (N,), status words (N,)."""
+
+    sync_index: np.ndarray
+    dtheta: np.ndarray
+    dv: np.ndarray
+    host_time: np.ndarray
+    status: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.sync_index)
+
+    def take(self, mask: np.ndarray) -> ImuSamples:
+        """The samples where ``mask`` (or an index array) selects."""
+        return ImuSamples(self.sync_index[mask], self.dtheta[mask], self.dv[mask], self.host_time[mask],
+                          self.status[mask])
+
+    def records(self) -> list[ImuSample]:
+        """One record a sample."""
+        return [ImuSample(k, tuple(a), tuple(b), t, None, status) for k, a, b, t, status in zip(
+            self.sync_index.tolist(), self.dtheta.tolist(), self.dv.tolist(), self.host_time.tolist(),
+            self.status.tolist(), strict=True)]
+
+    @classmethod
+    def stack(cls, samples: list[ImuSample]) -> ImuSamples:
+        return cls(np.array([s.sync_index for s in samples], dtype=np.int64),
+                   np.array([s.dtheta for s in samples], dtype=float).reshape(-1, 3),
+                   np.array([s.dv for s in samples], dtype=float).reshape(-1, 3),
+                   np.array([s.host_time for s in samples], dtype=float), np.array([s.status for s in samples],
+                                                                                   dtype=np.int64))
+
+
+@dataclass(frozen=True)
+class TableSamples:
+    """Struct-of-arrays form of decoded table samples: sync indices (N,) int64, angles (N, 3) rad, host
+    receive times (N,), latch delays (N,) s, status bytes (N,)."""
+
+    sync_index: np.ndarray
+    angles: np.ndarray
+    host_time: np.ndarray
+    latch_delay: np.ndarray
+    status: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.sync_index)
+
+    def records(self) -> list[TableSample]:
+        """One record a sample."""
+        return [TableSample(k, tuple(a), t, None, d, status) for k, a, t, d, status in zip(
+            self.sync_index.tolist(), self.angles.tolist(), self.host_time.tolist(), self.latch_delay.tolist(),
+            self.status.tolist(), strict=True)]
+
+    @classmethod
+    def stack(cls, samples: list[TableSample]) -> TableSamples:
+        return cls(np.array([s.sync_index for s in samples], dtype=np.int64),
+                   np.array([s.angles for s in samples], dtype=float).reshape(-1, 3),
+                   np.array([s.host_time for s in samples], dtype=float),
+                   np.array([s.latch_delay for s in samples], dtype=float),
+                   np.array([s.status for s in samples], dtype=np.int64))
+
+
 @dataclass(frozen=True, slots=True)
 class AlignedSample:
     """What the estimator consumes: increments over (t - dt, t] and, when known, the table angles at t."""
@@ -61,10 +125,11 @@ class ImuGap:
 
 @dataclass(frozen=True)
 class AlignedBatch:
-    """Struct-of-arrays form of consecutive aligned samples (simulation, replay, CSV import).
+    """Struct-of-arrays form of consecutive aligned samples (the aligner's runs, simulation, CSV import).
 
     ``t`` (N,) ends each increment interval; ``dtheta`` and ``dv`` are (N, 3); ``angles`` is (N, 3)
-    (outer, middle, inner) at ``t`` or None when no turntable reference exists.
+    (outer, middle, inner) at ``t`` or None when no turntable reference exists (in the aligner's runs,
+    NaN rows for the samples without angles).
     """
 
     t: np.ndarray

@@ -73,7 +73,7 @@ class Decoding(RawListener):
 
     def on_raw(self, chunk) -> None:
         self.raw.append(chunk)
-        self.samples += self.decoder.feed(chunk)
+        self.samples += self.decoder.feed(chunk).records()
 
     def on_event(self, event) -> None:
         self.events.append(event)

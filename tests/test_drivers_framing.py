@@ -229,3 +229,21 @@ def test_a_backlog_read_after_a_host_stall_is_not_taken_for_counter_wraps():
     decoded = framer.feed(b"".join(frames[100:]), host_time=2.0)
     assert len(decoded) == 300 and framer.counters.missing == 0
     assert [d.sync_index for d in decoded] == list(range(decoded[0].sync_index, decoded[0].sync_index + 300))
+
+
+def test_adjoining_frames_after_a_held_up_writer_are_not_taken_for_wraps_but_lost_bytes_are_sized():
+    """The host times size a counter wrap only where bytes were lost: frames that adjoin in the stream
+    came one after the other, however long the writer was held up between them."""
+    from drivers.kvh1750 import Kvh1750Codec
+    from hil.samples import ImuSample
+
+    codec = Kvh1750Codec(rate_hz=1000.0)
+    frames = [codec.encode(codec.from_sample(ImuSample(k, (0.0,) * 3, (0.0, 0.0, 0.01)))) for k in range(1, 1001)]
+    framer = codec.framer()
+    framer.feed(b"".join(frames[:100]), host_time=0.1)
+    # the writer stalled for 0.3 s: the next 50 frames come late, adjoining the ones before
+    held = framer.feed(b"".join(frames[100:150]), host_time=0.45)
+    assert [d.sync_index for d in held] == list(range(101, 151)) and framer.counters.missing == 0
+    # then 300 frames are lost with a partial one (the port overflowed): the host time sizes the loss
+    lost = framer.feed(frames[150][:20] + b"".join(frames[451:500]), host_time=0.8)
+    assert lost[0].sync_index == 452 and framer.counters.missing == 301

@@ -19,8 +19,11 @@ instant lies within the last knot interval, where the error is ~1e-13 rad for a 
 - table gaps: interpolated across up to ``max_angle_gap_s``; beyond that the IMU samples go out
   without angles (counted).
 
-Decisions depend only on the order in which samples arrive, never on wall-clock time, so a
-replay of the same frames gives bit-identical output.
+Samples come in as the arrays of one read (:class:`~hil.samples.ImuSamples`, :class:`~hil.samples.TableSamples`)
+and go out as runs of consecutive aligned samples (:class:`~hil.samples.AlignedBatch`, NaN angles where
+a sample has none) and gaps: the interpolation and the release work on whole runs. Decisions depend
+only on the order in which reads arrive, never on wall-clock time, so a replay of the same frames
+gives bit-identical output.
 
 Fallback for devices without a sync input (``free_running``): each counter is mapped to host time by
 an :class:`~hil.pipeline.clock_model.AffineClock` fitted to the receive times, and the table's latch instants are
@@ -36,17 +39,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hil.pipeline.clock_model import AffineClock
-from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
+from hil.samples import AlignedBatch, ImuGap, ImuSample, ImuSamples, TableSample, TableSamples
 
 Vec3 = tuple[float, float, float]
+Released = AlignedBatch | ImuGap
 
 
-def lagrange_weights(x: float, knots: list[float]) -> list[float]:
-    """Weights w_j with ``p(x) = sum w_j y_j`` for the polynomial through (knots, y)."""
+def lagrange_weights(x, knots) -> list:
+    """Weights w_j with ``p(x) = sum w_j y_j`` for the polynomial through (knots, y); ``x`` (N,) with
+    ``knots`` (N, m) gives weights (N,) each."""
+    columns = knots if np.ndim(knots) == 1 else np.asarray(knots).T
     weights = []
-    for j, xj in enumerate(knots):
+    for j, xj in enumerate(columns):
         w = 1.0
-        for m, xm in enumerate(knots):
+        for m, xm in enumerate(columns):
             if m != j:
                 w *= (x - xm) / (xj - xm)
         weights.append(w)
@@ -92,10 +98,10 @@ class _TableKnots:
         self.angles.insert(i, angles)
         return True
 
-    def ready(self, t: float) -> bool:
-        """True when the knots :meth:`at` uses for ``t`` have all arrived."""
-        i = bisect.bisect_left(self.time, t)
-        return i < len(self.time) and max(0, i - 3) + 4 <= len(self.time)
+    def ready(self, t: np.ndarray) -> np.ndarray:
+        """Per instant, True when the knots :meth:`at` uses for it have all arrived."""
+        i = np.searchsorted(self.time, t, side="left")
+        return (i < len(self.time)) & (len(self.time) >= 4)
 
     def last_time(self) -> float:
         return self.time[-1] if self.time else -math.inf
@@ -106,23 +112,32 @@ class _TableKnots:
         if i:
             del self.index[:i], self.time[:i], self.angles[:i]
 
-    def at(self, t: float, max_gap: float) -> Vec3 | None:
-        """Angles at ``t`` from the cubic on the 4 knots ending at the first knot >= t (the first four at
-        the start); None across a gap longer than ``max_gap`` or beyond the last knot."""
-        i = bisect.bisect_left(self.time, t)
-        if i == len(self.time) or (i > 0 and self.time[i] - self.time[i - 1] > max_gap):
-            return None
-        if i == 0 and self.time[0] - t > max_gap:
-            return None
-        lo = max(0, i - 3)
-        hi = min(len(self.time), lo + 4)
-        weights = lagrange_weights(t, self.time[lo:hi])
-        value = sum(w * a for w, a in zip(weights, self.angles[lo:hi]))
-        return tuple(value.tolist())
+    def at(self, t: np.ndarray, max_gap: float) -> np.ndarray:
+        """Angles (N, 3) at instants ``t`` (N,) from the cubic on the 4 knots ending at the first knot >= t
+        (the first four at the start); NaN across a gap longer than ``max_gap`` or beyond the last knot."""
+        out = np.full((len(t), 3), np.nan)
+        if not self.time or not len(t):
+            return out
+        time = np.asarray(self.time)
+        i = np.searchsorted(time, t, side="left")
+        inside = i < len(time)
+        ic = np.minimum(i, len(time) - 1)
+        spans = np.where(i > 0, time[ic] - time[np.maximum(ic - 1, 0)], time[0] - t)
+        ok = inside & ~(spans > max_gap)
+        if not ok.any():
+            return out
+        lo = np.maximum(0, i[ok] - 3)[:, None] + np.arange(min(len(time), 4))  # at the start, the first 4
+        weights = lagrange_weights(t[ok], time[lo])
+        knots = np.asarray(self.angles)[lo]
+        value = 0
+        for j, w in enumerate(weights):
+            value = value + w[:, None] * knots[:, j]
+        out[ok] = value
+        return out
 
 
 class Aligner:
-    """Pairs IMU and table samples by sync count and yields :class:`AlignedSample` / :class:`ImuGap` in order.
+    """Pairs IMU and table samples by sync count and releases runs of aligned samples and gaps in order.
 
     ``imu_rate_hz`` and ``table_counter_rate_hz`` are the counters' rates: both the pulse train's when
     the table is synchronised (a table latching every fifth pulse of 1000 Hz counts 5, 10, 15 ...), the
@@ -142,16 +157,19 @@ class Aligner:
         self.max_angle_gap = max_angle_gap_s
         self.table_wait = table_wait_s
         self.counters = AlignerCounters()
-        self._pending: dict[int, ImuSample] = {}
+        # pending IMU samples, sorted by count
+        self._count = np.zeros(0, dtype=np.int64)
+        self._dtheta = np.zeros((0, 3))
+        self._dv = np.zeros((0, 3))
         self._next: int | None = None  # count of the next IMU sample to release
         self._first = 0  # count of the first IMU sample
         self._history: list[tuple[int, np.ndarray, np.ndarray]] = []  # last released (count, dtheta, dv)
         self._table = _TableKnots()
-        self._out: list[AlignedSample | ImuGap] = []
+        self._out: list[Released] = []
         self._last_angles: Vec3 | None = None
         self.clocks = (AffineClock(imu_rate_hz), AffineClock(table_counter_rate_hz)) if free_running else None
 
-    def imu_time(self, index: int) -> float:
+    def imu_time(self, index):
         return index * self.imu_period + self.imu_delay
 
     @property
@@ -159,122 +177,149 @@ class Aligner:
         """Start of the first IMU interval (the estimator's i_b0 instant); None before any IMU sample."""
         return None if self._next is None else self.imu_time(self._first) - self.imu_period
 
-    def add_imu(self, sample: ImuSample) -> list[AlignedSample | ImuGap]:
-        """Take one IMU sample; returns what became ready."""
-        k = sample.sync_index
+    def add_imu(self, sample: ImuSample) -> list[Released]:
+        """:meth:`add_imus` of one sample."""
+        return self.add_imus(ImuSamples.stack([sample]))
+
+    def add_table(self, sample: TableSample) -> list[Released]:
+        """:meth:`add_tables` of one sample."""
+        return self.add_tables(TableSamples.stack([sample]))
+
+    def add_imus(self, samples: ImuSamples) -> list[Released]:
+        """Take the IMU samples of one read; returns what became ready."""
+        if not len(samples):
+            return self._release()
+        k = samples.sync_index
         if self.clocks is not None:
-            self.clocks[0].add(k, sample.host_time)
+            for count, host_time in zip(k.tolist(), samples.host_time.tolist(), strict=True):
+                self.clocks[0].add(count, host_time)
         if self._next is None:
-            self._next = self._first = k
-        if k < self._next:
-            self.counters.imu_late += 1
-        elif k in self._pending:
-            self.counters.imu_duplicates += 1
-        else:
-            self._pending[k] = sample
+            self._next = self._first = int(k[0])
+        after = self._count[-1] if len(self._count) else self._next - 1
+        if k[0] > after and (len(k) == 1 or (np.diff(k) > 0).all()):  # in order: all new, after those pending
+            self._count = np.concatenate((self._count, k))
+            self._dtheta = np.concatenate((self._dtheta, samples.dtheta))
+            self._dv = np.concatenate((self._dv, samples.dv))
+            return self._release()
+        late = k < self._next
+        self.counters.imu_late += int(np.count_nonzero(late))
+        _, first = np.unique(k, return_index=True)
+        new = np.zeros(len(k), dtype=bool)
+        new[first] = True  # the first of repeats within the read
+        new &= ~late & ~np.isin(k, self._count)
+        self.counters.imu_duplicates += int(np.count_nonzero(~late & ~new))
+        count = np.concatenate((self._count, k[new]))
+        order = np.argsort(count, kind="stable")
+        self._count = count[order]
+        self._dtheta = np.concatenate((self._dtheta, samples.dtheta[new]))[order]
+        self._dv = np.concatenate((self._dv, samples.dv[new]))[order]
         return self._release()
 
-    def add_table(self, sample: TableSample) -> list[AlignedSample | ImuGap]:
-        """Take one table sample; returns what became ready."""
-        t = sample.sync_index * self.table_count_period + sample.latch_delay
-        if self.clocks is not None:
-            imu, table = self.clocks
-            table.add(sample.sync_index, sample.host_time)
-            if not imu.ready:
-                self.counters.table_unmapped += 1
-                return self._release()
-            # the table's latch instant on the host clock, then as an IMU count, then on the IMU time line
-            host = table.time(sample.sync_index) + sample.latch_delay
-            t = (host - imu.time(0)) / imu.period * self.imu_period
-        if not self._table.insert(sample.sync_index, t, np.asarray(sample.angles, dtype=float)):
-            self.counters.table_duplicates += 1
+    def add_tables(self, samples: TableSamples) -> list[Released]:
+        """Take the table samples of one read; returns what became ready."""
+        times = samples.sync_index * self.table_count_period + samples.latch_delay
+        for count, t, angles, delay, host_time in zip(samples.sync_index.tolist(), times.tolist(), samples.angles,
+                                                      samples.latch_delay.tolist(), samples.host_time.tolist(),
+                                                      strict=True):
+            if self.clocks is not None:
+                imu, table = self.clocks
+                table.add(count, host_time)
+                if not imu.ready:
+                    self.counters.table_unmapped += 1
+                    continue
+                # the table's latch instant on the host clock, then as an IMU count, then on the IMU time line
+                host = table.time(count) + delay
+                t = (host - imu.time(0)) / imu.period * self.imu_period
+            if not self._table.insert(count, t, angles):
+                self.counters.table_duplicates += 1
         return self._release()
 
-    def flush(self) -> list[AlignedSample | ImuGap]:
+    def flush(self) -> list[Released]:
         """End of the trial: release everything still waiting (angles where the table allows)."""
-        while self._pending:
-            self._release(final=True)
-            if self._pending and self._next not in self._pending:
-                self._close_gap(min(self._pending))
+        self._release(final=True)
         return self._take()
 
     # -- internals -------------------------------------------------------------------------------
 
-    def _take(self) -> list[AlignedSample | ImuGap]:
+    def _take(self) -> list[Released]:
         out, self._out = self._out, []
         return out
 
-    def _release(self, final: bool = False) -> list[AlignedSample | ImuGap]:
-        while self._pending:
+    def _release(self, final: bool = False) -> list[Released]:
+        while len(self._count):
             k = self._next
-            if k not in self._pending:
-                newest, resume = max(self._pending), min(self._pending)
+            if self._count[0] != k:
+                newest, resume = int(self._count[-1]), int(self._count[0])
                 if (newest - k < self.reorder_window or newest == resume) and not final:
                     break  # k may still arrive out of order; the fill needs the sample after the resume
-                if self.with_table and not final and not self._table_ready(self.imu_time(resume) - self.imu_period):
+                if self.with_table and not final and not self._table_ready(np.array([self.imu_time(resume)
+                                                                                     - self.imu_period]))[0]:
                     break  # the bridge needs the table angles at the gap's end
-                self._close_gap(min(self._pending))
+                self._close_gap(resume)
                 continue
-            t = self.imu_time(k)
-            angles = None
-            if self.with_table:
-                if not final and not self._table_ready(t):
-                    break  # the table sample for this instant is still on its way
-                angles = self._table.at(t, self.max_angle_gap)
-                if angles is None:
-                    self.counters.without_angles += 1
-            self._emit(k, self._pending.pop(k), t, angles)
+            run = int(np.argmax(self._count - k != np.arange(len(self._count)))) or len(self._count)
+            t = self.imu_time(self._count[:run])
+            if self.with_table and not final:
+                ready = self._table_ready(t)  # the table samples for these instants have arrived
+                run = int(np.argmin(ready)) if not ready.all() else run
+                t = t[:run]
+                if not run:
+                    break
+            angles = self._angles_at(t)
+            self.counters.without_angles += int(np.count_nonzero(np.isnan(angles[:, 0]))) if self.with_table else 0
+            self._emit(self._count[:run], t, self._dtheta[:run], self._dv[:run], angles)
+            self._count, self._dtheta, self._dv = self._count[run:], self._dtheta[run:], self._dv[run:]
         if self.with_table and self._next is not None:
             self._table.forget_before(self.imu_time(self._next))
         return self._take() if not final else []
 
-    def _table_ready(self, t: float) -> bool:
-        """The table samples around ``t`` have arrived, or the table is so far behind the IMU (more
-        than ``table_wait``) that the IMU goes on without it."""
-        if self._table.ready(t):
-            return True
-        ahead = self.imu_time(max(self._pending)) - max(self._table.last_time(), t)
-        return ahead >= self.table_wait
+    def _table_ready(self, t: np.ndarray) -> np.ndarray:
+        """Per instant, whether the table samples around it have arrived, or the table is so far behind
+        the IMU (more than ``table_wait``) that the IMU goes on without it."""
+        ahead = self.imu_time(int(self._count[-1])) - np.maximum(self._table.last_time(), t)
+        return self._table.ready(t) | (ahead >= self.table_wait)
 
-    def _emit(self, k: int, sample: ImuSample, t: float, angles: Vec3 | None) -> None:
-        self._out.append(AlignedSample(t, sample.dtheta, sample.dv, angles))
-        self._history = [*self._history[-1:], (k, np.asarray(sample.dtheta), np.asarray(sample.dv))]
-        self._last_angles = angles
-        self.counters.aligned += 1
-        self._next = k + 1
+    def _emit(self, k: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
+        self._out.append(AlignedBatch(t, dtheta, dv, angles))
+        last = [(int(k[j]), dtheta[j], dv[j]) for j in range(max(0, len(k) - 2), len(k))]
+        self._history = [*self._history, *last][-2:]
+        self._last_angles = None if np.isnan(angles[-1, 0]) else tuple(angles[-1].tolist())
+        self.counters.aligned += len(k)
+        self._next = int(k[-1]) + 1
 
     def _close_gap(self, resume: int) -> None:
         """Samples ``_next .. resume - 1`` are lost: fill them if short and surrounded, else bridge."""
         start = self._next
         missing = resume - start
         self.counters.imu_gaps += 1
-        after = [self._pending.get(resume), self._pending.get(resume + 1)]
-        if missing <= self.max_fill and len(self._history) == 2 and all(s is not None for s in after):
+        following = len(self._count) > 1 and self._count[1] == resume + 1
+        if missing <= self.max_fill and len(self._history) == 2 and following:
             self.counters.imu_filled += missing
-            for k, dtheta, dv in self._fill(start, resume, after):
-                self._emit(k, ImuSample(k, dtheta, dv), self.imu_time(k), self._angles_at(self.imu_time(k)))
+            k = np.arange(start, resume)
+            dtheta, dv = self._fill(start, resume)
+            t = self.imu_time(k)
+            self._emit(k, t, dtheta, dv, self._angles_at(t))
             return
         self.counters.imu_bridged += missing
         t_start, t_end = self.imu_time(start) - self.imu_period, self.imu_time(resume) - self.imu_period
-        end_angles = self._angles_at(t_end)
+        end = self._angles_at(np.array([t_end]))[0]
+        end_angles = None if np.isnan(end[0]) else tuple(end.tolist())
         self._out.append(ImuGap(t_start, t_end, self._last_angles, end_angles))
         self._history = []
         self._last_angles = end_angles
         self._next = resume
 
-    def _angles_at(self, t: float) -> Vec3 | None:
-        return self._table.at(t, self.max_angle_gap) if self.with_table else None
+    def _angles_at(self, t: np.ndarray) -> np.ndarray:
+        return self._table.at(t, self.max_angle_gap) if self.with_table else np.full((len(t), 3), np.nan)
 
-    def _fill(self, start: int, resume: int, after: list[ImuSample]) -> list[tuple[int, Vec3, Vec3]]:
-        """Increments of the missing samples from the cubic through the cumulative sums around the gap."""
+    def _fill(self, start: int, resume: int) -> tuple[np.ndarray, np.ndarray]:
+        """Increments (n, 3) of the missing samples from the cubic through the cumulative sums around the gap."""
         (k1, th1, v1), (k2, th2, v2) = self._history
         known = (float(k1 - 1), float(k1), float(k2))
-        th = cumulative_cubic(known, (np.zeros(3), th1, th1 + th2), float(resume),
-                              (np.asarray(after[0].dtheta), np.asarray(after[1].dtheta)))
-        v = cumulative_cubic(known, (np.zeros(3), v1, v1 + v2), float(resume),
-                             (np.asarray(after[0].dv), np.asarray(after[1].dv)))
-        return [(k, tuple((th(k) - th(k - 1)).tolist()), tuple((v(k) - v(k - 1)).tolist()))
-                for k in range(start, resume)]
+        th = cumulative_cubic(known, (np.zeros(3), th1, th1 + th2), float(resume), (self._dtheta[0], self._dtheta[1]))
+        v = cumulative_cubic(known, (np.zeros(3), v1, v1 + v2), float(resume), (self._dv[0], self._dv[1]))
+        k = range(start, resume)
+        return np.array([th(j) - th(j - 1) for j in k]), np.array([v(j) - v(j - 1) for j in k])
 
 
 def cumulative_cubic(x_known, y_known, x_resume: float, increments_after):

@@ -20,7 +20,7 @@ import numpy as np
 
 from hil.config import ConfigError
 from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate
-from hil.samples import AlignedBatch, ImuSample
+from hil.samples import AlignedBatch, ImuSamples
 from hil.units import ARCSEC, DEG_PER_H, G0, PPM, UG
 
 UG_PER_G2 = UG / G0**2  # 1/(m/s^2) per ug/g^2
@@ -44,14 +44,12 @@ class Compensation:
         self.period = period
         self.applied = {"path": self.path, "sha256": hashlib.sha256(data).hexdigest(), **applied_terms(doc)}
 
-    def samples(self, samples: list[ImuSample]) -> list[ImuSample]:
+    def samples(self, samples: ImuSamples) -> ImuSamples:
         """Decoded IMU samples with compensated increments (one vectorised call a chunk)."""
-        if not samples:
+        if not len(samples):
             return samples
-        dtheta, dv = compensate(self.accel, self.gyro, np.array([s.dtheta for s in samples]),
-                                np.array([s.dv for s in samples]), self.period)
-        return [dataclasses.replace(s, dtheta=tuple(a), dv=tuple(b))
-                for s, a, b in zip(samples, dtheta.tolist(), dv.tolist(), strict=True)]
+        dtheta, dv = compensate(self.accel, self.gyro, samples.dtheta, samples.dv, self.period)
+        return dataclasses.replace(samples, dtheta=dtheta, dv=dv)
 
     def batch(self, batch: AlignedBatch) -> AlignedBatch:
         """A batch with compensated increments, each over its own interval."""

@@ -16,7 +16,6 @@ import numpy as np
 
 from hil.config import ImuConfig
 from hil.frames import Earth, TableGeometry, table_body_rotation
-from hil.samples import ImuSample
 from hil.units import DEG, G0
 
 RATE_MARGIN = 2.0  # times the fastest configured gimbal rate limit
@@ -27,7 +26,7 @@ GATE_FRACTION = 0.01  # ... this fraction of the sample's rotation
 
 
 class ImuPlausibility:
-    """``ok(sample)`` for samples of ``rate_hz``; ``rejected`` counts the failures."""
+    """``ok(dtheta, dv)`` for the samples (N, 3) of a read at ``rate_hz``; ``rejected`` counts the failures."""
 
     def __init__(self, rate_hz: float, gravity: float, max_rate: float,
                  force_tolerance: float | None = None) -> None:
@@ -38,13 +37,15 @@ class ImuPlausibility:
         self.rejected = 0
         self.last_rejected: tuple[float, float] | None = None  # (|f| in g, rate / max rate) of the last failure
 
-    def ok(self, sample: ImuSample) -> bool:
-        angle = math.hypot(*sample.dtheta)
-        force = math.hypot(*sample.dv) / self.period
-        good = angle <= self.max_angle and abs(force - self.gravity) <= self.force_tolerance
-        if not good:
-            self.rejected += 1
-            self.last_rejected = (force / self.gravity, angle / self.max_angle)
+    def ok(self, dtheta: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """Per sample (N,), True where it is plausible."""
+        angle = np.sqrt(np.einsum("ij,ij->i", dtheta, dtheta))
+        force = np.sqrt(np.einsum("ij,ij->i", dv, dv)) / self.period
+        good = (angle <= self.max_angle) & (np.abs(force - self.gravity) <= self.force_tolerance)
+        if not good.all():
+            self.rejected += len(good) - int(good.sum())
+            last = np.flatnonzero(~good)[-1]
+            self.last_rejected = (float(force[last]) / self.gravity, float(angle[last]) / self.max_angle)
         return good
 
     def diagnosis(self, keys: UnitKeys) -> str:

@@ -27,7 +27,7 @@ from hil.pipeline.plausibility import (
     UnitKeys,
 )
 from hil.pipeline.time_offset import TimeOffsetEstimator
-from hil.samples import AlignedBatch, AlignedSample, ImuGap, StreamCounts
+from hil.samples import AlignedBatch, ImuGap, StreamCounts
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
@@ -69,8 +69,9 @@ class TrialProcessor:
         self.gate = GyroTableGate(self.earth, self.geometry)
         self.watch = RejectionWatch(cfg.imu_rate_hz)
         self._stalled_by: ImuPlausibility | GyroTableGate | None = None
-        self._previous: AlignedSample | None = None  # the last sample the estimator took
-        self._block: list[AlignedSample] = []  # aligned samples waiting for the estimator
+        self._previous: tuple[float, np.ndarray | None] | None = None  # (t, angles) of the last sample taken
+        self._block: list[AlignedBatch] = []  # aligned runs waiting for the estimator
+        self._blocked = 0  # ... and their samples
         self._t_end = 0.0
         self.updates = 0  # blocks handed to the estimator
         self.estimator: OnlineEstimator | None = None
@@ -98,18 +99,17 @@ class TrialProcessor:
         if isinstance(item, StreamEvent):
             decoder.event(item)
             return
-        ready: list[AlignedSample | ImuGap] = []
         samples = decoder.feed(item)
-        if self.compensation is not None and item.stream == IMU:
+        if item.stream == TABLE:
+            self._estimate(self.aligner.add_tables(samples))
+            return
+        if self.compensation is not None:
             samples = self.compensation.samples(samples)
-        for sample in samples:
-            if item.stream == TABLE:
-                ready += self.aligner.add_table(sample)
-            elif self.plausibility.ok(sample):
-                ready += self.aligner.add_imu(sample)
-            else:
-                self._rejected(self.plausibility)
-        self._estimate(ready)
+        good = self.plausibility.ok(samples.dtheta, samples.dv)
+        if not good.all():
+            self._rejected(self.plausibility, len(good) - int(good.sum()))
+            samples = samples.take(good)
+        self._estimate(self.aligner.add_imus(samples))
 
     def feed_batch(self, batch: AlignedBatch) -> None:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
@@ -211,7 +211,7 @@ class TrialProcessor:
                           "without_angles": counts.extra["aligner_without_angles"]}
         return out
 
-    def _estimate(self, ready: list[AlignedSample | ImuGap], final: bool = False) -> None:
+    def _estimate(self, ready: list[AlignedBatch | ImuGap], final: bool = False) -> None:
         """Hand aligned samples to the estimator in blocks of ``estimator.batch_samples`` (a gap or the
         end closes a block early): the block boundaries depend on the samples only, so a replay
         updates the estimator exactly as the live run did."""
@@ -222,68 +222,84 @@ class TrialProcessor:
         before = len(self.estimator.snapshots)
         if ready:
             last = ready[-1]
-            self._t_end = last.t if isinstance(last, AlignedSample) else last.t_end
+            self._t_end = float(last.t[-1]) if isinstance(last, AlignedBatch) else last.t_end
+        size = self.cfg.estimator.batch_samples
         for item in ready:
-            if isinstance(item, AlignedSample):
+            if isinstance(item, AlignedBatch):
                 self._block.append(item)
-                if len(self._block) >= self.cfg.estimator.batch_samples:
-                    self._update(self._block)
-                    self._block = []
+                self._blocked += len(item)
+                if self._blocked >= size:
+                    run = _joined(self._block)
+                    full = self._blocked // size * size
+                    for start in range(0, full, size):
+                        self._update(_part(run, start, start + size))
+                    self._block, self._blocked = [_part(run, full, len(run))], len(run) - full
                 continue
-            self._update(self._block)
-            self._block = []
+            self._update(_joined(self._block))
+            self._block, self._blocked = [], 0
             self.bridged_without_table += not self.estimator.bridge(item)
             self.time_offset.restart()
-            self._previous = None if item.angles_end is None else AlignedSample(item.t_end, (0.0,) * 3,
-                                                                                (0.0,) * 3, item.angles_end)
+            self._previous = None if item.angles_end is None else (item.t_end, np.asarray(item.angles_end))
         if final:
-            self._update(self._block)
-            self._block = []
+            self._update(_joined(self._block))
+            self._block, self._blocked = [], 0
         self._snapshots_from(before)
 
-    def _update(self, run: list[AlignedSample]) -> None:
-        self.updates += bool(run)
+    def _update(self, run: AlignedBatch | None) -> None:
+        if run is None or not len(run):
+            return
+        self.updates += 1
         for chunk in self._gated(run):
             if isinstance(chunk, ImuGap):
                 self.estimator.bridge(chunk)
                 self.time_offset.restart()
                 continue
-            self.estimator.update_samples(chunk)
-            self.time_offset.add(chunk)
+            known = not np.isnan(chunk.angles).any()
+            self.estimator.update_many(AlignedBatch(chunk.t, chunk.dtheta, chunk.dv, chunk.angles if known else None))
+            self.time_offset.add(chunk.t, chunk.dtheta, chunk.angles)
             if self._on_samples is not None:
-                self._on_samples(np.array([s.t for s in chunk]) - self.estimator.t0, np.array([s.dtheta for s in chunk]),
-                                 np.array([s.dv for s in chunk]),
-                                 np.array([s.angles or (np.nan,) * 3 for s in chunk], dtype=float))
-        with_angles = [s for s in run if s.angles is not None]
-        if with_angles and self._on_table is not None:
-            self._on_table(np.array([s.t for s in with_angles]) - self.estimator.t0,
-                           np.array([s.angles for s in with_angles], dtype=float))
+                self._on_samples(chunk.t - self.estimator.t0, chunk.dtheta, chunk.dv, chunk.angles)
+        with_angles = ~np.isnan(run.angles[:, 0])
+        if with_angles.any() and self._on_table is not None:
+            self._on_table(run.t[with_angles] - self.estimator.t0, run.angles[with_angles])
 
-    def _gated(self, run: list[AlignedSample]) -> list[list[AlignedSample] | ImuGap]:
+    def _gated(self, run: AlignedBatch) -> list[AlignedBatch | ImuGap]:
         """The run split where the gyro disagrees with the table: those samples become bridged gaps."""
         previous = self._previous
-        self._previous = run[-1] if run else previous
-        if not run or previous is None or previous.angles is None or any(s.angles is None for s in run):
-            if run:
-                self.watch.taken()
-            return [run] if run else []
-        t_end = np.array([s.t for s in run])
-        t_start = np.concatenate(([previous.t], t_end[:-1]))
-        angles = np.array([s.angles for s in run])
-        starts = np.vstack(([previous.angles], angles[:-1]))
-        good = self.gate.consistent(t_start, t_end, starts, angles, np.array([s.dtheta for s in run]))
+        last = run.angles[-1]
+        self._previous = (float(run.t[-1]), None if np.isnan(last[0]) else last)
+        if previous is None or previous[1] is None or np.isnan(run.angles).any():
+            self.watch.taken()
+            return [run]
+        t_end, angles = run.t, run.angles
+        t_start = np.concatenate(([previous[0]], t_end[:-1]))
+        starts = np.vstack((previous[1], angles[:-1]))
+        good = self.gate.consistent(t_start, t_end, starts, angles, run.dtheta)
         if good.any():
             self.watch.taken(len(good) - 1 - int(np.flatnonzero(good)[-1]))
         else:
             self._rejected(self.gate, len(good))
         if good.all():
             return [run]
-        out: list[list[AlignedSample] | ImuGap] = []
-        for k, sample in enumerate(run):
+        out: list[AlignedBatch | ImuGap] = []
+        k = 0
+        while k < len(good):
             if good[k]:
-                if not out or isinstance(out[-1], ImuGap):
-                    out.append([])
-                out[-1].append(sample)
+                stop = k + int(np.argmin(good[k:])) if not good[k:].all() else len(good)
+                out.append(_part(run, k, stop))
+                k = stop
             else:
-                out.append(ImuGap(t_start[k], t_end[k], tuple(starts[k]), sample.angles))
+                out.append(ImuGap(t_start[k], t_end[k], tuple(starts[k]), tuple(angles[k].tolist())))
+                k += 1
         return out
+
+
+def _part(run: AlignedBatch, start: int, stop: int) -> AlignedBatch:
+    return AlignedBatch(run.t[start:stop], run.dtheta[start:stop], run.dv[start:stop], run.angles[start:stop])
+
+
+def _joined(runs: list[AlignedBatch]) -> AlignedBatch | None:
+    """One run of consecutive runs (None for none)."""
+    if len(runs) < 2:
+        return runs[0] if runs else None
+    return AlignedBatch(*(np.concatenate([getattr(r, name) for r in runs]) for name in ("t", "dtheta", "dv", "angles")))

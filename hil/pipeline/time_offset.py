@@ -16,7 +16,6 @@ from collections import deque
 import numpy as np
 
 from hil.frames import Earth, TableGeometry
-from hil.samples import AlignedSample
 
 WINDOW_S = 60.0  # a continuous stretch contributes its last minute
 MIN_WINDOW_S = 4.0  # shorter stretches (between IMU gaps) are not used
@@ -33,18 +32,22 @@ class TimeOffsetEstimator:
         self.rate_hz = rate_hz
         size = int(WINDOW_S * rate_hz)
         self._t: deque[float] = deque(maxlen=size)
-        self._dtheta: deque[tuple[float, float, float]] = deque(maxlen=size)
-        self._angles: deque[tuple[float, float, float]] = deque(maxlen=size)
+        self._dtheta: deque[list[float]] = deque(maxlen=size)
+        self._angles: deque[list[float]] = deque(maxlen=size)
         self._done: list[tuple[float, int]] = []  # (offset, samples) of finished windows
 
-    def add(self, samples: list[AlignedSample]) -> None:
-        for s in samples:
-            if s.angles is None:
+    def add(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
+        """Consecutive aligned samples: times (N,), gyro increments and angles (N, 3); a sample without
+        angles (NaN) is a discontinuity."""
+        missing = np.flatnonzero(np.isnan(angles[:, 0]))
+        start = 0
+        for stop in [*missing.tolist(), len(t)]:
+            self._t.extend(t[start:stop].tolist())
+            self._dtheta.extend(dtheta[start:stop].tolist())
+            self._angles.extend(angles[start:stop].tolist())
+            if stop < len(t):
                 self.restart()
-                continue
-            self._t.append(s.t)
-            self._dtheta.append(s.dtheta)
-            self._angles.append(s.angles)
+            start = stop + 1
 
     def restart(self) -> None:
         """A discontinuity (gap): keep the estimate of the window so far, and start a new one."""

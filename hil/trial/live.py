@@ -23,7 +23,7 @@ import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent
 from drivers.latency import LatencyHistogram
-from drivers.reader import DeviceReader
+from drivers.reader import GATHER_S, DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
 from hil.config import Config
@@ -154,7 +154,9 @@ class LiveTrial:
         feed = ViewerFeed(viewer, self._live_health)
         self.motion_check = motion_check
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
-        self.readers = [DeviceReader(t, raw_listeners=[self.fanout]) for t in transports(cfg, ports).values()]
+        gather = GATHER_S if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
+        self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather)
+                        for t in transports(cfg, ports).values()]
 
     def run(self) -> str:
         """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``.
