@@ -25,6 +25,7 @@ from drivers.tap import message_to_chunk
 from hil.config import InputError
 
 POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request promptly
+SOCKET_READ_MAX = 1 << 16  # bytes taken from a socket:// port in one read (a TCP receive buffer's worth)
 
 
 class TransportError(InputError, OSError):
@@ -140,10 +141,22 @@ class SerialTransport(Transport):
         try:
             data = self.port.read(self.port.in_waiting or 1)
             if data:
-                data += self.port.read(self.port.in_waiting)
+                data += self._arrived()
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"{self.stream}: read from {self.url} failed: {exc}") from exc
         return RawChunk(self.stream, time.time(), data) if data else None
+
+    def _arrived(self) -> bytes:
+        """The bytes that have arrived, without waiting. A socket:// port's ``in_waiting`` only says whether
+        any have (pyserial polls the socket: 0 or 1), so it reads them at once with no timeout."""
+        waiting = self.port.in_waiting
+        if not waiting or not self.url.startswith("socket://"):
+            return self.port.read(waiting) if waiting else b""
+        self.port.timeout = 0
+        try:
+            return self.port.read(SOCKET_READ_MAX)
+        finally:
+            self.port.timeout = POLL_S
 
     def write(self, data: bytes) -> None:
         if self.port is None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import select
+import socket
 import threading
 import time
 import tty
@@ -242,3 +243,20 @@ def test_a_reused_pty_number_is_not_reopened():
         for m, s in held:
             os.close(s)
             os.close(m)
+
+
+def test_a_socket_port_read_takes_every_byte_that_has_arrived():
+    """pyserial's socket:// ``in_waiting`` is only 0 or 1: a read must still take the whole backlog."""
+    server = socket.create_server(("127.0.0.1", 0))
+    transport = SerialTransport(f"socket://127.0.0.1:{server.getsockname()[1]}", 115200, "imu")
+    transport.open()
+    peer, _ = server.accept()
+    try:
+        payload = bytes(range(256)) * 40
+        peer.sendall(payload)  # on the loopback the bytes are in the receiving socket once sendall returns
+        chunk = transport.read()
+        assert chunk is not None and chunk.data == payload, None if chunk is None else len(chunk.data)
+    finally:
+        transport.close()
+        peer.close()
+        server.close()
