@@ -60,7 +60,7 @@ def main() -> None:
                 wall = float("inf")
                 for _ in range(args.repeat):
                     start_pass, rows = time.perf_counter(), []
-                    gather(client, tasks, rows, Path(tmp))
+                    gather(client, run_one, tasks, rows, Path(tmp))
                     wall = min(wall, time.perf_counter() - start_pass)
                     assert sorted(rows, key=lambda r: r["id"]) == serial, "the cluster's rows differ from the serial ones"
                 empty = float("inf")
