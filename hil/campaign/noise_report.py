@@ -32,19 +32,24 @@ def _ratios(rows: list[dict[str, Any]], point: int, term: str) -> np.ndarray:
 
 
 def _histograms(summary: dict, rows: list[dict[str, Any]], terms: list[str], plt) -> bytes:
-    fig, axes = plt.subplots(1, len(terms), figsize=(3.2 * len(terms) + 1, 3.4), squeeze=False)
-    for ax, term in zip(axes[0], terms):
+    columns = min(len(terms), 3)
+    rows_ = -(-len(terms) // columns)
+    fig, axes = plt.subplots(rows_, columns, figsize=(3.6 * columns, 3.0 * rows_ + 0.8), squeeze=False)
+    for ax in axes.flat[len(terms):]:
+        ax.set_visible(False)
+    for ax, term in zip(axes.flat, terms):
         for p, label in zip(summary["points"], point_labels(summary["points"])):
             ratios = _ratios(rows, p["point"], term)
             if ratios.size:
                 ax.hist(ratios, bins=20, density=True, histtype="step", label=label)
         ax.axvline(1.0, color="k", linestyle="--", linewidth=0.8)
         ax.set_xlabel(f"{term} fitted / truth", fontsize=8)
-    axes[0][0].set_ylabel("density (x, y, z pooled)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("density (x, y, z pooled)", fontsize=8)
     if len(summary["points"]) <= 8:
-        axes[0][-1].legend(fontsize=7)
+        fig.legend(*axes.flat[0].get_legend_handles_labels(), fontsize=7, loc="lower center", ncols=2)
     fig.suptitle("Fitted noise terms over the configured ones")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.08 if len(summary["points"]) <= 8 else 0.0, 1.0, 1.0))
     return png(fig)
 
 

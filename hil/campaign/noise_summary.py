@@ -6,7 +6,8 @@ degrees of freedom) of v, the mean relative error mean((v_i - t) / t), and the c
 runs whose interval [lower_i, upper_i] contains t. When the intervals have their nominal level p (noise.json
 ``ci.level``), K ~ Binomial(M, p), so c lies in ``[F^-1(0.025) / M, F^-1(0.975) / M]`` (F the binomial
 distribution function) with at least 95 % probability: a coverage outside that band says the intervals are
-too narrow (below) or too wide (above). A run that cannot resolve a term has no interval for it: it counts in
+too narrow (below) or too wide (above); the point's headline ``coverage_consistent`` is every coverage
+inside its band (``coverage_above`` and ``coverage_below`` count the others). A run that cannot resolve a term has no interval for it: it counts in
 ``unresolved``, not in M. A term the config does not put in (truth 0) is counted when a run resolves it
 (``resolved``), with no statistics.
 """
@@ -38,12 +39,12 @@ def term_axis(rows: list[dict[str, Any]], term: str, axis: int, nominal: float) 
     """The statistics of one term on one axis over the done runs ``rows`` (one sweep point: one truth)."""
     truth = rows[0].get(f"{TRUTH}.{term}.{axis}") or 0.0
     sensor, key = term.split(".")
-    found = [(row[f"{term}.{axis}"], row[f"ci.{sensor}.{key}.lower.{axis}"], row[f"ci.{sensor}.{key}.upper.{axis}"])
-             for row in rows if row.get(f"{term}.{axis}") is not None]
+    found = [row for row in rows if row.get(f"{term}.{axis}") is not None]
     out: dict[str, Any] = {"truth": truth, "resolved": len(found), "unresolved": len(rows) - len(found)}
     if not truth > 0.0 or not found:
         return out
-    values, lower, upper = (np.array(column, dtype=float) for column in zip(*found))
+    values, lower, upper = (np.array([row[f"{prefix}.{axis}"] for row in found], dtype=float)
+                            for prefix in (term, f"ci.{sensor}.{key}.lower", f"ci.{sensor}.{key}.upper"))
     covered = int(np.sum((lower <= truth) & (truth <= upper)))
     low, high = coverage_band(len(found), nominal)
     coverage = covered / len(found)
@@ -62,8 +63,11 @@ def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]
         return out
     nominal = float(done[0][CI_LEVEL])
     terms = {term: [term_axis(done, term, k, nominal) for k in range(AXES)] for term in TERM_KEYS}
-    insides = [axis["coverage_inside"] for per_axis in terms.values() for axis in per_axis if "coverage_inside" in axis]
-    return {**out, "ci_level": nominal, "terms": terms, "coverage_consistent": bool(insides) and all(insides)}
+    tested = [a for per_axis in terms.values() for a in per_axis if "coverage" in a]
+    above = sum(a["coverage"] > a["coverage_band"][1] for a in tested)
+    below = sum(a["coverage"] < a["coverage_band"][0] for a in tested)
+    return {**out, "ci_level": nominal, "terms": terms, "coverage_tested": len(tested), "coverage_above": above,
+            "coverage_below": below, "coverage_consistent": bool(tested) and above == below == 0}
 
 
 def _joined(texts: list[str]) -> str:
@@ -76,8 +80,12 @@ def point_lines(p: dict[str, Any]) -> list[str]:
     label = point_label(p["values"])
     if "terms" not in p:
         return [f"  {label}: no run done"]
-    verdict = "consistent" if p["coverage_consistent"] else "NOT consistent"
-    lines = [f"  {label}: {p['done']} runs, coverage {verdict} with the {p['ci_level']:.1%} level of the intervals"]
+    head = f"  {label}: {p['done']} runs, coverage of the {p['ci_level']:.1%} intervals"
+    if p["coverage_consistent"]:
+        lines = [f"{head} consistent with their level on all {p['coverage_tested']} terms and axes"]
+    else:
+        lines = [(f"{head} NOT consistent with their level: of {p['coverage_tested']} terms and axes, "
+                 f"{p['coverage_above']} above their band (too wide), {p['coverage_below']} below (too narrow)")]
     for term, per_axis in p["terms"].items():
         shown = [a for a in per_axis if "coverage" in a]
         if not shown:
