@@ -99,16 +99,18 @@ def test_bias_instability_truth_is_the_floor_of_the_emulators_gauss_markov_sum()
     rate, b = 100.0, (0.5, 2.0, 20.0)
     truth = noise_truth(ImuErrors(gyro_bias_instability_dph=b, accel_bias_instability_ug=b), rate)
     phi = np.exp(-1.0 / rate / CORRELATION_TIMES)
-    for k in range(3):
-        variance = (b[k] * DEG_PER_H) ** 2 * math.log(4.0) / math.pi
-        def autocovariance(d, variance=variance):
-            return variance * np.sum(phi[:, None] ** np.abs(d)[None, :], axis=0)
 
-        for tau in (1.28, 10.24, 163.84, 1310.72):
-            floor = math.sqrt(exact_avar(autocovariance, round(tau * rate)) / FLICKER_FLOOR)
-            assert floor == pytest.approx(truth["gyro"]["bias_instability_dph"][k] * GYRO_UNITS.bias_instability,
-                                          rel=0.02)
-        assert truth["accel"]["bias_instability_ug"][k] == pytest.approx(b[k], rel=1e-12)
+    def autocovariance(d):  # of the process for B = 1 (its Allan deviation scales with B)
+        return math.log(4.0) / math.pi * np.sum(phi[:, None] ** np.abs(d)[None, :], axis=0)
+
+    floors = [math.sqrt(exact_avar(autocovariance, round(tau * rate)) / FLICKER_FLOOR)
+              for tau in (1.28, 10.24, 163.84, 1310.72)]
+    assert floors == pytest.approx([1.0] * 4, rel=0.02)
+    for k in range(3):
+        assert truth["gyro"]["bias_instability_dph"][k] * GYRO_UNITS.bias_instability == pytest.approx(
+            b[k] * DEG_PER_H, rel=1e-12)
+        assert truth["accel"]["bias_instability_ug"][k] * ACCEL_UNITS.bias_instability == pytest.approx(
+            b[k] * UG, rel=1e-12)
 
 
 def test_random_walk_truth_is_the_coefficient_of_the_emulators_wiener_bias():
