@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from hil.campaign.noise_summary import coverage_band, point_lines, point_summary
-from hil.campaign.runner import run_campaign
+from hil.campaign.runner import resumed_rows, run_campaign
 from hil.campaign.spec import CampaignSpec, SpecError, load_campaign
 from hil.config import ImuErrors
 from hil.estimation.allan import ACCEL_UNITS, FLICKER_FLOOR, GYRO_UNITS
@@ -54,6 +54,18 @@ def test_an_unknown_kind_names_the_key_and_calibration_is_refused_as_not_availab
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert "kind: 'calibration' campaigns are not available" in proc.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_resume_refuses_the_runs_of_a_campaign_of_another_kind(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    swing = _spec(tmp_path)
+    (out / "campaign.yaml").write_text(swing.read_text())
+    noise = load_campaign(_spec(tmp_path, kind="noise"))
+    with pytest.raises(SpecError, match="the runs in .* are of kind swing, .* of kind noise"):
+        resumed_rows(noise, out)
+    (out / "campaign.yaml").write_text(_spec(tmp_path, kind="noise").read_text())
+    assert resumed_rows(noise, out) == []  # no runs.parquet yet
 
 
 def _boxcar(m: int, d: np.ndarray) -> np.ndarray:

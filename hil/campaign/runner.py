@@ -15,9 +15,11 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+import yaml
+
 from hil.campaign.kinds import KINDS, Kind, Row
 from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, task_columns
-from hil.campaign.spec import Campaign, SpecError, load_campaign
+from hil.campaign.spec import DEFAULT_KIND, Campaign, SpecError, load_campaign
 from hil.campaign.table import RUNS_NAME, read_runs, write_runs
 from hil.campaign.task import RunTask
 from hil.trial.stop_signals import STOP_SIGNALS
@@ -26,9 +28,23 @@ CHECKPOINT_S = 5.0  # runs.parquet is rewritten at most this often while runs co
 SPEC_COPY = "campaign.yaml"
 
 
+def made_kind(out: Path) -> str | None:
+    """The kind of the campaign that made OUT, from its SPEC copy (None without a readable copy)."""
+    try:
+        data = yaml.safe_load((out / SPEC_COPY).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError):
+        return None
+    return data.get("kind", DEFAULT_KIND) if isinstance(data, dict) else None
+
+
 def resumed_rows(campaign: Campaign, out: Path) -> list[dict[str, Any]]:
     """The rows of OUT/runs.parquet that the campaign can keep: done runs whose seed and swept values are
-    the campaign's (a row that is not is an error: OUT belongs to another SPEC); failed runs are run again."""
+    the campaign's (a row that is not is an error: OUT belongs to another SPEC, as it does when the SPEC
+    that made it was of another kind); failed runs are run again."""
+    made = made_kind(out)
+    if made is not None and made != campaign.spec.kind:
+        raise SpecError(f"{out / SPEC_COPY}: the runs in {out} are of kind {made}, {campaign.path} of kind "
+                        f"{campaign.spec.kind}: resume with the SPEC that made them, or use another --out")
     plan = {task.id: task for task in campaign.tasks}
     kept = []
     for row in read_runs(out):
