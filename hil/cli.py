@@ -207,7 +207,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
                                         "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
-    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, sweep: {dotted.key: [values]}}")
+    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, kind: swing|noise, "
+                                   "sweep: {dotted.key: [values]}}")
     p.add_argument("--scheduler", metavar="ADDR", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
                                        "127.0.0.1)")
     p.add_argument("--workers", type=int, metavar="N", help="LocalCluster: worker processes (default: one a core); --scheduler: "
