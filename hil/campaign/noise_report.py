@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.campaign.noise_summary import AXES
+from hil.campaign.noise_summary import AXES, TERM_KEYS
 from hil.campaign.report import banded, figures_html, png, point_labels
 from hil.campaign.runs import ERROR, TRUTH
 from hil.campaign.task import point_label
@@ -21,7 +21,7 @@ def _terms(summary: dict) -> list[str]:
     """The terms some sweep point has statistics of (a truth and resolved runs), in noise.json's order."""
     found = {term for p in summary["points"] for term, per_axis in p.get("terms", {}).items()
              if any("coverage" in a for a in per_axis)}
-    return [term for term in (summary["points"][0].get("terms", {}) if summary["points"] else {}) if term in found]
+    return [term for term in TERM_KEYS if term in found]
 
 
 def _ratios(rows: list[dict[str, Any]], point: int, term: str) -> np.ndarray:
