@@ -31,6 +31,16 @@ from hil.samples import AlignedBatch, AlignedSample, ImuGap, StreamCounts
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
+TABLE_WAIT_S = 5.0  # s of the host's clock the IMU may run ahead of a silent table before it goes on without it
+UNPACED_TABLE_WAIT_S = 120.0  # s of trial time, at --speed max (see table_wait)
+
+
+def table_wait(time_scale: float | None) -> float:
+    """How far (s of trial time) the IMU may run ahead of a silent table: ``TABLE_WAIT_S`` on the host's clock
+    at the devices' speed. At ``--speed max`` (None) the emulated devices go as fast as the harness reads, and
+    the ports' buffers alone hold seconds of trial time of one stream while the other's reader waits for the
+    processor: the table is behind, not silent, so the IMU waits ``UNPACED_TABLE_WAIT_S``."""
+    return UNPACED_TABLE_WAIT_S if time_scale is None else TABLE_WAIT_S * time_scale
 
 
 TableCallback = Callable[[np.ndarray, np.ndarray], None]
@@ -63,7 +73,7 @@ class TrialProcessor:
                                               time_scale)}
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
-                               free_running=free_running)
+                               table_wait_s=table_wait(time_scale), free_running=free_running)
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
         self.gate = GyroTableGate(self.earth, self.geometry)
