@@ -55,15 +55,16 @@ class CalibrationOutcome(TrialOutcome):
     residuals: Residuals | None = None
 
     @classmethod
-    def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool) -> CalibrationOutcome:
+    def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool, unfinished: str = UNFINISHED
+                    ) -> CalibrationOutcome:
         """``outcome`` with the calibration of the windows of ``sequence`` (a
         :class:`~hil.trial.calibration_sequence.CalibrationSequence`, or None when it never started) when
-        the trial and the schedule completed; a completed trial whose schedule did not is ended early.
-        ``truth``: the IMU's errors are the config's (an emulated or simulated IMU)."""
+        the trial and the schedule completed; a completed trial whose schedule did not is ended early,
+        ``unfinished`` saying why. ``truth``: the IMU's errors are the config's (an emulated or simulated IMU)."""
         fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(TrialOutcome)}
         if outcome.ended == COMPLETED and (sequence is None or not sequence.done):
             where = sequence.progress if sequence is not None else "not started"
-            fields["result"]["ended"] = f"early: {UNFINISHED} ({where})"
+            fields["result"]["ended"] = f"early: {unfinished} ({where})"
         if fields["result"]["ended"] != COMPLETED:
             return cls(**fields)
         from hil.outputs.calibration_report import calibration_summary

@@ -61,6 +61,8 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         while not sequence.done and sequence.failure is None and sim.samples < end:
             processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
     except (TableError, LimitError, InterlockError) as exc:
+        if viewer is not None:
+            viewer.close()
         raise TrialSetupError(str(exc)) from None
     finally:
         try:
@@ -72,4 +74,5 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         viewer.log_snapshots(processor.estimator.snapshots)
     ended = COMPLETED if sequence.failure is None else f"early: turntable is not moving as commanded: {sequence.failure}"
     outcome = TrialOutcome.of(processor, cfg, config_text, out, ended, emulated_truth(cfg))
-    return CalibrationOutcome.of_sequence(outcome, sequence, truth=True), viewer
+    unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
+    return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
