@@ -23,7 +23,10 @@ from hil.config import DeviceTiming, TurntableConfig, load_config
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import write_calibration
 from hil.outputs.calibration_report import comparison
+from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule
+from hil.trial.calibration_sequence import CalibrationSequence, StepWindow
 from hil.trial.calibration_simulation import run_calibration_simulation
+from hil.trial.outcome import TrialOutcome
 from hil.units import ARCSEC, DEG
 
 SHORT = {"dwell_s": 2, "plateau_s": 5}  # the live test's schedule with shorter windows
@@ -134,3 +137,16 @@ def test_the_reported_angles_are_what_the_table_frames_decode_to():
     reported = encoder_reading(truth.angles(clock.latch_times(k, None)), zero)
     assert np.ptp(reported[:, 0]) > 6.0  # across the seam
     np.testing.assert_array_equal(reported, decoded)
+
+
+def test_a_window_whose_samples_were_all_lost_ends_the_trial_early_with_the_window_named(tmp_path):
+    cfg = load_config(calibration_config(tmp_path, positions=[[0, 0, 0]], plateau_s=0))
+    sequence = CalibrationSequence(checked_schedule(cfg), None, 1.0 / RATE_HZ)
+    sequence.windows_found.append(StepWindow(sequence.steps[0], 2.0, 6.0))
+    sequence._index = len(sequence.steps)  # the schedule went through
+    t = np.arange(1, 301) / RATE_HZ  # the samples stop at 1.5 s
+    sequence.on_samples(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
+    outcome = TrialOutcome(cfg, "", tmp_path / "out", {"ended": "completed"}, [])
+    calibrated = CalibrationOutcome.of_sequence(outcome, sequence, True)
+    assert calibrated.ended == "early: calibration window 2.00..6.00 s holds no samples"
+    assert calibrated.calibration is None and "calibration" not in calibrated.result

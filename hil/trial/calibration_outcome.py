@@ -69,7 +69,12 @@ class CalibrationOutcome(TrialOutcome):
             return cls(**fields)
         from hil.outputs.calibration_report import calibration_summary
 
-        document, residuals = fit_windows(outcome.cfg, sequence.windows(), truth)
+        try:
+            windows = sequence.windows()
+        except ValueError as exc:  # a window whose samples were all lost (gated out, or gaps in the data)
+            fields["result"]["ended"] = f"early: {exc}"
+            return cls(**fields)
+        document, residuals = fit_windows(outcome.cfg, windows, truth)
         fields["result"]["calibration"] = calibration_summary(document)
         return cls(**fields, calibration=document, residuals=residuals)
 
