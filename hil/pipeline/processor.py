@@ -58,7 +58,8 @@ class TrialProcessor:
     ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s) and
     gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion
     check); ``on_samples`` with the trial times (N,), increments (N, 3) and angles (N, 3; NaN where the
-    table had none) of each run of aligned samples the estimator took (for the calibration's windows);
+    table had none) of each run of aligned samples the estimator took and of each batch fed (for
+    the calibration's windows);
     all run on the caller's thread.
     """
 
@@ -132,6 +133,9 @@ class TrialProcessor:
         self._batched += len(batch)
         self._batched_angles += 0 if batch.angles is None else len(batch)
         self._t_end = float(batch.t[-1]) if len(batch) else self._t_end
+        if self._on_samples is not None and len(batch):
+            angles = batch.angles if batch.angles is not None else np.full((len(batch), 3), np.nan)
+            self._on_samples(batch.t - self.estimator.t0, batch.dtheta, batch.dv, angles)
         if self._on_table is not None and batch.angles is not None:
             self._on_table(batch.t - self.estimator.t0, batch.angles)
         self._snapshots_from(before)
