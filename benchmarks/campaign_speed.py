@@ -1,10 +1,11 @@
 """Speed of `hil campaign`: runs/s on a LocalCluster of 1 and 2 workers beside the same runs called serially in
 this process, and the scheduler's overhead per run: one worker's wall time minus the serial time, per run,
 and the wall time per task of the same tasks mapped to a function that does nothing.
-The runs are the 2019 paper's swing, short by default so that the overhead shows; each figure is the best
-of --repeat passes (the machine's other load only ever slows a pass down).
+The runs are the 2019 paper's swing (``--kind noise``: the static record of configs/noise_static.yaml and its
+Allan analysis), short by default so that the overhead shows; each figure is the best of --repeat passes
+(the machine's other load only ever slows a pass down).
 
-    .venv/bin/python benchmarks/campaign_speed.py [--runs 40] [--duration 60] [--rate 100] [--repeat 3]
+    .venv/bin/python benchmarks/campaign_speed.py [--kind swing] [--runs 40] [--duration 60] [--rate 100] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -17,11 +18,12 @@ from pathlib import Path
 import yaml
 
 from hil.campaign.cluster import open_client
+from hil.campaign.kinds import KINDS
 from hil.campaign.runner import gather
-from hil.campaign.runs import run_one
 from hil.campaign.spec import load_campaign
 
-BASE = Path(__file__).resolve().parent.parent / "configs" / "liu2019_sim.yaml"
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+BASES = {"swing": CONFIGS / "liu2019_sim.yaml", "noise": CONFIGS / "noise_static.yaml"}
 
 
 def nothing(task):
@@ -31,6 +33,7 @@ def nothing(task):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--kind", choices=sorted(BASES), default="swing")
     parser.add_argument("--runs", type=int, default=40)
     parser.add_argument("--duration", type=float, default=60.0, help="s of each trial")
     parser.add_argument("--rate", type=float, default=100.0, help="Hz")
@@ -38,16 +41,18 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         spec = Path(tmp) / "speed.yaml"
-        spec.write_text(yaml.safe_dump({"base": str(BASE), "runs": args.runs, "seed": 1, "sweep": {
-            "trial.duration_s": [args.duration], "trial.rate_hz": [args.rate]}}))
+        sweep = {"trial.duration_s": [args.duration], "trial.rate_hz": [args.rate]}
+        spec.write_text(yaml.safe_dump({"base": str(BASES[args.kind]), "kind": args.kind, "runs": args.runs, "seed": 1,
+                                        "sweep": sweep}))
         tasks = load_campaign(spec).tasks
+        run_one = KINDS[args.kind].run
         run_one(tasks[0])  # imports and caches warm, as on a worker after its first run
         serial_s = float("inf")
         for _ in range(args.repeat):
             start = time.perf_counter()
             serial = [run_one(task) for task in tasks]
             serial_s = min(serial_s, time.perf_counter() - start)
-        print(f"{args.runs} runs of {args.duration:g} s at {args.rate:g} Hz")
+        print(f"{args.runs} {args.kind} runs of {args.duration:g} s at {args.rate:g} Hz")
         print(f"serial, in process: {serial_s:7.2f} s, {args.runs / serial_s:6.2f} runs/s, "
               f"{serial_s / args.runs * 1e3:7.1f} ms a run")
         one_worker_s = None
@@ -60,7 +65,7 @@ def main() -> None:
                 wall = float("inf")
                 for _ in range(args.repeat):
                     start_pass, rows = time.perf_counter(), []
-                    gather(client, tasks, rows, Path(tmp))
+                    gather(client, run_one, tasks, rows, Path(tmp))
                     wall = min(wall, time.perf_counter() - start_pass)
                     assert sorted(rows, key=lambda r: r["id"]) == serial, "the cluster's rows differ from the serial ones"
                 empty = float("inf")

@@ -10,9 +10,11 @@ calibration.html), the worst |error| / sigma and the RMS of error / sigma; then 
 terms and seeds (target >= 95 %; the exit code says whether it was met). A last run without the
 configured noise prints the worst relative errors with their sigmas (docs/calibration.md, Validation:
 on this short schedule the terms only the earth rate gives keep a small deterministic error there). The
-runs are not bit-reproducible: at ``--speed max`` the windows' sample counts depend on the machine's load.
+live runs are not bit-reproducible: at ``--speed max`` the windows' sample counts depend on the machine's load.
+With ``--simulate`` each run is ``hil calibrate --simulate`` (the same sequence commanding the servo in
+process, no transports): reproducible for a seed, and the figures are also summed up per term family.
 
-    .venv/bin/python benchmarks/validate_calibration.py [--seeds 20] [--shipped-schedule]
+    .venv/bin/python benchmarks/validate_calibration.py [--seeds 20] [--shipped-schedule] [--simulate]
 """
 
 from __future__ import annotations
@@ -49,15 +51,16 @@ def config(seed: int, noise: bool, shipped: bool) -> dict:
     return cfg
 
 
-def calibrate(cfg: dict, work: Path) -> tuple[list[dict], float]:
-    """Rows of :func:`comparison` of one ``hil calibrate`` run, and its wall time (s)."""
+def calibrate(cfg: dict, work: Path, simulate: bool) -> tuple[list[dict], float]:
+    """Rows of :func:`comparison` of one ``hil calibrate`` run (``--simulate``: simulated), and its wall time (s)."""
     work.mkdir(parents=True)
     path = work / "calibration.yaml"
     path.write_text(yaml.safe_dump(cfg))
+    how = ["--simulate"] if simulate else ["--speed", "max", "--quiet"]
     started = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "hil.cli", "calibrate", str(path), "--speed", "max", "--viewer",
-                           "none", "--out", str(work / "out"), "--quiet", "--no-figures"], cwd=ROOT,
-                          capture_output=True, text=True, check=False)
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "calibrate", str(path), *how, "--viewer", "none",
+                           "--out", str(work / "out"), "--no-figures"], cwd=ROOT, capture_output=True, text=True,
+                          check=False)
     elapsed = time.perf_counter() - started
     if proc.returncode not in (0, 3):
         raise SystemExit(f"hil calibrate exited {proc.returncode}: {proc.stderr.strip()}")
@@ -68,24 +71,33 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--shipped-schedule", action="store_true")
+    parser.add_argument("--simulate", action="store_true", help="hil calibrate --simulate (no emulator process)")
     args = parser.parse_args()
     ratios: dict[str, list[float]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(1, args.seeds + 1):
-            rows, elapsed = calibrate(config(seed, True, args.shipped_schedule), Path(tmp) / f"seed{seed}")
+            rows, elapsed = calibrate(config(seed, True, args.shipped_schedule), Path(tmp) / f"seed{seed}",
+                                      args.simulate)
             judged = [r for r in rows if r["error_sigma"] is not None]
             for r in judged:
                 ratios.setdefault(r["term"], []).append(r["error_sigma"])
             worst = max(judged, key=lambda r: abs(r["error_sigma"]))
             print(f"seed {seed}: {elapsed:.1f} s wall, {len(judged)} terms judged, worst {worst['term']} "
                   f"{worst['error_sigma']:+.2f} sigma", flush=True)
-        rows, elapsed = calibrate(config(1, False, args.shipped_schedule), Path(tmp) / "noise-free")
+        rows, elapsed = calibrate(config(1, False, args.shipped_schedule), Path(tmp) / "noise-free", args.simulate)
     print(f"\n{'term':36s} {'within 3 sigma':>14s} {'worst |e|/s':>11s} {'rms e/s':>8s}")
     fractions = []
     for term, values in ratios.items():
         values = np.abs(np.array(values))
         fractions.append(np.mean(values <= 3.0))
         print(f"{term:36s} {fractions[-1]:14.0%} {np.max(values):11.2f} {np.sqrt(np.mean(values**2)):8.2f}")
+    families: dict[str, list[float]] = {}
+    for term, values in ratios.items():
+        families.setdefault(term.rsplit(".", 1)[0], []).extend(values)
+    print(f"\n{'term family':36s} {'within 3 sigma':>14s} {'worst |e|/s':>11s} {'rms e/s':>8s}")
+    for family, values in families.items():
+        values = np.abs(np.array(values))
+        print(f"{family:36s} {np.mean(values <= 3.0):14.0%} {np.max(values):11.2f} {np.sqrt(np.mean(values**2)):8.2f}")
     every = np.concatenate([np.abs(v) for v in ratios.values()])
     overall = float(np.mean(every <= 3.0))
     print(f"\nall terms: {overall:.1%} of {every.size} errors within 3 sigma (target >= 95 %); "

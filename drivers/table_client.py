@@ -39,7 +39,12 @@ class TableCommandClient:
         self.port: serial.SerialBase | None = None
         self._position_demand: dict[str, float] = {}
 
-    def open(self) -> TableCommandClient:
+    def open(self, port: serial.SerialBase | None = None) -> TableCommandClient:
+        """Open :attr:`url`, or use ``port``: an open port of pyserial's interface (``write``, ``read_until``,
+        ``reset_input_buffer``, ``close``), such as the in-process emulated table's."""
+        if port is not None:
+            self.port = port
+            return self
         try:
             self.port = open_serial(self.url, "turntable command port", baudrate=self.baudrate, timeout=self.timeout_s)
         except TransportError as exc:

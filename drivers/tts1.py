@@ -18,7 +18,7 @@ from hil.samples import TableSample, TableSamples
 SYNC = b"\x54\x53\x01"  # sync word "TS" and version 1
 FRAME_SIZE = 24
 UDEG_PER_RAD = 180e6 / math.pi
-_FULL_TURN_UDEG = 360_000_000
+FULL_TURN_UDEG = 360_000_000
 _BODY = struct.Struct("<2sBBIiiiH")
 _CRC = struct.Struct(">H")
 FIELDS = np.dtype([("sync", "S3"), ("status", "u1"), ("sync_counter", "<u4"), ("angles_udeg", "<i4", 3),
@@ -49,7 +49,7 @@ def status_byte(flags: Status, mode: Mode) -> int:
 
 def wrap_udeg(value: float) -> int:
     """An angle in micro-degrees, rounded and wrapped to [-180e6, 180e6)."""
-    return (round(value) + _FULL_TURN_UDEG // 2) % _FULL_TURN_UDEG - _FULL_TURN_UDEG // 2
+    return (round(value) + FULL_TURN_UDEG // 2) % FULL_TURN_UDEG - FULL_TURN_UDEG // 2
 
 
 @dataclass(frozen=True, slots=True)

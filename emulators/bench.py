@@ -182,9 +182,9 @@ class Bench:
 
     def stats(self, pulses: int, elapsed: float, stopped: bool) -> EmulatorStats:
         """The run so far: ``pulses`` emitted in ``elapsed`` s, and whether it was ``stopped`` early."""
-        server = self.server
+        commands = self.server.responder
         return EmulatorStats(pulses, elapsed, stopped, {
             name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50),
                               w.latency.percentile_ms(99), w.lost_unread)
             for name, w in self.writers.items()},
-            dict(server.received), server.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text)
+            dict(commands.received), commands.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol
 
 import numpy as np
@@ -94,6 +95,10 @@ class Positions:
 
     def segments(self) -> list[tuple[float, float, float, float, np.ndarray, np.ndarray]]:
         """(move start, acceleration time, move time, distance, from, to) for each move."""
+        return self._segments
+
+    @cached_property
+    def _segments(self) -> list[tuple[float, float, float, float, np.ndarray, np.ndarray]]:
         out = []
         start = float(self.dwell[0])
         for k in range(1, len(self.targets)):

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -83,9 +84,12 @@ class ServoMotion:
 
     axes: tuple[tuple[Piece, ...], tuple[Piece, ...], tuple[Piece, ...]]
 
+    @cached_property
+    def _starts(self) -> tuple[np.ndarray, ...]:
+        return tuple(np.array([p.start for p in pieces]) for pieces in self.axes)
+
     def _active(self, axis: int, t: np.ndarray) -> np.ndarray:
-        starts = np.array([p.start for p in self.axes[axis]])
-        return np.clip(np.searchsorted(starts, t, side="right") - 1, 0, None)
+        return np.clip(np.searchsorted(self._starts[axis], t, side="right") - 1, 0, None)
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(t, dtype=float)

@@ -31,13 +31,7 @@ class Simulation:
     def from_config(cls, cfg: Config) -> Simulation:
         if cfg.trial.duration_s is None:
             raise ConfigError("trial.duration_s: required key is missing (an emulated trial needs a duration)")
-        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-        site = cfg.site
-        truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
-                      (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),
-                      site.gravity_anomaly_mgal * MGAL)
-        errors = SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, gravity=earth.g)
-        return cls(truth, errors, cfg.imu_rate_hz, cfg.trial.duration_s)
+        return cls(*emulated_world(cfg), cfg.imu_rate_hz, cfg.trial.duration_s)
 
     @property
     def samples(self) -> int:
@@ -53,3 +47,14 @@ class Simulation:
             dtheta, dv = self.truth.increments(t0, t)
             dtheta, dv = self.errors.apply(t, dtheta, dv)
             yield AlignedBatch(t, dtheta, dv, self.truth.angles(t), t0)
+
+
+def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:
+    """The truth (site, table, the configured ``turntable.motion``) and the IMU's errors (seeded with
+    ``trial.seed``) of a config."""
+    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+    site = cfg.site
+    truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
+                  (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),
+                  site.gravity_anomaly_mgal * MGAL)
+    return truth, SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, gravity=earth.g)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from drivers.kvh1750 import STATUS_ALL_VALID
-from drivers.tts1 import Status, Tts1Codec
+from drivers.tts1 import FULL_TURN_UDEG, UDEG_PER_RAD, Status, Tts1Codec
 from emulators.clocks import DeviceClock
 from emulators.sensor_errors import SensorErrorModel
 from emulators.servo import Servo
@@ -94,6 +94,15 @@ class TableSource(FrameSource):
         return [Emission(int(c), float(t), float(end), codec.encode(codec.from_sample(
                     TableSample(int(c), tuple(a), latch_delay=delay, status=int(st)))))
                 for c, t, end, a, st in zip(self.clock.counters(k), ticks, latch, angles.tolist(), status)]
+
+
+def encoder_reading(true_angles: np.ndarray, zero_offset: np.ndarray) -> np.ndarray:
+    """The angles (N, 3) rad that :class:`TableSource`'s frames decode to for true gimbal angles (N, 3) rad:
+    the encoder reading ``true - zero_offset`` on the frame's 1e-6 deg grid, wrapped to [-180, 180) deg
+    (:func:`drivers.tts1.wrap_udeg`, rounding half to even as it does)."""
+    udeg = np.rint((np.asarray(true_angles, dtype=float) - zero_offset) * UDEG_PER_RAD)
+    half = FULL_TURN_UDEG // 2
+    return ((udeg + half) % FULL_TURN_UDEG - half) / UDEG_PER_RAD
 
 
 class DeviceStream:

@@ -60,11 +60,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    cfg, out = _trial_config(args)
+    if args.simulate:
+        from hil.trial.calibration_simulation import run_calibration_simulation
+
+        return _finish(args, *run_calibration_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)))
     from hil.trial.calibration_runner import run_calibration
 
-    cfg, out = _trial_config(args)
-    return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet,
-                                          figures=not args.no_figures))
+    return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -177,6 +180,9 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p, CALIBRATION_CONFIG)
     _trial_options(p)
     _live_options(p)
+    p.add_argument("--simulate", action="store_true",
+                   help="the emulated table and IMU in this process, as fast as the CPU allows (no ports, no "
+                        "recording; --speed does not apply)")
     p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
@@ -207,7 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
                                         "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
-    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, sweep: {dotted.key: [values]}}")
+    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, kind: swing|noise, "
+                                   "sweep: {dotted.key: [values]}}")
     p.add_argument("--scheduler", metavar="ADDR", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
                                        "127.0.0.1)")
     p.add_argument("--workers", type=int, metavar="N", help="LocalCluster: worker processes (default: one a core); --scheduler: "

@@ -11,7 +11,7 @@ import pytest
 from emulators.sensor_errors import BiasInstability, SensorErrorModel
 from hil.config import ImuErrors
 from hil.estimation import allan
-from hil.outputs.noise import write_noise
+from hil.outputs.noise import noise_document, write_noise
 from hil.units import DEG, DEG_PER_H, UG
 
 T = 0.01  # s, 100 Hz
@@ -192,7 +192,7 @@ def test_noise_json_has_the_design_keys_in_datasheet_units_and_null_where_unreso
     arw_deg_per_sqrt_h, vrw = 0.05, 0.02  # deg/sqrt(h), m/s/sqrt(h)
     gyro = allan.analyse(_white(1 << 12, arw_deg_per_sqrt_h * allan.GYRO_UNITS.white, 3, seed=1), T)
     accel = allan.analyse(_white(1 << 12, vrw * allan.ACCEL_UNITS.white, 3, seed=2), T)
-    doc = write_noise(tmp_path, gyro, accel)
+    doc = write_noise(tmp_path, noise_document(gyro, accel), gyro, accel)
     assert json.loads((tmp_path / "noise.json").read_text()) == doc
     assert (tmp_path / "allan.png").stat().st_size > 0
     assert doc["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([arw_deg_per_sqrt_h] * 3, rel=0.05)

@@ -1,11 +1,12 @@
 """Campaigns on real dask.distributed clusters: a LocalCluster of 2 worker processes and an existing scheduler
 with its workers started here, both on 127.0.0.1 only, give the same runs.parquet; --resume completes a
-partial table to the same rows."""
+partial table to the same rows; a worker killed mid-campaign loses no run."""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -157,3 +158,45 @@ def test_sigterm_ends_a_campaign_with_its_rows_kept_and_exit_1(tmp_path):
     assert 0 < done < 2000 and f"campaign interrupted (SIGTERM): {done} of 2000 runs" in err
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["runs"] == done and summary["failed"] == 0
+
+
+def _busy_worker(client) -> str | None:
+    """The address of a worker the scheduler has given a campaign's run to, if any."""
+    return next((worker for worker, keys in client.processing().items()
+                 if any(str(key).startswith("campaign-") for key in keys)), None)
+
+
+def test_a_worker_killed_mid_campaign_leaves_every_run_a_row(tmp_path, existing_cluster):
+    from distributed import Client
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(yaml.safe_dump({"base": str(ROOT / "configs" / "noise_static.yaml"), "kind": "noise", "runs": 8,
+                                    "seed": 2, "sweep": {"trial.duration_s": [600.0]}}))
+    address, (_, workers) = existing_cluster
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "campaign", str(spec), "--scheduler", address,
+                             "--workers", "2", "--out", "o"], cwd=tmp_path, env=_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        with Client(address, timeout=20) as client:
+            deadline = time.monotonic() + 60
+            while (busy := _busy_worker(client)) is None:
+                assert time.monotonic() < deadline and proc.poll() is None, "no run reached a worker"
+                time.sleep(0.1)
+            time.sleep(0.5)  # into the run: its worker imports and simulates
+            pid = client.run(os.getpid, workers=[busy])[busy]
+            assert any(str(key).startswith("campaign-") for key in client.processing()[busy])  # killed mid-run
+            assert pid in _tree(workers.pid)  # one of the worker processes this test started
+            os.kill(pid, signal.SIGKILL)
+        out, err = proc.communicate(timeout=180)
+    finally:
+        proc.kill()
+    assert proc.returncode in (0, 1), err  # 1: some run failed with the lost worker (its row says so)
+    table = pq.read_table(tmp_path / "o" / "runs.parquet")
+    rows = table.to_pylist()
+    assert [row["id"] for row in rows] == [t.id for t in load_campaign(spec).tasks]
+    failed = [row for row in rows if row["error"] is not None]
+    assert all(row["error"].strip() for row in failed) and (proc.returncode == 1) == bool(failed)
+    assert all(row["accel.vrw_m_per_s_per_sqrt_h.0"] is not None for row in rows if row["error"] is None)
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["runs"] == 8 and summary["failed"] == len(failed)
+    assert f"campaign: 8 runs, {len(failed)} failed" in out

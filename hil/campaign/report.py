@@ -1,33 +1,35 @@
 """``OUT/campaign.html``: one self-contained page (figures as PNG data URIs, inline style, nothing fetched),
-in the style of the trial report: the consistency table per sweep point and four figures: the normalised
-errors against N(0, 1), the ratio std(error)/mean(sigma) with its band, the mean NEES with its chi-square
-band, the convergence time against the swept value. matplotlib is imported when the page is drawn."""
+in the style of the trial report, with the section of the campaign's kind. A swing campaign's: the consistency
+table per sweep point and four figures: the normalised errors against N(0, 1), the ratio std(error)/mean(sigma)
+with its band, the mean NEES with its chi-square band, the convergence time against the swept value. The
+figure helpers here serve every kind's section. matplotlib is imported when the page is drawn."""
 
 from __future__ import annotations
 
 import base64
 import html
 import io
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hil.campaign.spec import point_label
 from hil.campaign.summary import SIGMA, bias_error
+from hil.campaign.task import point_label
 from hil.outputs.report import html_page
 
 REPORT_NAME = "campaign.html"
 AXES = "xyz"
 
 
-def _labels(points: list[dict]) -> list[str]:
+def point_labels(points: list[dict]) -> list[str]:
     """Short point labels for the figures: the keys that vary across the points, by their last part."""
     varying = [k for k in points[0]["values"] if len({repr(p["values"][k]) for p in points}) > 1] if points else []
     return [", ".join(f"{k.rsplit('.', 1)[-1]}={p['values'][k]}" for k in varying) or "all runs" for p in points]
 
 
-def _png(fig) -> bytes:
+def png(fig) -> bytes:
     import matplotlib.pyplot as plt
 
     buffer = io.BytesIO()
@@ -50,7 +52,7 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
     fig, axes = plt.subplots(1, 3, figsize=(10, 3.4), sharey=True)
     grid = np.linspace(-4.0, 4.0, 161)
     for k, ax in enumerate(axes):
-        for p, label in zip(summary["points"], _labels(summary["points"])):
+        for p, label in zip(summary["points"], point_labels(summary["points"])):
             z = _normalised(rows, p["point"])[:, k]
             z = z[np.isfinite(z)]
             if z.size:
@@ -62,36 +64,37 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
         axes[-1].legend(fontsize=7)
     fig.suptitle("Bias error against the reported sigma")
     fig.tight_layout()
-    return _png(fig)
+    return png(fig)
 
 
-def _banded(points: list[dict], plt, band: str, band_label: str, ideal: float, ylabel: str, title: str, series):
-    """A statistic per sweep point over its 95 % band: ``series`` gives (x offset, values, label) per line."""
-    x = np.arange(len(points))
+def banded(labels: list[str], bands: list, plt, band_label: str, ideal: float, ylabel: str, title: str, series):
+    """A statistic per entry (a sweep point) over its 95 % band (``bands``, one (low, high) an entry): ``series``
+    gives (x offset, values, label) per line."""
+    x = np.arange(len(labels))
     fig, ax = plt.subplots(figsize=(10, 3.6))
-    for i, p in enumerate(points):
-        ax.fill_between([i - 0.4, i + 0.4], *p[band], color="tab:green", alpha=0.2, label=band_label if i == 0 else None)
+    for i, band in enumerate(bands):
+        ax.fill_between([i - 0.4, i + 0.4], *band, color="tab:green", alpha=0.2, label=band_label if i == 0 else None)
     for offset, values, label in series:
         ax.plot(x + offset, values, "o", label=label)
     ax.axhline(ideal, color="k", linewidth=0.5)
-    ax.set_xticks(x, _labels(points), rotation=20, ha="right", fontsize=7)
+    ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=7)
     ax.set_ylabel(ylabel)
     ax.legend(fontsize=7)
     fig.suptitle(title)
     fig.tight_layout()
-    return _png(fig)
+    return png(fig)
 
 
 def _ratios(summary: dict, plt) -> bytes:
     points = [p for p in summary["points"] if "ratio" in p]
     series = [((k - 1) * 0.15, [p["ratio"][k] for p in points], f"axis {AXES[k]}") for k in range(3)]
-    return _banded(points, plt, "ratio_band", "95 % band of a consistent estimator", 1.0, "std(error) / mean(sigma)",
+    return banded(point_labels(points), [p["ratio_band"] for p in points], plt, "95 % band of a consistent estimator", 1.0, "std(error) / mean(sigma)",
                    "Consistency ratio per axis and sweep point", series)
 
 
 def _nees(summary: dict, plt) -> bytes:
     points = [p for p in summary["points"] if "nees_mean" in p]
-    return _banded(points, plt, "nees_band", "95 % chi-square band (3 dof)", 3.0, "mean NEES",
+    return banded(point_labels(points), [p["nees_band"] for p in points], plt, "95 % chi-square band (3 dof)", 3.0, "mean NEES",
                    "Normalised estimation error squared, mean over the runs",
                    [(0.0, [p["nees_mean"] for p in points], "mean NEES")])
 
@@ -110,7 +113,7 @@ def _convergence(summary: dict, plt) -> bytes | None:
     if key is None:
         return None
     groups: dict[str, list[dict]] = {}
-    others = _labels([{"values": {k: v for k, v in p["values"].items() if k != key}} for p in points])
+    others = point_labels([{"values": {k: v for k, v in p["values"].items() if k != key}} for p in points])
     for p, label in zip(points, others):
         groups.setdefault(label, []).append(p)
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -131,7 +134,7 @@ def _convergence(summary: dict, plt) -> bytes | None:
         ax.legend(fontsize=7)
     fig.suptitle("Convergence time against the swept value")
     fig.tight_layout()
-    return _png(fig)
+    return png(fig)
 
 
 def _num(v: Any) -> str:
@@ -164,24 +167,35 @@ def _table(summary: dict) -> str:
     return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
 
 
-def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]]) -> Path:
-    """Write ``out/campaign.html`` from the summary and the rows; returns its path."""
+def figures_html(figures: list[tuple[str, bytes | None]]) -> str:
+    """The figures (caption, PNG; None: not drawn) as self-contained HTML."""
+    return "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
+                   f"{base64.b64encode(image).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
+                   for caption, image in figures if image is not None)
+
+
+def swing_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
+    """A swing campaign's part of the page: the consistency table and its four figures."""
+    figures = [("Bias error over its reported sigma, every sweep point, against N(0, 1)", _histograms(summary, rows, plt)),
+               ("std(error)/mean(sigma) per axis with the 95 % band of a consistent estimator", _ratios(summary, plt)),
+               ("Mean NEES with its 95 % chi-square band", _nees(summary, plt)),
+               ("Convergence time against the swept value", _convergence(summary, plt))]
+    return f"<h2>Consistency per sweep point</h2>{_table(summary)}<h2>Figures</h2>{figures_html(figures)}"
+
+
+def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]],
+                          section: Callable[[dict, list[dict[str, Any]], Any], str] = swing_section) -> Path:
+    """Write ``out/campaign.html`` from the summary and the rows, with the ``section`` of the campaign's kind;
+    returns its path."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figures = [("Bias error over its reported sigma, every sweep point, against N(0, 1)", _histograms(summary, rows, plt)),
-               ("std(error)/mean(sigma) per axis with the 95 % band of a consistent estimator", _ratios(summary, plt)),
-               ("Mean NEES with its 95 % chi-square band", _nees(summary, plt)),
-               ("Convergence time against the swept value", _convergence(summary, plt))]
     cluster = summary["cluster"]
     body = (f"<p class='meta'>{summary['runs']} runs, {summary['failed']} failed, on {html.escape(cluster['scheduler'])} "
             f"with {cluster['workers']} workers. A row is highlighted when a statistic falls outside its band.</p>"
-            f"<h2>Consistency per sweep point</h2>{_table(summary)}<h2>Figures</h2>"
-            + "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
-                      f"{base64.b64encode(png).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
-                      for caption, png in figures if png is not None))
+            + section(summary, rows, plt))
     path = out / REPORT_NAME
     path.write_text(html_page("Campaign", "Campaign", body), encoding="utf-8")
     return path

@@ -9,24 +9,42 @@ import signal
 import sys
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, run_one, task_columns
-from hil.campaign.spec import Campaign, RunTask, SpecError, load_campaign, point_label
+import yaml
+
+from hil.campaign.kinds import KINDS, Kind, Row
+from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, task_columns
+from hil.campaign.spec import DEFAULT_KIND, Campaign, SpecError, load_campaign
 from hil.campaign.table import RUNS_NAME, read_runs, write_runs
+from hil.campaign.task import RunTask
 from hil.trial.stop_signals import STOP_SIGNALS
 
 CHECKPOINT_S = 5.0  # runs.parquet is rewritten at most this often while runs complete
 SPEC_COPY = "campaign.yaml"
 
 
+def made_kind(out: Path) -> str | None:
+    """The kind of the campaign that made OUT, from its SPEC copy (None without a readable copy)."""
+    try:
+        data = yaml.safe_load((out / SPEC_COPY).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError):
+        return None
+    return data.get("kind", DEFAULT_KIND) if isinstance(data, dict) else None
+
+
 def resumed_rows(campaign: Campaign, out: Path) -> list[dict[str, Any]]:
     """The rows of OUT/runs.parquet that the campaign can keep: done runs whose seed and swept values are
-    the campaign's (a row that is not is an error: OUT belongs to another SPEC); failed runs are run again."""
+    the campaign's (a row that is not is an error: OUT belongs to another SPEC, as it does when the SPEC
+    that made it was of another kind); failed runs are run again."""
+    made = made_kind(out)
+    if made is not None and made != campaign.spec.kind:
+        raise SpecError(f"{out / SPEC_COPY}: the runs in {out} are of kind {made}, {campaign.path} of kind "
+                        f"{campaign.spec.kind}: resume with the SPEC that made them, or use another --out")
     plan = {task.id: task for task in campaign.tasks}
     kept = []
     for row in read_runs(out):
@@ -70,13 +88,13 @@ def _progress(total: int, done: int):
     return progress, progress.add_task("runs", total=total, completed=done, failed=0)
 
 
-def gather(client, tasks: list[RunTask], rows: list[dict[str, Any]], out: Path) -> None:
-    """Map ``run_one`` over ``tasks`` on the client's cluster; each row appended to ``rows`` as its run
+def gather(client, run: Callable[[RunTask], Row], tasks: list[RunTask], rows: list[Row], out: Path) -> None:
+    """Map ``run`` (a kind's run) over ``tasks`` on the client's cluster; each row appended to ``rows`` as its run
     completes (a run whose task is lost is a row with its error), runs.parquet rewritten on the way."""
     from distributed import as_completed
 
     batch = uuid.uuid4().hex[:8]  # keys of their own: another campaign on a shared scheduler has the same ids
-    futures = client.map(run_one, tasks, key=[f"campaign-{batch}-{t.id}" for t in tasks])
+    futures = client.map(run, tasks, key=[f"campaign-{batch}-{t.id}" for t in tasks])
     task_of = {f.key: t for f, t in zip(futures, tasks)}
     progress, bar = _progress(len(rows) + len(tasks), len(rows))
     failed, written = 0, time.monotonic()
@@ -104,6 +122,7 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
     from hil.campaign.summary import summarise, write_summary
 
     campaign = load_campaign(spec)
+    kind = KINDS[campaign.spec.kind]
     if (out / RUNS_NAME).exists() and not resume:
         raise SpecError(f"{out / RUNS_NAME}: exists; --resume goes on with it, or choose another --out")
     rows = resumed_rows(campaign, out) if resume else []
@@ -117,33 +136,23 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
         interrupted = None
         try:
             with stop_signals():
-                gather(client, pending, rows, out)
+                gather(client, kind.run, pending, rows, out)
         except Interrupted as exc:
             interrupted = str(exc)
         finally:
             write_runs(out, rows)
-    summary = {"spec": campaign.spec.model_dump(), **summarise(campaign.points, rows, info.as_dict())}
+    summary = {"spec": campaign.spec.as_dict(), **summarise(campaign.points, rows, info.as_dict(), kind.point_summary)}
     write_summary(out, summary)
-    write_campaign_report(out, summary, rows)
-    print(summary_text(summary, out))
+    write_campaign_report(out, summary, rows, kind.section)
+    print(summary_text(summary, out, kind))
     if interrupted:
         print(f"hil: campaign interrupted ({interrupted}): {len(rows)} of {len(campaign.tasks)} runs in "
               f"{out / RUNS_NAME}; --resume goes on", file=sys.stderr)
     return 1 if summary["failed"] or interrupted else 0
 
 
-def summary_text(summary: dict[str, Any], out: Path) -> str:
-    """The console summary: per sweep point, the consistency ratio per axis and the mean NEES."""
+def summary_text(summary: dict[str, Any], out: Path, kind: Kind) -> str:
+    """The console summary: the campaign's counts, then each sweep point's lines (the kind's statistics)."""
     cluster = summary["cluster"]
     head = f"campaign: {summary['runs']} runs, {summary['failed']} failed, on {cluster['workers']} workers; outputs in {out}"
-    lines = [head]
-    for p in summary["points"]:
-        values = point_label(p["values"])
-        if "ratio" in p:
-            ratio = " ".join(f"{r:.3f}" for r in p["ratio"])
-            lines.append(f"  {values}: std(error)/sigma {ratio} (band {p['ratio_band'][0]:.3f}-"
-                         f"{p['ratio_band'][1]:.3f}), NEES {p['nees_mean']:.3f} (band {p['nees_band'][0]:.3f}-"
-                         f"{p['nees_band'][1]:.3f})")
-        else:
-            lines.append(f"  {values}: {p['with_estimate']} runs with an estimate: too few for statistics")
-    return "\n".join(lines)
+    return "\n".join([head] + [line for p in summary["points"] for line in kind.lines(p)])

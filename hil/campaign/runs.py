@@ -1,5 +1,7 @@
-"""One run of a campaign, as a worker executes it: the simulated trial of ``hil simulate`` (no outputs
-written, no viewer), its result.json document flattened into one row of runs.parquet."""
+"""One run of a campaign, as a worker executes it, flattened into one row of runs.parquet: the simulated trial
+of ``hil simulate`` and its result.json document (kind ``swing``), or the simulated static trial of
+``hil noise CONFIG`` and its noise.json document with the noise terms the config puts in (kind ``noise``).
+No outputs are written, no viewer opened."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from hil.campaign.spec import RunTask
+from hil.campaign.task import RunTask
 
 SWEEP_PREFIX = "sweep."  # a swept value's column: sweep.<dotted key> (result.json has trial.* keys of its own)
 ERROR = "error"
@@ -52,3 +54,20 @@ def run_one(task: RunTask) -> dict[str, Any]:
     except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost campaign
         return failed_row(task, exc)
     return {**task_columns(task), ERROR: None, **flatten(outcome.result)}
+
+
+TRUTH = "truth"  # a noise run's configured terms: truth.<sensor>.<noise.json key>.<axis>
+
+
+def run_noise(task: RunTask) -> dict[str, Any]:
+    """The row of one noise run: the Allan analysis of the task's simulated static trial, and the truth."""
+    from hil.config import parse_config
+    from hil.trial.noise_runner import analyse_record, noise_truth, simulated
+
+    try:
+        cfg = parse_config(task.config, task.id)
+        doc = analyse_record(simulated(cfg), task.id).doc
+    except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost campaign
+        return failed_row(task, exc)
+    return {**task_columns(task), ERROR: None, **flatten(doc), **flatten(noise_truth(cfg.imu.errors, cfg.imu_rate_hz),
+                                                                        f"{TRUTH}.")}

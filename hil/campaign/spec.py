@@ -1,5 +1,6 @@
-"""A campaign's SPEC: ``{base: CONFIG, runs: N, seed: S, sweep: {dotted.key: [values], ...}}`` (YAML, safe
-loading), validated, and expanded into its runs: every combination of the sweep, N seeds each.
+"""A campaign's SPEC: ``{base: CONFIG, runs: N, seed: S, kind: K, sweep: {dotted.key: [values], ...}}`` (YAML,
+safe loading), validated, and expanded into its runs: every combination of the sweep, N seeds each. ``kind``
+(default ``swing``) is the simulated trial each run is (:mod:`hil.campaign.kinds`).
 
 The seeds are ``numpy.random.SeedSequence(S).spawn(N)``, one per run index and shared by every sweep point
 (common random numbers: two points differ by the swept values, not by their noise), so a campaign is the
@@ -14,17 +15,21 @@ import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from hil.campaign.task import RunTask, point_label
 from hil.config import Config, ConfigError, InputError, describe_validation, parse_config, resolve_path
 
 
 class SpecError(InputError, ValueError):
     """A campaign SPEC that cannot be used; the message names the key and the reason."""
+
+
+DEFAULT_KIND = "swing"
 
 
 class CampaignSpec(BaseModel):
@@ -33,6 +38,7 @@ class CampaignSpec(BaseModel):
     base: str  # the trial config every run starts from: relative to the SPEC's directory, or a shipped name
     runs: int = Field(gt=0)  # seeds per sweep point
     seed: int = Field(0, ge=0)  # entropy of the SeedSequence
+    kind: Literal["swing", "noise", "calibration"] = DEFAULT_KIND  # the simulated trial of every run
     sweep: dict[str, list[Any]] = {}
 
     @field_validator("sweep")
@@ -43,17 +49,10 @@ class CampaignSpec(BaseModel):
                 raise ValueError(f"{key}: expected a non-empty list of values")
         return sweep
 
-
-@dataclass(frozen=True)
-class RunTask:
-    """One run as a worker takes it: small and picklable (the config as a mapping, not a model)."""
-
-    id: str
-    point: int
-    run: int
-    seed: int
-    values: dict[str, Any]  # the swept values of its point, by dotted key
-    config: dict  # the base config with the point's values and trial.seed set
+    def as_dict(self) -> dict[str, Any]:
+        """The SPEC for summary.json; ``kind`` only when it is not the default (a swing campaign's summary is
+        as it was before campaigns had kinds)."""
+        return self.model_dump(exclude={"kind"} if self.kind == DEFAULT_KIND else None)
 
 
 @dataclass(frozen=True)
@@ -120,10 +119,6 @@ def _base_path(spec_path: Path, base: str) -> Path:
     return beside if beside.exists() else resolve_path(base)
 
 
-def point_label(values: dict[str, Any]) -> str:
-    return ", ".join(f"{k}={v}" for k, v in values.items()) or "base"
-
-
 def _check_point(config: dict, label: str, source: str) -> None:
     """The trial config of a point, checked as ``hil simulate`` sets it up (the emulator and the processor,
     with ``imu.calibration`` read); a ConfigError names the point."""
@@ -148,6 +143,10 @@ def load_campaign(path: str | Path) -> Campaign:
         spec = CampaignSpec.model_validate(data)
     except ValidationError as exc:
         raise SpecError(f"{path}: {describe_validation(exc)}") from None
+    from hil.campaign.kinds import KINDS, UNAVAILABLE
+
+    if spec.kind not in KINDS:
+        raise SpecError(f"{path}: kind: {spec.kind!r} campaigns are not available: {UNAVAILABLE[spec.kind]}")
     for key in spec.sweep:
         try:
             check_key(key)

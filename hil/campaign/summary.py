@@ -13,6 +13,7 @@ result.json reports per-axis sigmas only, so the NEES here ignores their cross-c
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ import numpy as np
 from scipy import stats
 
 from hil.campaign.runs import ERROR
+from hil.campaign.task import point_label
 from hil.outputs.result import strict_json
 
 SUMMARY_NAME = "summary.json"
@@ -93,16 +95,29 @@ def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]
     return out
 
 
-def summarise(points: list[dict[str, Any]], rows: list[dict[str, Any]], cluster: dict[str, Any]) -> dict[str, Any]:
-    """summary.json: every sweep point's statistics, the campaign's counts and the cluster it ran on."""
+def summarise(points: list[dict[str, Any]], rows: list[dict[str, Any]], cluster: dict[str, Any],
+              point: Callable[[int, dict[str, Any], list[dict[str, Any]]], dict[str, Any]] = point_summary
+              ) -> dict[str, Any]:
+    """summary.json: every sweep point's statistics (``point``: of the campaign's kind), the campaign's counts
+    and the cluster it ran on."""
     by_point: dict[int, list[dict[str, Any]]] = {p: [] for p in range(len(points))}
     for row in rows:
         by_point[row["point"]].append(row)
     return {"runs": len(rows), "failed": sum(row.get(ERROR) is not None for row in rows), "level": LEVEL,
-            "points": [point_summary(p, points[p], by_point[p]) for p in range(len(points))], "cluster": cluster}
+            "points": [point(p, points[p], by_point[p]) for p in range(len(points))], "cluster": cluster}
 
 
 def write_summary(out: Path, summary: dict[str, Any]) -> Path:
     path = out / SUMMARY_NAME
     path.write_text(json.dumps(strict_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return path
+
+
+def point_lines(p: dict[str, Any]) -> list[str]:
+    """The console line of a point: the consistency ratio per axis and the mean NEES."""
+    values = point_label(p["values"])
+    if "ratio" not in p:
+        return [f"  {values}: {p['with_estimate']} runs with an estimate: too few for statistics"]
+    ratio = " ".join(f"{r:.3f}" for r in p["ratio"])
+    return [(f"  {values}: std(error)/sigma {ratio} (band {p['ratio_band'][0]:.3f}-{p['ratio_band'][1]:.3f}), NEES "
+             f"{p['nees_mean']:.3f} (band {p['nees_band'][0]:.3f}-{p['nees_band'][1]:.3f})")]

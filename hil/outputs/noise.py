@@ -64,11 +64,9 @@ def noise_document(gyro: AllanAnalysis, accel: AllanAnalysis) -> dict:
     return doc
 
 
-def write_noise(out: Path, gyro: AllanAnalysis, accel: AllanAnalysis, figure: bool = True,
-                extra: dict | None = None) -> dict:
-    """Writes OUT/noise.json (with the ``extra`` keys: where the data came from) and OUT/allan.png unless
-    figure is False; returns the document."""
-    doc = {**noise_document(gyro, accel), **(extra or {})}
+def write_noise(out: Path, doc: dict, gyro: AllanAnalysis, accel: AllanAnalysis, figure: bool = True) -> dict:
+    """Writes the noise.json document ``doc`` as OUT/noise.json and, unless figure is False, OUT/allan.png of
+    the analyses it came from; returns the document."""
     out.mkdir(parents=True, exist_ok=True)
     (out / NOISE_JSON).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     if figure:

@@ -31,6 +31,16 @@ from hil.samples import AlignedBatch, ImuGap, StreamCounts
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
+TABLE_WAIT_S = 5.0  # s of the host's clock the IMU may run ahead of a silent table before it goes on without it
+UNPACED_TABLE_WAIT_S = 120.0  # s of trial time, at --speed max (see table_wait)
+
+
+def table_wait(time_scale: float | None) -> float:
+    """How far (s of trial time) the IMU may run ahead of a silent table: ``TABLE_WAIT_S`` on the host's clock
+    at the devices' speed. At ``--speed max`` (None) the emulated devices go as fast as the harness reads, and
+    the ports' buffers alone hold seconds of trial time of one stream while the other's reader waits for the
+    processor: the table is behind, not silent, so the IMU waits ``UNPACED_TABLE_WAIT_S``."""
+    return UNPACED_TABLE_WAIT_S if time_scale is None else TABLE_WAIT_S * time_scale
 
 
 TableCallback = Callable[[np.ndarray, np.ndarray], None]
@@ -48,7 +58,8 @@ class TrialProcessor:
     ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s) and
     gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion
     check); ``on_samples`` with the trial times (N,), increments (N, 3) and angles (N, 3; NaN where the
-    table had none) of each run of aligned samples the estimator took (for the calibration's windows);
+    table had none) of each run of aligned samples the estimator took and of each batch fed (for
+    the calibration's windows);
     all run on the caller's thread.
     """
 
@@ -63,7 +74,7 @@ class TrialProcessor:
                                               time_scale)}
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
-                               free_running=free_running)
+                               table_wait_s=table_wait(time_scale), free_running=free_running)
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
         self.gate = GyroTableGate(self.earth, self.geometry)
@@ -122,6 +133,9 @@ class TrialProcessor:
         self._batched += len(batch)
         self._batched_angles += 0 if batch.angles is None else len(batch)
         self._t_end = float(batch.t[-1]) if len(batch) else self._t_end
+        if self._on_samples is not None and len(batch):
+            angles = batch.angles if batch.angles is not None else np.full((len(batch), 3), np.nan)
+            self._on_samples(batch.t - self.estimator.t0, batch.dtheta, batch.dv, angles)
         if self._on_table is not None and batch.angles is not None:
             self._on_table(batch.t - self.estimator.t0, batch.angles)
         self._snapshots_from(before)

@@ -8,18 +8,20 @@ moving one the table's motion is first taken out with its angles (:mod:`hil.pipe
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from hil.config import Config, load_config, resolve_path
-from hil.estimation.allan import DEFAULT_LEVEL, analyse
+from hil.config import Config, ImuErrors, load_config, resolve_path
+from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
 from hil.frames import Earth, TableGeometry
+from hil.outputs.noise import SENSORS
 from hil.recording.csv_input import DataError, read_increments_csv, write_increments_csv
 from hil.samples import AlignedBatch
 from hil.trial.outcome import TrialSetupError
-from hil.units import DEG
+from hil.units import DEG, DEG_PER_H, SQRT_HOUR, UG
 
 STATIC_ANGLE_SPAN = 1e-3 * DEG  # table angles spanning less than this: a static trial
 STATIC_RATE_SPAN = 0.5 * DEG  # rad/s: 1-s mean rates spanning more than this without angles: a moving IMU
@@ -44,9 +46,13 @@ def read_source(source: str | Path, config: str | Path | None = None) -> NoiseRe
         return NoiseRecord(batch, "recording", given or recorded)
     if path.suffix == ".csv":
         return NoiseRecord(read_increments_csv(path), "csv", given)
+    return simulated(load_config(resolve_path(path)))
+
+
+def simulated(cfg: Config) -> NoiseRecord:
+    """The emulator's increments of a trial config, as ``hil simulate`` draws them."""
     from emulators.simulation import Simulation
 
-    cfg = load_config(resolve_path(path))
     return NoiseRecord(_concatenated(list(Simulation.from_config(cfg).batches())), "simulation", cfg)
 
 
@@ -73,17 +79,74 @@ def _concatenated(batches: list[AlignedBatch]) -> AlignedBatch:
                         np.vstack([b.dv for b in batches]), angles, batches[0].t0)
 
 
+def noise_truth(errors: ImuErrors, rate_hz: float) -> dict:
+    """The noise terms the emulator's error model (:mod:`emulators.sensor_errors`) gives a static trial, in
+    noise.json's keys and units: white rate noise of 1-sigma s per sample of period T = 1 / rate has the
+    Allan variance s^2 T / tau (the mean of m = tau / T independent samples), so N = s sqrt(T); the bias
+    instability B and the rate random walk K are configured as the IEEE 952 coefficients themselves (Eqs.
+    C.15, C.17). Linear drift and output quantisation, which add other slopes, are not terms of the model."""
+    period = 1.0 / rate_hz
+    e = errors
+    rates = {"gyro": (np.array(e.gyro_noise_dph) * DEG_PER_H, np.array(e.gyro_bias_instability_dph) * DEG_PER_H,
+                      np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / SQRT_HOUR),
+             "accel": (np.array(e.accel_noise_ug) * UG, np.array(e.accel_bias_instability_ug) * UG,
+                       np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / SQRT_HOUR)}
+    truth = {}
+    for sensor, units, keys in SENSORS:
+        white, instability, walk = rates[sensor]
+        si = (white * math.sqrt(period), instability, walk)
+        scale = (units.white, units.bias_instability, units.random_walk)
+        truth[sensor] = {key: [float(v) for v in value / unit] for key, value, unit in zip(keys, si, scale)}
+    return truth
+
+
 def moving(batch: AlignedBatch, period: float) -> bool:
     """Whether the table moved: its angles span more than ``STATIC_ANGLE_SPAN``, or, without angles, the
     gyros' 1-s mean rates span more than ``STATIC_RATE_SPAN``."""
     if batch.angles is not None:
         return bool(np.max(np.ptp(np.unwrap(batch.angles, axis=0), axis=0)) > STATIC_ANGLE_SPAN)
-    per_second = max(int(round(1.0 / period)), 1)
+    per_second = max(round(1.0 / period), 1)
     n = len(batch) // per_second * per_second
     if n < 2 * per_second:
         return False
     means = batch.dtheta[:n].reshape(-1, per_second, 3).sum(axis=1)  # rad over each second: mean rate
     return bool(np.max(np.ptp(means, axis=0)) > STATIC_RATE_SPAN)
+
+
+@dataclass(frozen=True)
+class NoiseAnalysis:
+    """The Allan analyses of a record's gyros and accelerometers and their noise.json document."""
+
+    gyro: AllanAnalysis
+    accel: AllanAnalysis
+    doc: dict
+
+
+def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL) -> NoiseAnalysis:
+    """The Allan deviation and noise terms of a record (the table's motion taken out first if it moved);
+    ``label`` names the source in errors. Nothing is written."""
+    from hil.outputs.noise import noise_document
+    from hil.pipeline.table_motion import motion_residuals
+
+    batch = record.batch
+    period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
+    is_moving = moving(batch, period)
+    dtheta, dv = batch.dtheta, batch.dv
+    if is_moving:
+        if batch.angles is None:
+            raise TrialSetupError(f"{label}: the IMU moves and there are no table angles to take the motion out: "
+                                  "the noise terms need a static trial, or the table's angles with the increments")
+        cfg = record.cfg
+        if cfg is None:
+            raise TrialSetupError(f"{label}: a moving trial's CSV needs --config for the site and the table geometry")
+        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+        dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
+    try:
+        gyro, accel = analyse(dtheta, period, level), analyse(dv, period, level)
+    except ValueError as exc:
+        raise DataError(f"{label}: {exc}") from None
+    extra = {"source": record.source, "samples": len(dtheta), "period_s": period, "motion_removed": is_moving}
+    return NoiseAnalysis(gyro, accel, {**noise_document(gyro, accel), **extra})
 
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
@@ -92,34 +155,15 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     returns the noise document."""
     from hil.outputs.noise import write_noise
     from hil.outputs.report import write_noise_report
-    from hil.pipeline.table_motion import motion_residuals
 
     record = read_source(source, config)
-    batch = record.batch
     if export is not None:
-        write_increments_csv(export, batch)
-    period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
-    is_moving = moving(batch, period)
-    dtheta, dv = batch.dtheta, batch.dv
-    if is_moving:
-        if batch.angles is None:
-            raise TrialSetupError(f"{source}: the IMU moves and there are no table angles to take the motion out: "
-                                  "the noise terms need a static trial, or the table's angles with the increments")
-        cfg = record.cfg
-        if cfg is None:
-            raise TrialSetupError(f"{source}: a moving trial's CSV needs --config for the site and the table geometry")
-        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-        dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
-    try:
-        gyro, accel = analyse(dtheta, period, level), analyse(dv, period, level)
-    except ValueError as exc:
-        raise DataError(f"{source}: {exc}") from None
-    extra = {"source": record.source, "samples": len(dtheta), "period_s": period,
-             "motion_removed": is_moving}
-    doc = write_noise(out, gyro, accel, figure=figure, extra=extra)
+        write_increments_csv(export, record.batch)
+    analysis = analyse_record(record, str(source), level)
+    write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
     if rerun:
         from hil.viewer.allan_view import save_allan  # rerun only when asked for
 
-        save_allan(out, doc)
-    return doc
+        save_allan(out, analysis.doc)
+    return analysis.doc

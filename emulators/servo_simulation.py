@@ -1,0 +1,75 @@
+"""The emulated IMU and the commanded table in the caller's process, without transports (``hil calibrate
+--simulate``).
+
+The harness commands the servo (:mod:`emulators.servo`) through the drivers' table client on a
+:class:`~emulators.acl_server.ServoPort` (:meth:`ServoSimulation.command_client`), and :meth:`ServoSimulation.step`
+advances simulated time: the samples up to a time under the servo's plan so far, which it then commits, so a
+command sent after a step takes effect at the next sync pulse, as the emulator's pulse loop makes it.
+
+As in :class:`emulators.simulation.Simulation`, sample k covers ((k - 1) / rate, k / rate]: its increments
+are the truth's exact integrals with the sensor errors applied; its table angles are what the table reports
+for that instant (:func:`emulators.sources.encoder_reading`: the zero offset, the 1e-6 deg grid), as the
+aligner puts the table's readings on the IMU's instants.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from drivers.table_client import TableCommandClient
+from emulators.acl_server import ServoPort
+from emulators.sensor_errors import SensorErrorModel
+from emulators.servo import Servo
+from emulators.simulation import emulated_world
+from emulators.sources import encoder_reading
+from emulators.truth import Truth
+from hil.config import Config
+from hil.samples import AlignedBatch
+from hil.units import ARCSEC
+
+IN_PROCESS = "emulator (in process)"  # the command client's url, for its messages
+
+
+@dataclass
+class ServoSimulation:
+    """Truth, sensor errors and the servo of one trial; :attr:`samples` emitted so far."""
+
+    truth: Truth
+    errors: SensorErrorModel
+    servo: Servo
+    zero_offset: np.ndarray  # rad (outer, middle, inner): true angle minus encoder reading
+    rate_hz: float
+    samples: int = 0
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> ServoSimulation:
+        truth, errors = emulated_world(cfg)
+        servo = Servo(cfg.turntable, cfg.imu_rate_hz, truth.motion)
+        return cls(truth, errors, servo, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC, cfg.imu_rate_hz)
+
+    def __post_init__(self) -> None:
+        self.port = ServoPort(self.servo)
+
+    def command_client(self, limits, baudrate: int = 115200) -> TableCommandClient:
+        """The drivers' table client, open on :attr:`port` (limits: :class:`hil.config.LimitsConfig`)."""
+        return TableCommandClient(IN_PROCESS, limits, baudrate).open(self.port)
+
+    def step(self, t_end: float) -> AlignedBatch:
+        """The samples after those emitted that end at or before ``t_end`` (s), under the servo's plan; the
+        servo's horizon is then their end."""
+        n = max(math.floor(t_end * self.rate_hz + 1e-9), self.samples)
+        t = np.arange(self.samples + 1, n + 1) / self.rate_hz
+        t0 = self.samples / self.rate_hz
+        if not len(t):
+            return AlignedBatch(t, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)), t0)
+        with self.servo.lock:
+            self.servo.advance(float(t[-1]))
+            truth = replace(self.truth, motion=self.servo.motion)
+            self.servo.commit(float(t[-1]))
+        dtheta, dv = truth.increments(t0, t)
+        dtheta, dv = self.errors.apply(t, dtheta, dv)
+        self.samples = n
+        return AlignedBatch(t, dtheta, dv, encoder_reading(truth.angles(t), self.zero_offset), t0)

@@ -1,0 +1,33 @@
+"""What a campaign's ``kind`` runs and reports: per kind, the run a worker executes (a task to its row), the
+summary of a sweep point's rows, the console lines of that summary and the section of campaign.html.
+Wiring a kind is one entry here."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from hil.campaign import noise_summary, summary
+from hil.campaign.noise_report import noise_section
+from hil.campaign.report import swing_section
+from hil.campaign.runs import run_noise, run_one
+from hil.campaign.task import RunTask
+
+Row = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Kind:
+    run: Callable[[RunTask], Row]  # one run, as a worker executes it; a run that raises is a row with its error
+    point_summary: Callable[[int, dict[str, Any], list[Row]], dict[str, Any]]  # a sweep point in summary.json
+    lines: Callable[[dict[str, Any]], list[str]]  # a sweep point's console lines
+    section: Callable[[dict, list[Row], Any], str]  # campaign.html's part for the kind (summary, rows, pyplot)
+
+
+KINDS = {
+    "swing": Kind(run_one, summary.point_summary, summary.point_lines, swing_section),
+    "noise": Kind(run_noise, noise_summary.point_summary, noise_summary.point_lines, noise_section),
+}
+# kinds the SPEC knows that have no entry yet, with the reason a SPEC of theirs is refused
+UNAVAILABLE = {"calibration": "there is no simulated calibration trial to run yet; use kind swing or noise"}

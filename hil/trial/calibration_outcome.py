@@ -1,0 +1,116 @@
+"""What the two calibration runners share (the live trial, :mod:`hil.trial.calibration_runner`, and the
+simulated one, :mod:`hil.trial.calibration_simulation`): the schedule checked against the table's limits,
+the emulated table's bound on its length, the fit of the windows, and the outcome that carries the
+calibration document and writes ``calibration.json`` and ``calibration.html`` beside the trial's outputs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from hil.config import Config
+from hil.estimation.calibration_model import Window
+from hil.estimation.calibration_schedule import Schedule
+from hil.outputs.calibration_report import Residuals
+from hil.outputs.result import COMPLETED
+from hil.trial.outcome import TrialOutcome, TrialSetupError
+
+# The emulated devices run for this many times the schedule's nominal length (+ 120 s), and the trial ends when
+# the schedule does. Each command acts as late as the data queued between the devices and the processing, so on
+# a loaded machine the schedule takes longer in the devices' time than its nominal length (seen: beyond 2x + 60 s).
+EMULATED_MARGIN = 4.0
+UNFINISHED = "the devices stopped before the schedule ended"
+
+
+def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
+    """``calibration``'s schedule; raises :class:`TrialSetupError` (prefixed with ``where``) when a step lies
+    outside ``turntable.limits``."""
+    from hil.estimation.calibration_schedule import check_limits, schedule_from_config
+
+    schedule = schedule_from_config(cfg.calibration)
+    try:
+        check_limits(schedule, cfg.turntable.limits)
+    except ValueError as exc:
+        prefix = f"{where}: " if where else ""
+        raise TrialSetupError(f"{prefix}{exc} (turntable.limits); nothing was sent") from None
+    return schedule
+
+
+def emulated_length(cfg: Config, schedule: Schedule) -> float:
+    """Trial seconds the emulated devices run for a schedule (see :data:`EMULATED_MARGIN`)."""
+    from hil.estimation.calibration_schedule import schedule_duration
+
+    return EMULATED_MARGIN * schedule_duration(schedule, cfg.turntable.limits) + 120.0
+
+
+@dataclass
+class CalibrationOutcome(TrialOutcome):
+    """A calibration trial's outcome: :attr:`calibration` is calibration.json's document (the terms, their
+    sigmas, the windows and, for an emulated IMU, the truth), None when the schedule did not complete;
+    :attr:`residuals` are its windows' residuals, for calibration.html. result.json's ``calibration`` block
+    is its summary."""
+
+    calibration: dict | None = None
+    residuals: Residuals | None = None
+
+    @classmethod
+    def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool, unfinished: str = UNFINISHED
+                    ) -> CalibrationOutcome:
+        """``outcome`` with the calibration of the windows of ``sequence`` (a
+        :class:`~hil.trial.calibration_sequence.CalibrationSequence`, or None when it never started) when
+        the trial and the schedule completed; a completed trial whose schedule did not is ended early,
+        ``unfinished`` saying why. ``truth``: the IMU's errors are the config's (an emulated or simulated IMU)."""
+        fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(TrialOutcome)}
+        if outcome.ended == COMPLETED and (sequence is None or not sequence.done):
+            where = sequence.progress if sequence is not None else "not started"
+            fields["result"]["ended"] = f"early: {unfinished} ({where})"
+        if fields["result"]["ended"] != COMPLETED:
+            return cls(**fields)
+        from hil.outputs.calibration_report import calibration_summary
+
+        try:
+            windows = sequence.windows()
+        except ValueError as exc:  # a window whose samples were all lost (gated out, or gaps in the data)
+            fields["result"]["ended"] = f"early: {exc}"
+            return cls(**fields)
+        document, residuals = fit_windows(outcome.cfg, windows, truth)
+        fields["result"]["calibration"] = calibration_summary(document)
+        return cls(**fields, calibration=document, residuals=residuals)
+
+    def write(self, figures: bool = True) -> str:
+        """calibration.json and calibration.html (when calibrated), then the trial's outputs."""
+        if self.calibration is not None:
+            from hil.outputs.calibration import write_calibration
+            from hil.outputs.calibration_report import write_calibration_report
+
+            self.out.mkdir(parents=True, exist_ok=True)
+            write_calibration(self.out / "calibration.json", self.calibration)
+            write_calibration_report(self.out, self.calibration, self.residuals, figures and self.cfg.output.figures)
+        return super().write(figures)
+
+
+def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:
+    """Fit the accelerometers on the dwells and the gyros on every window (when there are plateaus);
+    calibration.json's document (with ``truth`` and ``truth.as_observed`` when ``truth``) and the residuals."""
+    from hil.estimation.accel_calibration import calibrate_accelerometers
+    from hil.estimation.gyro_calibration import calibrate_gyros
+    from hil.frames import Earth, TableGeometry
+    from hil.outputs.calibration import calibration_document
+    from hil.outputs.calibration_report import observed_truth, window_residuals
+
+    calibration = cfg.calibration
+    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+    geometry = TableGeometry.from_config(cfg.turntable)
+    accel = calibrate_accelerometers(windows, earth, geometry, calibration.accel_terms, calibration.rank_tolerance)
+    gyro = None
+    if any(not w.static for w in windows):
+        gyro = calibrate_gyros(windows, earth, geometry, accel.refined.theta[15:18],
+                               accel.refined.covariance[15:18, 15:18], calibration.gyro_terms,
+                               calibration.rank_tolerance)
+    zero = cfg.turntable.zero_offset_arcsec
+    errors = cfg.imu.errors if truth else None
+    document = calibration_document(accel, gyro, windows, errors, zero if truth else None)
+    if errors is not None:
+        document["truth"]["as_observed"] = observed_truth(errors, zero)
+    return document, window_residuals(windows, accel, gyro, earth, geometry)

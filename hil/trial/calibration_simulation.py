@@ -1,0 +1,78 @@
+"""``hil calibrate --simulate``: the calibration trial without transports or the emulator's process, as
+fast as the CPU allows; deterministic for a ``trial.seed``.
+
+The :class:`~hil.trial.calibration_sequence.CalibrationSequence` of the live trial commands a real servo in
+this process (:class:`emulators.servo_simulation.ServoSimulation`) through the drivers' table client:
+every command is formatted and parsed as on the wire, and a refusal raises as it does live. Simulated time
+goes on in steps of ``estimator.batch_samples`` samples (0.05 s at 200 Hz by default), the blocks in which
+the live processor hands samples and angles on: each step's samples, under the servo's plan so far (a
+command acts at the first pulse after the step it was sent in), go through the
+:class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, whose ``on_table`` (the table's
+reported angles) advances the sequence, which sends the next commands, and whose ``on_samples`` hands it
+the samples, as in the live trial. The trial ends when the sequence is done or fails, or at the emulated
+devices' bound on the schedule's length (:func:`~hil.trial.calibration_outcome.emulated_length`), with
+the live trial's result; the table is sent Off on every way out; then the same fit
+(:class:`~hil.trial.calibration_outcome.CalibrationOutcome`). Nothing is written until the outcome's
+``write``: a campaign's worker takes the result and the calibration document from the outcome.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+from hil.config import Config
+from hil.outputs.result import COMPLETED
+from hil.pipeline.processor import TrialProcessor
+from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
+from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
+from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
+
+
+def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions | None = None
+                               ) -> tuple[CalibrationOutcome, Viewer | None]:
+    """The simulated calibration trial (module docstring); its outcome (with the calibration when the
+    schedule completed) and the viewer ``options`` ask for (none by default)."""
+    from drivers.table_client import InterlockError, LimitError, TableError
+    from emulators.servo_simulation import ServoSimulation
+    from hil.trial.calibration_feed import sequence_views
+    from hil.trial.calibration_sequence import CalibrationSequence
+
+    schedule = checked_schedule(cfg)
+    sim = ServoSimulation.from_config(cfg)
+    rate = cfg.imu_rate_hz
+    end = round(emulated_length(cfg, schedule) * rate)  # samples
+    step = cfg.estimator.batch_samples
+    viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
+    client = sim.command_client(cfg.turntable.limits, cfg.turntable.baudrate)
+    sequence = CalibrationSequence(schedule, client, 1.0 / rate, **sequence_views(viewer, schedule, cfg))
+    on_table = ViewerFeed(viewer).on_table
+
+    def table(t, angles) -> None:
+        on_table(t, angles)
+        sequence.add(t, angles)
+
+    processor = TrialProcessor(cfg, on_table=table, on_samples=sequence.on_samples)
+    try:
+        client.apply_limits()
+        sequence.start()
+        client.configure_sync(True)
+        while not sequence.done and sequence.failure is None and sim.samples < end:
+            processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
+    except (TableError, LimitError, InterlockError) as exc:
+        if viewer is not None:
+            viewer.close()
+        raise TrialSetupError(str(exc)) from None
+    finally:
+        try:
+            client.close()  # :Mode ALL,Off, and the modes read back
+        except TableError as exc:
+            print(f"hil: WARNING: could not confirm the turntable is off: {exc}", file=sys.stderr)
+    processor.finish()
+    if viewer is not None and processor.estimator is not None:
+        viewer.log_snapshots(processor.estimator.snapshots)
+    ended = COMPLETED if sequence.failure is None else f"early: turntable is not moving as commanded: {sequence.failure}"
+    outcome = TrialOutcome.of(processor, cfg, config_text, out, ended, emulated_truth(cfg))
+    unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
+    return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
