@@ -36,7 +36,7 @@ import math
 import numpy as np
 
 from hil.config import ImuErrors
-from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG
+from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG, UG_PER_G2
 
 # Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the
 # first sample) so that the running fractional sum keeps its precision over long trials.
@@ -164,7 +164,7 @@ class SensorErrorModel:
     series (random-walk state, random stream and quantisation remainders carry over).
     """
 
-    def __init__(self, errors: ImuErrors, rate_hz: float, seed: int, gravity: float = 9.80665) -> None:
+    def __init__(self, errors: ImuErrors, rate_hz: float, seed: int) -> None:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         period = 1.0 / rate_hz
@@ -189,7 +189,7 @@ class SensorErrorModel:
             random_walk=np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / sqrt_hour,
             scale=np.array(e.accel_scale_ppm) * PPM,
             misalignment=np.array(e.accel_misalignment_arcsec) * ARCSEC,
-            nonlinearity=np.array(e.accel_nonlinearity_ug_per_g2) * UG / gravity**2,
+            nonlinearity=np.array(e.accel_nonlinearity_ug_per_g2) * UG_PER_G2,
             quantum=e.dv_quantum_mps,
             period=period,
         )

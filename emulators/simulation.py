@@ -57,4 +57,4 @@ def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:
     truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
                   (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),
                   site.gravity_anomaly_mgal * MGAL)
-    return truth, SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, gravity=earth.g)
+    return truth, SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed)

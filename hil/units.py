@@ -6,6 +6,7 @@ import math
 
 G0 = 9.80665  # m/s^2 per g (standard gravity)
 UG = 9.80665e-6  # m/s^2 per micro-g (G0 * 1e-6, written out: the product rounds differently)
+UG_PER_G2 = UG / G0**2  # 1/(m/s^2) per ug/g^2 (g the standard gravity, as in ug)
 DEG = math.pi / 180.0  # rad per degree
 DEG_PER_H = DEG / 3600.0  # rad/s per deg/h
 ARCSEC = DEG / 3600.0  # rad per arc second

@@ -161,6 +161,13 @@ def test_nonlinearity_adds_k_f_squared():
     np.testing.assert_array_equal(out_dtheta, 0.0)
 
 
+def test_nonlinearity_is_per_standard_g_squared_whatever_the_site():
+    f = 9.7946  # m/s^2: a site's gravity, not the standard 9.80665 of the unit g (and of ug)
+    _, out_dv = _model(accel_nonlinearity_ug_per_g2=[100.0, 0.0, 0.0]).apply(_times(1), np.zeros((1, 3)),
+                                                                             np.array([[f * T, 0.0, 0.0]]))
+    assert out_dv[0, 0] - f * T == pytest.approx(100.0 * (f / 9.80665) ** 2 * 9.80665e-6 * T, rel=1e-9)
+
+
 def test_quantisation_gives_whole_quanta_and_tracks_the_input_sum():
     n = 20_000  # several remainder blocks
     dtheta, dv = _motion(n)

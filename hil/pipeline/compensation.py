@@ -21,9 +21,8 @@ import numpy as np
 from hil.config import ConfigError
 from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate
 from hil.samples import AlignedBatch, ImuSamples
-from hil.units import ARCSEC, DEG_PER_H, G0, PPM, UG
+from hil.units import ARCSEC, DEG_PER_H, PPM, UG, UG_PER_G2
 
-UG_PER_G2 = UG / G0**2  # 1/(m/s^2) per ug/g^2
 # (key, slice of theta, SI per unit)
 ACCEL_KEYS = (("bias_ug", BIAS, UG), ("scale_ppm", SCALE, PPM), ("misalignment_arcsec", MIS, ARCSEC),
               ("nonlinearity_ug_per_g2", NONLIN, UG_PER_G2))
