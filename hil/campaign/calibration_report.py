@@ -81,7 +81,7 @@ def _headlines(summary: dict) -> str:
         verdict = "consistent" if p["consistent"] else "NOT consistent"
         items.append(f"<li>{html.escape(point_label(p['values']))}: {verdict}, {p['ratio_above']} above and "
                      f"{p['ratio_below']} below their band of {p['ratio_tested']} terms (by chance "
-                     f"~{p['ratio_expected_outside']:.1f}); worst {html.escape(worst['term'])} "
+                     f"~{p['ratio_expected_outside']:.1f}, at most {p['ratio_outside_allowed']}); worst {html.escape(worst['term'])} "
                      f"{worst['ratio']:.3f}</li>")
     return f"<ul>{''.join(items)}</ul>" if items else "<p>Too few runs for statistics.</p>"
 
