@@ -17,7 +17,9 @@ import yaml
 from hil.campaign.calibration_summary import point_lines, point_summary
 from hil.campaign.kinds import KINDS
 from hil.campaign.runner import run_campaign
+from hil.campaign.runs import run_calibration
 from hil.campaign.spec import CampaignSpec, SpecError, load_campaign
+from hil.campaign.task import RunTask
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = ROOT / "configs" / "calibration_short.yaml"
@@ -101,6 +103,16 @@ def test_a_calibration_point_whose_schedule_leaves_the_table_limits_is_refused_b
     with pytest.raises(SpecError, match=r"sweep point calibration.plateau_rate_dps=90: calibration schedule "
                                         r"plateau 1: .* rate 90 deg/s exceeds the table limit 60 deg/s"):
         load_campaign(_spec(tmp_path, sweep={"calibration.plateau_rate_dps": [30, 90]}))
+
+
+def test_a_calibration_that_ends_without_its_terms_is_a_failed_run_saying_why():
+    config = yaml.safe_load(SHORT.read_text())
+    config["trial"]["rate_hz"] = 50
+    config["calibration"].update(positions=[[0, 0, 0], [0, 90, 0]], dwell_s=1, plateau_s=0)
+    config["turntable"]["interlock_trip_at_s"] = 3.0  # during the move to the second position: the axes brake
+    row = run_calibration(RunTask("p000-r0000", 0, 0, 7, {}, config))
+    assert set(row) == {"id", "point", "run", "seed", "error"}  # the task's columns and why, no terms
+    assert row["error"].startswith("trial early: the schedule did not end") and "(step 2 of 2: moving)" in row["error"]
 
 
 def test_the_shipped_calibration_example_sweeps_the_dwell_of_the_short_calibration():
