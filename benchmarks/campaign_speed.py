@@ -2,7 +2,8 @@
 this process, and the scheduler's overhead per run: one worker's wall time minus the serial time, per run,
 and the wall time per task of the same tasks mapped to a function that does nothing.
 The runs are the 2019 paper's swing (``--kind noise``: the static record of configs/noise_static.yaml and its
-Allan analysis), short by default so that the overhead shows; each figure is the best of --repeat passes
+Allan analysis; ``--kind calibration``: the calibration of configs/calibration_short.yaml, whose schedule sets
+its length), short by default so that the overhead shows; each figure is the best of --repeat passes
 (the machine's other load only ever slows a pass down).
 
     .venv/bin/python benchmarks/campaign_speed.py [--kind swing] [--runs 40] [--duration 60] [--rate 100] [--repeat 3]
@@ -23,7 +24,8 @@ from hil.campaign.runner import gather
 from hil.campaign.spec import load_campaign
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
-BASES = {"swing": CONFIGS / "liu2019_sim.yaml", "noise": CONFIGS / "noise_static.yaml"}
+BASES = {"swing": CONFIGS / "liu2019_sim.yaml", "noise": CONFIGS / "noise_static.yaml",
+         "calibration": CONFIGS / "calibration_short.yaml"}
 
 
 def nothing(task):
@@ -41,7 +43,9 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         spec = Path(tmp) / "speed.yaml"
-        sweep = {"trial.duration_s": [args.duration], "trial.rate_hz": [args.rate]}
+        sweep = {"trial.rate_hz": [args.rate]}
+        if args.kind != "calibration":
+            sweep["trial.duration_s"] = [args.duration]
         spec.write_text(yaml.safe_dump({"base": str(BASES[args.kind]), "kind": args.kind, "runs": args.runs, "seed": 1,
                                         "sweep": sweep}))
         tasks = load_campaign(spec).tasks
@@ -52,7 +56,8 @@ def main() -> None:
             start = time.perf_counter()
             serial = [run_one(task) for task in tasks]
             serial_s = min(serial_s, time.perf_counter() - start)
-        print(f"{args.runs} {args.kind} runs of {args.duration:g} s at {args.rate:g} Hz")
+        length = "its schedule" if args.kind == "calibration" else f"{args.duration:g} s"
+        print(f"{args.runs} {args.kind} runs of {length} at {args.rate:g} Hz")
         print(f"serial, in process: {serial_s:7.2f} s, {args.runs / serial_s:6.2f} runs/s, "
               f"{serial_s / args.runs * 1e3:7.1f} ms a run")
         one_worker_s = None

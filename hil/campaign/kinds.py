@@ -1,6 +1,7 @@
 """What a campaign's ``kind`` runs and reports: per kind, the run a worker executes (a task to its row), the
 summary of a sweep point's rows, the console lines of that summary and the section of campaign.html.
-Wiring a kind is one entry here."""
+Wiring a kind is one entry here (and its name in
+:class:`hil.campaign.spec.CampaignSpec`'s ``kind``)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from hil.campaign import noise_summary, summary
+from hil.campaign import calibration_summary, noise_summary, summary
+from hil.campaign.calibration_report import calibration_section
 from hil.campaign.noise_report import noise_section
 from hil.campaign.report import swing_section
-from hil.campaign.runs import run_noise, run_one
+from hil.campaign.runs import run_calibration, run_noise, run_one
 from hil.campaign.task import RunTask
 
 Row = dict[str, Any]
@@ -28,6 +30,6 @@ class Kind:
 KINDS = {
     "swing": Kind(run_one, summary.point_summary, summary.point_lines, swing_section),
     "noise": Kind(run_noise, noise_summary.point_summary, noise_summary.point_lines, noise_section),
+    "calibration": Kind(run_calibration, calibration_summary.point_summary, calibration_summary.point_lines,
+                        calibration_section),
 }
-# kinds the SPEC knows that have no entry yet, with the reason a SPEC of theirs is refused
-UNAVAILABLE = {"calibration": "there is no simulated calibration trial to run yet; use kind swing or noise"}

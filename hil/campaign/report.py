@@ -48,23 +48,30 @@ def _normalised(rows: list[dict[str, Any]], point: int) -> np.ndarray:
         return np.array([e for e, _ in found]) / np.array([s for _, s in found], dtype=float)
 
 
-def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
-    fig, axes = plt.subplots(1, 3, figsize=(10, 3.4), sharey=True)
+def normal_histograms(panels: list[tuple[str, list[np.ndarray]]], labels: list[str], plt, title: str) -> bytes:
+    """Histograms of normalised errors (error over reported sigma) against N(0, 1): per panel (x label, one
+    array a sweep point, labelled by ``labels``), non-finite values left out."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(10, 3.4), sharey=True, squeeze=False)
     grid = np.linspace(-4.0, 4.0, 161)
-    for k, ax in enumerate(axes):
-        for p, label in zip(summary["points"], point_labels(summary["points"])):
-            z = _normalised(rows, p["point"])[:, k]
+    for ax, (xlabel, per_point) in zip(axes[0], panels):
+        for z, label in zip(per_point, labels):
             z = z[np.isfinite(z)]
             if z.size:
                 ax.hist(z, bins=np.linspace(-4.0, 4.0, 25), density=True, histtype="step", label=label)
         ax.plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", label="N(0, 1)")
-        ax.set_xlabel(f"error {AXES[k]} / reported sigma")
-    axes[0].set_ylabel("density")
-    if len(summary["points"]) <= 8:
-        axes[-1].legend(fontsize=7)
-    fig.suptitle("Bias error against the reported sigma")
+        ax.set_xlabel(xlabel)
+    axes[0, 0].set_ylabel("density")
+    if len(labels) <= 8:
+        axes[0, -1].legend(fontsize=7)
+    fig.suptitle(title)
     fig.tight_layout()
     return png(fig)
+
+
+def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
+    normalised = [_normalised(rows, p["point"]) for p in summary["points"]]
+    return normal_histograms([(f"error {AXES[k]} / reported sigma", [z[:, k] for z in normalised]) for k in range(3)],
+                             point_labels(summary["points"]), plt, "Bias error against the reported sigma")
 
 
 def banded(labels: list[str], bands: list, plt, band_label: str, ideal: float, ylabel: str, title: str, series):

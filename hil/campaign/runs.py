@@ -1,6 +1,8 @@
 """One run of a campaign, as a worker executes it, flattened into one row of runs.parquet: the simulated trial
 of ``hil simulate`` and its result.json document (kind ``swing``), or the simulated static trial of
-``hil noise CONFIG`` and its noise.json document with the noise terms the config puts in (kind ``noise``).
+``hil noise CONFIG`` and its noise.json document with the noise terms the config puts in (kind ``noise``), or
+the simulated calibration trial of ``hil calibrate --simulate`` with its terms against the truth (kind
+``calibration``).
 No outputs are written, no viewer opened."""
 
 from __future__ import annotations
@@ -71,3 +73,27 @@ def run_noise(task: RunTask) -> dict[str, Any]:
         return failed_row(task, exc)
     return {**task_columns(task), ERROR: None, **flatten(doc), **flatten(noise_truth(cfg.imu.errors, cfg.imu_rate_hz),
                                                                         f"{TRUTH}.")}
+
+
+TERM = "term"  # a calibration run's terms: term.<block>.<key>.<index>.{estimate,sigma,truth,error_sigma}
+TERM_FIELDS = ("estimate", "sigma", "truth", "error_sigma")
+
+
+def run_calibration(task: RunTask) -> dict[str, Any]:
+    """The row of one calibration run: the simulated calibration trial of ``hil calibrate --simulate``, its
+    result.json document and, per term of calibration.json, the estimate, its sigma, the truth as the
+    schedule observes it and the error in sigmas (None for a term reported unobservable). A trial that
+    ended without a calibration is a row with ``error``."""
+    from hil.config import parse_config
+    from hil.outputs.calibration_report import comparison
+    from hil.trial.calibration_simulation import run_calibration_simulation
+
+    try:
+        cfg = parse_config(task.config, task.id)
+        outcome, _ = run_calibration_simulation(cfg, yaml.safe_dump(task.config), Path("."))
+    except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost campaign
+        return failed_row(task, exc)
+    if outcome.calibration is None:
+        return failed_row(task, f"trial {outcome.result['ended']}")
+    terms = {f"{TERM}.{r['term']}.{field}": r[field] for r in comparison(outcome.calibration) for field in TERM_FIELDS}
+    return {**task_columns(task), ERROR: None, **flatten(outcome.result), **flatten(terms)}

@@ -38,7 +38,7 @@ class CampaignSpec(BaseModel):
     base: str  # the trial config every run starts from: relative to the SPEC's directory, or a shipped name
     runs: int = Field(gt=0)  # seeds per sweep point
     seed: int = Field(0, ge=0)  # entropy of the SeedSequence
-    kind: Literal["swing", "noise", "calibration"] = DEFAULT_KIND  # the simulated trial of every run
+    kind: Literal["swing", "noise", "calibration"] = DEFAULT_KIND  # the simulated trial of every run (kinds.KINDS)
     sweep: dict[str, list[Any]] = {}
 
     @field_validator("sweep")
@@ -119,17 +119,25 @@ def _base_path(spec_path: Path, base: str) -> Path:
     return beside if beside.exists() else resolve_path(base)
 
 
-def _check_point(config: dict, label: str, source: str) -> None:
-    """The trial config of a point, checked as ``hil simulate`` sets it up (the emulator and the processor,
-    with ``imu.calibration`` read); a ConfigError names the point."""
+def _check_point(config: dict, label: str, source: str, kind: str) -> None:
+    """The trial config of a point, checked as its kind's trial sets it up (the emulator and the processor,
+    with ``imu.calibration`` read; a calibration's schedule within the table's limits and the in-process
+    servo); a ConfigError or TrialSetupError names the point."""
+    from emulators.servo_simulation import ServoSimulation
     from emulators.simulation import Simulation
     from hil.pipeline.processor import TrialProcessor
+    from hil.trial.calibration_outcome import checked_schedule
+    from hil.trial.outcome import TrialSetupError
 
     try:
         cfg = parse_config(config, source)
-        Simulation.from_config(cfg)
+        if kind == "calibration":
+            checked_schedule(cfg)
+            ServoSimulation.from_config(cfg)
+        else:
+            Simulation.from_config(cfg)
         TrialProcessor(cfg)
-    except ConfigError as exc:
+    except (ConfigError, TrialSetupError) as exc:
         raise SpecError(f"{source}: sweep point {label}: {str(exc).removeprefix(source + ': ')}") from None
 
 
@@ -143,10 +151,6 @@ def load_campaign(path: str | Path) -> Campaign:
         spec = CampaignSpec.model_validate(data)
     except ValidationError as exc:
         raise SpecError(f"{path}: {describe_validation(exc)}") from None
-    from hil.campaign.kinds import KINDS, UNAVAILABLE
-
-    if spec.kind not in KINDS:
-        raise SpecError(f"{path}: kind: {spec.kind!r} campaigns are not available: {UNAVAILABLE[spec.kind]}")
     for key in spec.sweep:
         try:
             check_key(key)
@@ -164,7 +168,7 @@ def load_campaign(path: str | Path) -> Campaign:
         config = copy.deepcopy(base)
         for key, value in values.items():
             set_key(config, key, value)
-        _check_point(config, point_label(values), str(path))
+        _check_point(config, point_label(values), str(path), spec.kind)
         for r, seed in enumerate(seeds):
             run_config = copy.deepcopy(config)
             set_key(run_config, "trial.seed", seed)
