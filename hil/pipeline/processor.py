@@ -234,6 +234,7 @@ class TrialProcessor:
                 return
             self._start(self.aligner.t0)
         before = len(self.estimator.snapshots)
+        ready = self._until_the_end(ready)
         if ready:
             last = ready[-1]
             self._t_end = float(last.t[-1]) if isinstance(last, AlignedBatch) else last.t_end
@@ -258,6 +259,26 @@ class TrialProcessor:
             self._update(_joined(self._block))
             self._block, self._blocked = [], 0
         self._snapshots_from(before)
+
+    def _until_the_end(self, ready: list[AlignedBatch | ImuGap]) -> list[AlignedBatch | ImuGap]:
+        """``ready`` up to the configured duration: one read can carry samples beyond it (they stay in the
+        recording; the estimator stops at the sample that ends the trial)."""
+        if self.duration is None or not ready:
+            return ready
+        end = self.estimator.t0 + self.duration + 0.5 / self.cfg.imu_rate_hz
+        kept: list[AlignedBatch | ImuGap] = []
+        for item in ready:
+            if isinstance(item, ImuGap):
+                if item.t_end > end:
+                    break
+                kept.append(item)
+                continue
+            n = int(np.searchsorted(item.t, end, side="right"))
+            if n:
+                kept.append(item if n == len(item) else _part(item, 0, n))
+            if n < len(item):
+                break
+        return kept
 
     def _update(self, run: AlignedBatch | None) -> None:
         if run is None or not len(run):
