@@ -152,11 +152,11 @@ class SerialTransport(Transport):
         waiting = self.port.in_waiting
         if not waiting or not self.url.startswith("socket://"):
             return self.port.read(waiting) if waiting else b""
-        self.port.timeout = 0
+        timeout, self.port.timeout = self.port.timeout, 0
         try:
             return self.port.read(SOCKET_READ_MAX)
         finally:
-            self.port.timeout = POLL_S
+            self.port.timeout = timeout
 
     def write(self, data: bytes) -> None:
         if self.port is None:

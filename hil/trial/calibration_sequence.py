@@ -14,8 +14,8 @@ calibration windows from them at the end: the encoder angles of each IMU interva
 the mean of the readings at its two ends (across the +-180 deg seam), and a plateau's rate is the
 encoder's turn over the window's intervals divided by their length.
 
-For the live views: ``on_step(t, index)`` is called when a step is commanded (trial time t of the reading
-that closed the previous one, 0 for the first), ``on_window(t, index, window)`` once a closed window's
+For the live views: ``on_step(t, index)`` is called when a step is commanded (trial time t: the end of the
+previous step's window, 0 for the first), ``on_window(t, index, window)`` once a closed window's
 samples have all arrived (t its end; the window as :meth:`windows` will cut it).
 """
 
