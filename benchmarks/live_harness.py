@@ -35,6 +35,19 @@ def rss_mib() -> float:
     return float("nan")
 
 
+def thread_cpu() -> dict[str, float]:
+    """CPU seconds (user + system) of each live thread of this process, by thread name."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for thread in threading.enumerate():
+        try:
+            fields = Path(f"/proc/self/task/{thread.native_id}/stat").read_text().rpartition(")")[2].split()
+        except (FileNotFoundError, TypeError):
+            continue
+        out[thread.name] = (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0)
@@ -61,9 +74,15 @@ def main() -> None:
         memory: list[tuple[float, float]] = []
         stop = threading.Event()
 
+        threads: dict[str, float] = {}
+
         def sample_memory() -> None:
-            while not stop.wait(60.0):
-                memory.append((trial.processor.trial_time, rss_mib()))
+            ticks = 0
+            while not stop.wait(1.0):
+                threads.update(thread_cpu())  # the readers' last second is lost: they end with the trial
+                ticks += 1
+                if ticks % 60 == 0:
+                    memory.append((trial.processor.trial_time, rss_mib()))
 
         watcher = threading.Thread(target=sample_memory, daemon=True)
         watcher.start()
@@ -88,6 +107,8 @@ def main() -> None:
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
         print("frame arrival -> estimate updated, ms (latency: from the frame completing a block; "
               "age: from its first frame): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
+        threads.update(thread_cpu())
+        print("CPU by thread, s (to its last second): " + ", ".join(f"{name} {s:.2f}" for name, s in sorted(threads.items())))
         print("resident memory (trial s, MiB): " + ", ".join(f"({t:.0f}, {m:.1f})" for t, m in memory))
 
 
