@@ -54,7 +54,7 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
     sim = Simulation.from_config(cfg)
     viewer = open_viewer(options, cfg, out, blocking=True)
     processor = TrialProcessor(cfg, on_table=ViewerFeed(viewer).on_table)
-    for batch in sim.batches():
+    for batch in sim.batches_ahead():
         processor.feed_batch(batch)
     if viewer is not None and processor.estimator is not None:
         viewer.log_snapshots(processor.estimator.snapshots)  # as columns, in one go
