@@ -22,24 +22,24 @@ class LatencyHistogram:
             raise ValueError(f"latency histogram: bin_s must be positive and bins at least 1, got {bin_s}, {bins}")
         self.bin_s, self.bins = bin_s, bins
         self.counts = np.zeros(bins, dtype=np.int64)
+        self.count = 0  # values added so far
         self._max: float | None = None
-
-    @property
-    def count(self) -> int:
-        """Values added so far."""
-        return int(self.counts.sum())
 
     def add(self, seconds: float) -> None:
         self.counts[min(max(int(seconds / self.bin_s), 0), self.bins - 1)] += 1
+        self.count += 1
         self._max = seconds if self._max is None else max(self._max, seconds)
 
     def percentile_ms(self, q: float) -> float | None:
         """The q-th percentile (0-100), ms rounded to the microsecond; None before the first value."""
-        total = self.count
-        if total == 0:
-            return None
-        k = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * total))
-        return round((k + 1) * self.bin_s * 1e3, 3)
+        return self.percentiles_ms([q])[0]
+
+    def percentiles_ms(self, qs: list[float]) -> list[float | None]:
+        """:meth:`percentile_ms` of each of ``qs``, from one pass over the bins."""
+        if self.count == 0:
+            return [None] * len(qs)
+        ks = np.searchsorted(np.cumsum(self.counts), np.asarray(qs) / 100.0 * self.count)
+        return [round((int(k) + 1) * self.bin_s * 1e3, 3) for k in ks]
 
     def max_ms(self) -> float | None:
         """The largest value added, ms; None before the first value."""

@@ -4,10 +4,12 @@ A reader only reads: framing and decoding are the consumer's (:mod:`drivers.deco
 unplug/replug: when the transport fails it is closed and reopened with exponential back-off until it
 returns or the reader is stopped; the listeners hear of each outage and reconnection as events.
 
-On a byte stream a read returns every byte that has arrived, so a reader given ``gather_s`` lets that
-much time pass between reads that returned data (as a USB serial adapter's latency timer does): a read
-then carries the frames of that interval, and everything downstream handles them as one batch, at the
-cost of up to ``gather_s`` of waiting in the port's buffer (:data:`GATHER_S` for a live trial).
+On a byte stream a read returns every byte that has arrived, so a reader given ``gather_s`` reads once
+per tick of a ``gather_s`` grid on the host's monotonic clock after a read that returned data (as a USB
+serial adapter's latency timer does): a read then carries the frames of that interval, and everything
+downstream handles them as one batch, at the cost of up to ``gather_s`` of waiting in the port's buffer
+(:data:`GATHER_S` for a live trial). Readers with the same ``gather_s`` share the grid, so the consumer
+wakes once a tick for all of them (a thread woken from idle pays a fixed cost that batched work amortises).
 """
 
 from __future__ import annotations
@@ -21,6 +23,11 @@ from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
 
 GATHER_S = 0.01  # s between reads of a live trial's byte streams: 2 frames at 200 Hz, 20 at 2 kHz
+
+
+def next_tick(now: float, period: float) -> float:
+    """Seconds from ``now`` to the next multiple of ``period`` (a full period when ``now`` is on one)."""
+    return period - now % period
 
 
 class DeviceReader:
@@ -67,10 +74,9 @@ class DeviceReader:
                 self._reconnect(exc)
                 continue
             if chunk is not None:
-                returned = time.monotonic()
                 self._handle(chunk)
                 if self.gather_s:
-                    self._stop.wait(self.gather_s - (time.monotonic() - returned))
+                    self._stop.wait(next_tick(time.monotonic(), self.gather_s))
 
     def _handle(self, chunk: RawChunk) -> None:
         for listener in self.raw_listeners:

@@ -15,7 +15,7 @@ from conftest import Decoding
 
 from drivers.acl import AclCodec, AclReply, LineFramer
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
-from drivers.reader import DeviceReader
+from drivers.reader import DeviceReader, next_tick
 from drivers.table_client import (
     InterlockError,
     LimitError,
@@ -25,6 +25,15 @@ from drivers.table_client import (
 from drivers.transport import SerialTransport
 from hil.config import LimitsConfig
 from hil.samples import ImuSample
+
+
+def test_readers_that_gather_read_on_one_grid_of_the_host_clock():
+    """Two readers given the same gather time wake at the same instants, whenever their reads returned."""
+    for now in (0.0, 0.004, 12.3456, 1e6 + 0.0071):
+        wait = next_tick(now, 0.01)
+        assert 0.0 < wait <= 0.01 + 1e-12
+        assert abs(round((now + wait) / 0.01) * 0.01 - (now + wait)) < 1e-9  # on the grid
+    assert next_tick(0.0, 0.01) == pytest.approx(0.01)  # on a tick: the next one, not this one
 
 
 class Pty:

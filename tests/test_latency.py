@@ -33,3 +33,12 @@ def test_values_beyond_the_range_land_in_the_end_bins_but_keep_their_maximum():
 def test_a_histogram_needs_positive_bins():
     with pytest.raises(ValueError):
         LatencyHistogram(bin_s=0.0)
+
+
+def test_percentiles_at_once_are_the_percentiles_one_by_one():
+    h = LatencyHistogram()
+    for k in range(1000):
+        h.add((k + 0.5) * 1e-5)  # one value in each 10 us bin up to 10 ms
+    assert h.count == 1000
+    # the 500th value is in bin 499, whose upper edge is 5.00 ms; the 990th in bin 989 (9.90 ms)
+    assert h.percentiles_ms([50, 99]) == [h.percentile_ms(50), h.percentile_ms(99)] == [5.0, 9.9]

@@ -73,8 +73,9 @@ def decode_chunk(stream: str, encoding: str, log_time: int, data: bytes) -> RawC
 class Recorder:
     """Appends chunks and events to an MCAP file from any thread; a writer thread does the disk work.
 
-    :meth:`write` never blocks and never drops (an unbounded queue); the writer thread flushes at least
-    every ``flush_s``. :meth:`close` drains the queue and writes the MCAP summary.
+    :meth:`write` never blocks and never drops (an unbounded queue); the writer thread wakes every
+    ``flush_s``, writes what is queued and flushes (one wake-up per interval, not one per chunk).
+    :meth:`close` drains the queue and writes the MCAP summary.
     """
 
     def __init__(self, path: str | Path, config_text: str, flush_s: float = 0.1,
@@ -92,6 +93,7 @@ class Recorder:
         self._channels: dict[tuple[str, str], int] = {}
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._flush_s = flush_s
+        self._closing = threading.Event()
         self._sequence = 0
         self.messages = 0
         self.bytes = 0
@@ -105,6 +107,7 @@ class Recorder:
     def close(self, ended: str | None = None) -> None:
         """Write what is queued, then ``ended`` (how the trial ended) and the MCAP summary."""
         self._queue.put(None)
+        self._closing.set()
         self._thread.join()
         if ended is not None:
             self._writer.add_metadata("trial_end", {"ended": ended})
@@ -122,11 +125,8 @@ class Recorder:
             self._file.flush()
 
     def _queued(self) -> Iterator[RawChunk | StreamEvent | None]:
-        """Everything queued now, after waiting up to ``flush_s`` for the first."""
-        try:
-            yield self._queue.get(timeout=self._flush_s)
-        except queue.Empty:
-            return
+        """Everything queued after ``flush_s`` (or at once when closing)."""
+        self._closing.wait(self._flush_s)
         while True:
             try:
                 yield self._queue.get_nowait()

@@ -92,8 +92,8 @@ class LatencyStats:
             return {}
         out = {}
         for name, values in (("latency", self.latency), ("age", self.age)):
-            out.update({f"{name}_p50_ms": values.percentile_ms(50), f"{name}_p99_ms": values.percentile_ms(99),
-                        f"{name}_max_ms": values.max_ms()})
+            p50, p99 = values.percentiles_ms([50, 99])
+            out.update({f"{name}_p50_ms": p50, f"{name}_p99_ms": p99, f"{name}_max_ms": values.max_ms()})
         return out
 
 
