@@ -58,14 +58,15 @@ def _rodrigues_factors(rotvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.sinc(angle / np.pi), 0.5 * np.sinc(angle / (2.0 * np.pi)) ** 2
 
 
-def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
-    """exp([phi x]) for (N, 3) rotation vectors (Rodrigues), (N, 3, 3).
+def rotation_matrices(rotvec: np.ndarray, factors: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """exp([phi x]) for (N, 3) rotation vectors (Rodrigues), (N, 3, 3); ``factors`` their
+    :func:`_rodrigues_factors` when already formed.
 
     ``I + sin(a)/a K + (1 - cos a)/a^2 K^2`` with ``K^2 = phi phi^T - a^2 I`` written out element by
     element; equal to scipy's ``Rotation.from_rotvec(...).as_matrix()`` to rounding at a few
     microseconds per call where scipy's input handling costs ~100 us for small batches.
     """
-    a, b = _rodrigues_factors(rotvec)
+    a, b = factors or _rodrigues_factors(rotvec)
     x, y, z = rotvec[:, 0], rotvec[:, 1], rotvec[:, 2]
     ax, ay, az = a * x, a * y, a * z
     bxy, bxz, byz = b * x * y, b * x * z, b * y * z
@@ -75,9 +76,10 @@ def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
                      bxz - ay, byz + ax, 1.0 - b * (xx + yy)), axis=-1).reshape(-1, 3, 3)
 
 
-def rotate(rotvec: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """exp([phi x]) v for (N, 3) rotation vectors and vectors: ``v + sin(a)/a phi x v + (1 - cos a)/a^2 phi x (phi x v)``."""
-    a, b = _rodrigues_factors(rotvec)
+def rotate(rotvec: np.ndarray, v: np.ndarray, factors: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """exp([phi x]) v for (N, 3) rotation vectors and vectors: ``v + sin(a)/a phi x v + (1 - cos a)/a^2 phi x (phi x v)``;
+    ``factors`` as for :func:`rotation_matrices`."""
+    a, b = factors or _rodrigues_factors(rotvec)
     pv = cross(rotvec, v)
     return v + a[:, None] * pv + b[:, None] * cross(rotvec, pv)
 
@@ -134,16 +136,20 @@ class Strapdown:
         a_v, b_v, c_v = np.where(keep > 0, a_v, dv), b_v * keep, c_v * keep
 
         phi = dtheta + (cross(a_th, b_th) + cross(a_th, c_th)) / 12.0 + cross(b_th, c_th) / 60.0
-        c_end = self.attitude @ cumulative_product(rotation_matrices(phi))
-        c_start = np.concatenate((self.attitude[None], c_end[:-1]))
-
         s = NODES[None, :, None]
         alpha = a_th[:, None] * s + b_th[:, None] * s**2 / 2.0 + c_th[:, None] * s**3 / 3.0  # (N, 3 nodes, 3)
         force = a_v[:, None] + b_v[:, None] * s + c_v[:, None] * s**2
         n = len(dtheta)
         nodes = alpha.reshape(-1, 3)
-        rot = rotation_matrices(nodes).reshape(n, 3, 3, 3)  # (N, node, 3, 3)
-        dv_body = np.einsum("nki,k->ni", rotate(nodes, force.reshape(-1, 3)).reshape(n, 3, 3), WEIGHTS)
+        # the step rotations and the node rotations in one pass (one set of numpy calls for small batches)
+        vectors = np.concatenate((phi, nodes))
+        factors = _rodrigues_factors(vectors)
+        rotations = rotation_matrices(vectors, factors)
+        c_end = self.attitude @ cumulative_product(rotations[:n])
+        c_start = np.concatenate((self.attitude[None], c_end[:-1]))
+        rot = rotations[n:].reshape(n, 3, 3, 3)  # (N, node, 3, 3)
+        node_factors = (factors[0][n:], factors[1][n:])
+        dv_body = np.einsum("nki,k->ni", rotate(nodes, force.reshape(-1, 3), node_factors).reshape(n, 3, 3), WEIGHTS)
         r_mean = np.einsum("nkij,k->nij", rot, WEIGHTS)
 
         # Re-orthonormalise the carried attitude so rounding cannot build up over a long trial.
