@@ -3,10 +3,14 @@
 A recorded trial's bytes (``hil run ... --out DIR`` writes DIR/recording.mcap) are cut into reads of
 ``--gather`` seconds of frames per stream, as the live readers hand them over, with host times on the
 trial's clock, and fed through :class:`~hil.pipeline.processor.TrialProcessor` in arrival order.
-Prints the time per read and per IMU sample, the estimator updates, and the profile's top ten by own time.
+Prints the CPU time per read and per IMU sample, the estimator updates, and the profile's top ten by own
+time. ``--pause S`` sleeps S between reads, as the live processing thread idles between ticks: the same
+work then costs more CPU (a thread woken from idle starts with cold caches), which is why the live
+readers share one grid.
 
     .venv/bin/hil run --speed max --duration 60 --out /tmp/r60 --viewer none
     PYTHONPATH=. .venv/bin/python benchmarks/chunk_cost.py /tmp/r60 [--gather 0.01] [--batch N] [--repeat 3]
+        [--pause 0.005]
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ def main() -> None:
     parser.add_argument("--gather", type=float, default=0.01, help="s of frames a read holds (the live GATHER_S)")
     parser.add_argument("--batch", type=int, help="estimator.batch_samples (default: the recorded config's)")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--pause", type=float, default=0.0, help="s of sleep between reads (CPU time is measured)")
     args = parser.parse_args()
     recording, cfg = open_recording(args.run)
     if cfg.imu.protocol != "kvh1750":
@@ -49,24 +54,26 @@ def main() -> None:
         cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
     chunks = reads(recording, cfg.imu_rate_hz, cfg.trial.rate_hz, args.gather)
 
-    def run() -> TrialProcessor:
+    def run(pause: float = 0.0) -> TrialProcessor:
         processor = TrialProcessor(cfg, None, 1.0)
         for chunk in chunks:
             processor.feed(chunk)
+            if pause:
+                time.sleep(pause)
         processor.finish()
         return processor
 
     best = float("inf")
     for _ in range(args.repeat):
-        start = time.perf_counter()
-        processor = run()
-        best = min(best, time.perf_counter() - start)
+        start = time.thread_time()
+        processor = run(args.pause)
+        best = min(best, time.thread_time() - start)
     counts = processor.counts()
     trial_s = processor.trial_time
     print(f"imu {cfg.imu_rate_hz:g} Hz, table {cfg.trial.rate_hz:g} Hz, reads of {args.gather * 1e3:g} ms, "
-          f"estimator.batch_samples {cfg.estimator.batch_samples}: {len(chunks)} reads, {counts.aligned} samples "
+          f"estimator.batch_samples {cfg.estimator.batch_samples}, {args.pause * 1e3:g} ms between reads: {len(chunks)} reads, {counts.aligned} samples "
           f"aligned ({counts.dropped} dropped, {counts.corrupt} corrupt), {processor.updates} estimator updates")
-    print(f"best of {args.repeat}: {best:.3f} s for {trial_s:.1f} s of trial = {100 * best / trial_s:.2f} % of one core; "
+    print(f"best of {args.repeat}: {best:.3f} s of CPU for {trial_s:.1f} s of trial = {100 * best / trial_s:.2f} % of one core; "
           f"{1e6 * best / len(chunks):.0f} us per read, {1e6 * best / max(counts.aligned, 1):.1f} us per IMU sample")
     profile = cProfile.Profile()
     profile.runcall(run)
