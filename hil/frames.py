@@ -70,6 +70,15 @@ class Earth:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         return Rotation.from_rotvec(np.outer(t, self.omega_n))
 
+    def turn_matrices(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`n_to_n0` as (N, 3, 3) matrices, by Rodrigues' formula about the fixed earth axis u:
+        ``I + sin(Wt) [u x] + 2 sin^2(Wt/2) [u x]^2`` (no cancellation at small angles; equal to the
+        scipy rotation's matrix to rounding, without its per-call input handling)."""
+        angle = EARTH_RATE * np.asarray(t, dtype=float).reshape(-1)
+        k = skew(self.omega_n / EARTH_RATE)
+        return (np.eye(3) + np.sin(angle)[:, None, None] * k
+                + (2.0 * np.sin(0.5 * angle) ** 2)[:, None, None] * (k @ k))
+
     @classmethod
     def from_degrees(cls, latitude_deg: float, height_m: float = 0.0) -> Earth:
         return cls(latitude_deg * DEG, height_m)
@@ -178,8 +187,7 @@ def table_body_rotation(geometry: TableGeometry, earth: Earth, dt: np.ndarray, a
     start, end = np.atleast_2d(angles_start), np.atleast_2d(angles_end)
     c = geometry.attitude_matrix(np.vstack((start, end)))[0]
     n = len(start)
-    earth_turn = earth.n_to_n0(dt).as_matrix()
-    return np.einsum("nji,njk,nkl->nil", c[:n], earth_turn, c[n:])
+    return np.swapaxes(c[:n], 1, 2) @ (earth.turn_matrices(dt) @ c[n:])
 
 
 def _axis_matrices(angle: np.ndarray, axis: int) -> np.ndarray:

@@ -12,6 +12,7 @@ from hil.frames import (
     euler_from_matrix,
     euler_rotation,
     normal_gravity,
+    table_body_rotation,
 )
 
 
@@ -96,3 +97,21 @@ def test_n_to_n0_rotates_about_the_earth_axis():
     axis = earth.omega_n / EARTH_RATE
     np.testing.assert_allclose(c.apply(axis)[0], axis, atol=1e-15)
     assert c.magnitude()[0] == pytest.approx(EARTH_RATE * 3600.0, rel=1e-14)
+
+
+def test_earth_turn_matrices_are_scipys_rotation_about_the_earth_axis():
+    earth = Earth.from_degrees(32.0)
+    t = np.array([0.0, 1e-3, 0.005, 3600.0, 43082.0])  # up to half a sidereal day
+    np.testing.assert_allclose(earth.turn_matrices(t), earth.n_to_n0(t).as_matrix(), rtol=0, atol=2e-16)
+
+
+def test_table_body_rotation_is_the_composition_of_the_attitudes_and_the_earth_turn():
+    """C_n^b(t1) C_n(t2)^n(t1) C_b^n(t2), formed with scipy rotations."""
+    geo = TableGeometry(azimuth=0.2, tilt=(1e-3, 0.0), mounting=(0.05, -0.02, 0.03))
+    earth = Earth.from_degrees(32.0)
+    rng = np.random.default_rng(3)
+    start = rng.uniform(-math.pi, math.pi, (20, 3))
+    end = start + rng.normal(0.0, 0.01, (20, 3))
+    dt = rng.uniform(1e-3, 1.0, 20)
+    expected = (geo.attitude(start).inv() * earth.n_to_n0(dt) * geo.attitude(end)).as_matrix()
+    np.testing.assert_allclose(table_body_rotation(geo, earth, dt, start, end), expected, rtol=0, atol=1e-14)
