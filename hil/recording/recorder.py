@@ -105,6 +105,12 @@ class Recorder:
         """Queue one chunk or event for the file (thread-safe, constant time)."""
         self._queue.put(item)
 
+    @property
+    def backlog(self) -> int:
+        """Items queued and not yet written (approximately: the writer thread takes them meanwhile); a
+        producer faster than the disk waits on it to stay in bounded memory."""
+        return self._queue.qsize()
+
     def close(self, ended: str | None = None) -> None:
         """Write what is queued, then ``ended`` (how the trial ended) and the MCAP summary."""
         self._queue.put(None)
