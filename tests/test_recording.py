@@ -23,6 +23,7 @@ def _record(path, items, config="x", ended=None):
     for item in items:
         rec.write(item)
     rec.close(ended)
+    assert rec.backlog == 0
     return path
 
 
