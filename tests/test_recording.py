@@ -127,3 +127,18 @@ def test_an_mcap_file_of_another_kind_is_not_a_recording(tmp_path):
         RecordingReader(tmp_path / "other.mcap")
     with pytest.raises(ValueError, match=r"format.mcap: not a turntable-hil recording \(format 'other/1'\)"):
         read_recording(tmp_path / "format.mcap")
+
+
+def test_messages_before_the_trial_metadata_are_read_too(tmp_path):
+    from mcap.writer import Writer
+
+    with open(tmp_path / "late.mcap", "wb") as fh:
+        writer = Writer(fh)
+        writer.start()
+        writer.add_message(writer.register_channel("imu", "application/octet-stream", 0), log_time=10**9,
+                           data=b"\x01\x02", publish_time=10**9)
+        writer.add_metadata("trial", {"format": FORMAT, "config": "x"})
+        writer.finish()
+    reader = RecordingReader(tmp_path / "late.mcap")
+    assert reader.metadata["config"] == "x" and list(reader) == [RawChunk("imu", 1.0, b"\x01\x02")]
+    assert not reader.truncated and reader.ended is None

@@ -204,7 +204,9 @@ class RecordingReader:
                 if isinstance(record, Metadata) and record.name == "trial":
                     self.metadata = dict(record.metadata)
                     break
-                self._take(record)
+                item = self._take(record)
+                if item is not None:
+                    self._pending.append(item)
             else:
                 self._finish()
         except (McapError, EOFError, struct.error, ValueError) as exc:
@@ -234,11 +236,8 @@ class RecordingReader:
     def _take(self, record: object) -> RawChunk | StreamEvent | None:
         """The item of a message record; the other records update the reader's state."""
         if isinstance(record, Message):
-            item = _item(self._channels[record.channel_id], record)
-            if self._started:
-                return item
-            self._pending.append(item)
-        elif isinstance(record, Channel):
+            return _item(self._channels[record.channel_id], record)
+        if isinstance(record, Channel):
             self._channels[record.id] = record
         elif isinstance(record, Metadata) and record.name == "trial_end":
             self._ended = record.metadata.get("ended")
