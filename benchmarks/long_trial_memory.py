@@ -1,7 +1,7 @@
 """A long trial in flat memory: `hil simulate` or `hil replay` of the default swing for 24 h at 200 Hz (17.3 M samples).
 
-Simulate (the default) runs what `hil simulate` runs (the emulator's batches into the trial processor,
-then every output, figures and report included) in this process.
+Simulate (the default) runs what `hil simulate` runs (the emulator's batches, computed on a thread ahead,
+into the trial processor, then every output, figures and report included) in this process.
 
 `--replay` first writes the trial's recording with the harness's own Recorder, in its MCAP format: the
 emulated devices' wire frames (KVH 1750 and tts1, from `emulators.reads`) in reads of 0.1 s per stream,
@@ -85,7 +85,7 @@ def simulate(cfg: Config, config_text: str, every: float) -> None:
     sim = Simulation.from_config(cfg)
     rows = Rows(every)
     processor = TrialProcessor(cfg)
-    for batch in sim.batches():
+    for batch in sim.batches_ahead():  # as run_simulation: computed on a thread ahead
         processor.feed_batch(batch)
         rows.at(float(batch.t[-1]))
     outputs(processor, cfg, config_text, COMPLETED, rows)
