@@ -28,11 +28,11 @@ from hil.pipeline.processor import IMU, TABLE, TrialProcessor
 from hil.recording.replay import open_recording
 
 
-def reads(recording, imu_rate: float, table_rate: float, gather: float) -> list[RawChunk]:
+def reads(items: list, imu_rate: float, table_rate: float, gather: float) -> list[RawChunk]:
     """Each stream's bytes in reads of ``gather`` s of frames, merged in arrival order."""
     out = []
     for stream, frame, rate in ((IMU, KVH_FRAME, imu_rate), (TABLE, TTS1_FRAME, table_rate)):
-        data = b"".join(item.data for item in recording.items if isinstance(item, RawChunk) and item.stream == stream)
+        data = b"".join(item.data for item in items if isinstance(item, RawChunk) and item.stream == stream)
         step = max(1, round(gather * rate)) * frame
         t0 = 1.0e9
         out += [RawChunk(stream, t0 + (i + step) / frame / rate, data[i:i + step]) for i in range(0, len(data), step)]
@@ -52,7 +52,8 @@ def main() -> None:
         parser.error(f"the recording's IMU speaks {cfg.imu.protocol}; this benchmark cuts kvh1750 frames")
     if args.batch is not None:
         cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
-    chunks = reads(recording, cfg.imu_rate_hz, cfg.trial.rate_hz, args.gather)
+    with recording:
+        chunks = reads(list(recording), cfg.imu_rate_hz, cfg.trial.rate_hz, args.gather)
 
     def run(pause: float = 0.0) -> TrialProcessor:
         processor = TrialProcessor(cfg, None, 1.0)

@@ -91,28 +91,37 @@ def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -
                           f"(8N1), more than the configured {baudrate}; raise the baudrate or lower the rate")
 
 
+def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, DeviceStream]]:
+    """The table's servo and the frame streams (``imu``, ``turntable_data``) of a run of ``duration`` s:
+    what the emulated devices send, before any port or fault."""
+    rate = cfg.imu_rate_hz
+    sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
+        update={"duration_s": duration})}))
+    imu_cfg = cfg.imu
+    imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
+    table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
+                              cfg.turntable.timing, cfg.table_counts_per_frame)
+    seed = cfg.trial.seed
+    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors,
+                           device_time=imu_cfg.protocol == "xsens-mtdata2")
+    table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
+    streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
+                                  max(1, round(CHUNK_S / source.clock.period)))
+               for name, source in (("imu", imu_source), ("turntable_data", table_source))}
+    return Servo(cfg.turntable, rate, sim.truth.motion), streams
+
+
 class Bench:
     """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
 
     def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
                  wait_readers: bool) -> None:
         rate = cfg.imu_rate_hz
-        sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
-            update={"duration_s": duration})}))
         imu_cfg = cfg.imu
-        codec = imu_codec(imu_cfg, rate)
-        imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
-        table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
-                                  cfg.turntable.timing, cfg.table_counts_per_frame)
         seed = cfg.trial.seed
-        imu_source = ImuSource(imu_clock, seed, codec, sim.errors, device_time=imu_cfg.protocol == "xsens-mtdata2")
-        table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
-        self.servo = Servo(cfg.turntable, rate, sim.truth.motion)
-        self.streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
-                                           max(1, round(CHUNK_S / source.clock.period)))
-                        for name, source in (("imu", imu_source), ("turntable_data", table_source))}
-        self.synced = [n for n, c in (("imu", imu_clock), ("turntable_data", table_clock))
-                       if not c.timing.free_running] or ["imu"]
+        self.servo, self.streams = device_streams(cfg, duration)
+        codec = self.streams["imu"].source.codec
+        self.synced = [n for n, s in self.streams.items() if not s.source.clock.timing.free_running] or ["imu"]
         self.ports: dict = {}
         self.writers: dict[str, DeviceWriter] = {}
         self.server: AclServer | None = None

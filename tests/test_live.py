@@ -50,6 +50,21 @@ def test_replay_reproduces_the_result_exactly(live_run, tmp_path):
     assert (tmp_path / "series.csv").read_text() == (live_run / "series.csv").read_text()
 
 
+def test_the_emulated_devices_reads_recorded_without_ports_replay_to_the_live_result(live_run, tmp_path):
+    from emulators.reads import emulated_reads
+
+    recording, cfg = open_recording(live_run)
+    recording.close()
+    duration = float(recording.metadata["duration_s"])
+    recorder = Recorder(tmp_path / "reads.mcap", recording.metadata["config"], duration=duration, time_scale=1.0)
+    for chunk in emulated_reads(cfg, duration):
+        recorder.write(chunk)
+    recorder.close("completed")
+    assert main(["replay", str(tmp_path / "reads.mcap"), "--out", str(tmp_path / "out"), "--no-figures"]) == 0
+    live = json.loads((live_run / "result.json").read_text())
+    assert json.loads((tmp_path / "out" / "result.json").read_text()) == live
+
+
 def test_replay_of_a_trial_that_fails_its_limits_exits_3(live_run, tmp_path):
     import xml.etree.ElementTree as ET
 

@@ -16,8 +16,9 @@ Format (MCAP, https://mcap.dev; readable by any MCAP tool):
   time, so a replay sees exactly what the live run saw); ``sequence`` is the global arrival order.
 
 Messages are written unchunked and the file is flushed every ``flush_s`` (0.1 s), so a killed
-process loses at most that much; a file cut short is read to its last whole record by
-:func:`read_recording`, which uses the non-seeking reader.
+process loses at most that much. :class:`RecordingReader` reads a recording front to back with the
+non-seeking reader, one item at a time (a 24 h trial replays in constant memory), and a file cut short
+to its last whole record; :func:`read_recording` collects its items in a list.
 """
 
 from __future__ import annotations
@@ -104,6 +105,12 @@ class Recorder:
         """Queue one chunk or event for the file (thread-safe, constant time)."""
         self._queue.put(item)
 
+    @property
+    def backlog(self) -> int:
+        """Items queued and not yet written (approximately: the writer thread takes them meanwhile); a
+        producer faster than the disk waits on it to stay in bounded memory."""
+        return self._queue.qsize()
+
     def close(self, ended: str | None = None) -> None:
         """Write what is queued, then ``ended`` (how the trial ended) and the MCAP summary."""
         self._queue.put(None)
@@ -155,41 +162,122 @@ class Recorder:
 
 @dataclass
 class Recording:
-    """What a recording holds: the trial metadata and the items in arrival order."""
+    """What a recording holds, read whole: the trial metadata and the items in arrival order."""
 
     metadata: dict[str, str]
     items: list[RawChunk | StreamEvent]
     truncated: bool  # the file ended inside a record (the process was killed)
     ended: str | None = None  # how the live trial ended, when the recorder was closed
 
+    def __iter__(self) -> Iterator[RawChunk | StreamEvent]:
+        return iter(self.items)
+
+
+class RecordingReader:
+    """A recording read front to back in constant memory: the trial metadata on opening, then the items one
+    by one in file order (iterate once); :attr:`truncated` and :attr:`ended` are known when the iteration
+    has finished. Raises ValueError on opening if the file is not a recording; a file cut short ends the
+    iteration at its last whole record. Closes the file at the end of the iteration, or on :meth:`close`.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = path
+        self.metadata: dict[str, str] = {}
+        self._truncated = False
+        self._ended: str | None = None
+        self._finished = False
+        self._started = False
+        self._channels: dict[int, Channel] = {}
+        self._pending: list[RawChunk | StreamEvent] = []  # items before the trial metadata (none from a Recorder)
+        self._file = open(path, "rb")  # noqa: SIM115 - closed at the end of the iteration or by close()
+        self._records = StreamReader(self._file).records
+        try:
+            self._read_metadata()
+        except BaseException:
+            self.close()
+            raise
+
+    def _read_metadata(self) -> None:
+        """Read up to the ``trial`` metadata (the first record a Recorder writes after the header)."""
+        try:
+            for record in self._records:
+                if isinstance(record, Metadata) and record.name == "trial":
+                    self.metadata = dict(record.metadata)
+                    break
+                item = self._take(record)
+                if item is not None:
+                    self._pending.append(item)
+            else:
+                self._finish()
+        except (McapError, EOFError, struct.error, ValueError) as exc:
+            short = isinstance(exc, (EndOfFile, EOFError, struct.error))
+            reason = "the file ends before the trial metadata" if short else str(exc)
+            raise ValueError(f"{self.path}: not a turntable-hil recording ({reason})") from None
+        if self.metadata.get("format") != FORMAT:
+            raise ValueError(f"{self.path}: not a turntable-hil recording (format {self.metadata.get('format')!r})")
+
+    def __iter__(self) -> Iterator[RawChunk | StreamEvent]:
+        if self._started:
+            raise RuntimeError(f"{self.path}: a recording's items are read once")
+        self._started = True
+        yield from self._pending
+        self._pending = []
+        if self._finished:
+            return
+        try:
+            for record in self._records:
+                item = self._take(record)
+                if item is not None:
+                    yield item
+        except (McapError, EOFError, struct.error, ValueError):
+            self._truncated = True
+        self._finish()
+
+    def _take(self, record: object) -> RawChunk | StreamEvent | None:
+        """The item of a message record; the other records update the reader's state."""
+        if isinstance(record, Message):
+            return _item(self._channels[record.channel_id], record)
+        if isinstance(record, Channel):
+            self._channels[record.id] = record
+        elif isinstance(record, Metadata) and record.name == "trial_end":
+            self._ended = record.metadata.get("ended")
+        return None
+
+    def _finish(self) -> None:
+        self._finished = True
+        self.close()
+
+    @property
+    def truncated(self) -> bool:
+        """The file ended inside a record (the process was killed); known after the iteration."""
+        self._require_read()
+        return self._truncated
+
+    @property
+    def ended(self) -> str | None:
+        """How the live trial ended (the ``trial_end`` record, written last); known after the iteration."""
+        self._require_read()
+        return self._ended
+
+    def _require_read(self) -> None:
+        if not (self._finished and self._started):
+            raise RuntimeError(f"{self.path}: truncated and ended are known once every item has been read")
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> RecordingReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 def read_recording(path: str | Path) -> Recording:
-    """Read a recording front to back, tolerating a file cut short; raises ValueError if it is not one."""
-    metadata: dict[str, str] = {}
-    channels: dict[int, Channel] = {}
-    items: list[RawChunk | StreamEvent] = []
-    truncated = False
-    ended = None
-    with open(path, "rb") as fh:
-        try:
-            for record in StreamReader(fh).records:
-                if isinstance(record, Metadata) and record.name == "trial":
-                    metadata = dict(record.metadata)
-                elif isinstance(record, Metadata) and record.name == "trial_end":
-                    ended = record.metadata.get("ended")
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    items.append(_item(channels[record.channel_id], record))
-        except (McapError, EOFError, struct.error, ValueError) as exc:
-            if not metadata:
-                short = isinstance(exc, (EndOfFile, EOFError, struct.error))
-                reason = "the file ends before the trial metadata" if short else str(exc)
-                raise ValueError(f"{path}: not a turntable-hil recording ({reason})") from None
-            truncated = True
-    if metadata.get("format") != FORMAT:
-        raise ValueError(f"{path}: not a turntable-hil recording (format {metadata.get('format')!r})")
-    return Recording(metadata, items, truncated, ended)
+    """Read a recording whole (see :class:`RecordingReader`); raises ValueError if it is not one."""
+    with RecordingReader(path) as reader:
+        items = list(reader)
+    return Recording(reader.metadata, items, reader.truncated, reader.ended)
 
 
 def _item(channel: Channel, message: Message) -> RawChunk | StreamEvent:

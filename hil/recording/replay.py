@@ -8,7 +8,7 @@ import yaml
 
 from hil.config import Config, ConfigError, parse_config
 from hil.recording.csv_input import DataError
-from hil.recording.recorder import Recording, read_recording
+from hil.recording.recorder import Recording, RecordingReader
 
 RECORDING_NAME = "recording.mcap"
 
@@ -19,7 +19,7 @@ def recording_path(source: str | Path) -> Path:
     return path / RECORDING_NAME if path.is_dir() else path
 
 
-def recorded_config(recording: Recording, source: str | Path) -> Config:
+def recorded_config(recording: Recording | RecordingReader, source: str | Path) -> Config:
     """The trial config stored in a recording."""
     try:
         data = yaml.safe_load(recording.metadata["config"])
@@ -28,13 +28,18 @@ def recorded_config(recording: Recording, source: str | Path) -> Config:
     return parse_config(data, f"{source} (recorded config)")
 
 
-def open_recording(source: str | Path) -> tuple[Recording, Config]:
-    """A run directory's or a file's recording, read once, and the trial config stored in it."""
+def open_recording(source: str | Path) -> tuple[RecordingReader, Config]:
+    """A run directory's or a file's recording, opened for one pass over its items (the metadata read, the
+    items not yet), and the trial config stored in it."""
     path = recording_path(source)
     try:
-        recording = read_recording(path)
+        recording = RecordingReader(path)
     except OSError as exc:
         raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except ValueError as exc:  # not a recording; the message names the file
         raise DataError(str(exc)) from None
-    return recording, recorded_config(recording, path)
+    try:
+        return recording, recorded_config(recording, path)
+    except BaseException:
+        recording.close()
+        raise

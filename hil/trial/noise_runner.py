@@ -64,8 +64,9 @@ def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
     recording, cfg = open_recording(path)
     runs: list[tuple[np.ndarray, ...]] = []
     processor = TrialProcessor(cfg, on_samples=lambda *arrays: runs.append(arrays))
-    for item in recording.items:
-        processor.feed(item)
+    with recording:
+        for item in recording:
+            processor.feed(item)
     processor.finish()
     if not runs:
         raise DataError(f"{path}: no IMU sample reached the estimator: nothing to analyse")

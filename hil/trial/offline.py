@@ -10,20 +10,22 @@ from pathlib import Path
 from hil.config import Config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
-from hil.recording.recorder import Recording
+from hil.recording.recorder import Recording, RecordingReader
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
 
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
                ) -> tuple[TrialOutcome, Viewer | None]:
-    """A recording's chunks through the processing of the live run, in the same order."""
+    """A recording's chunks through the processing of the live run, in the same order, read as they are fed."""
     from hil.recording.replay import open_recording, recording_path
 
     out = Path(out) if out else recording_path(source).parent / "replay"
     recording, cfg = open_recording(source)
-    viewer = open_viewer(options, cfg, out, blocking=True)
-    processor = replay_recording(recording, cfg, viewer)
+    with recording:
+        viewer = open_viewer(options, cfg, out, blocking=True)
+        processor = replay_recording(recording, cfg, viewer)
+    # how the recording ends is known once every item has been read
     if recording.truncated:
         print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
     ended = recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
@@ -31,14 +33,16 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
     return outcome, viewer
 
 
-def replay_recording(recording: Recording, cfg: Config, viewer: Viewer | None = None) -> TrialProcessor:
-    """The finished processor of a recording's items fed in their order (and logged to ``viewer``)."""
+def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer: Viewer | None = None
+                     ) -> TrialProcessor:
+    """The finished processor of a recording's items fed in their order (and logged to ``viewer``); a
+    :class:`~hil.recording.recorder.RecordingReader` is read item by item as they are fed."""
     duration = recording.metadata.get("duration_s")
     scale = recording.metadata.get("time_scale", "1.0")
     feed = ViewerFeed(viewer)
     processor = TrialProcessor(cfg, float(duration) if duration else None, float(scale) if scale else None,
                                feed.on_snapshot, feed.on_table)
-    for item in recording.items:
+    for item in recording:
         processor.feed(item)
     processor.finish()
     if viewer is not None and processor.estimator is not None:
