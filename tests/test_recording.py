@@ -142,3 +142,21 @@ def test_messages_before_the_trial_metadata_are_read_too(tmp_path):
     reader = RecordingReader(tmp_path / "late.mcap")
     assert reader.metadata["config"] == "x" and list(reader) == [RawChunk("imu", 1.0, b"\x01\x02")]
     assert not reader.truncated and reader.ended is None
+
+
+def test_a_read_error_past_the_metadata_is_one_line_naming_the_file(tmp_path, monkeypatch):
+    """An I/O error in the middle of a recording (a failing disk) is an input error, not a traceback."""
+    from hil.recording.csv_input import DataError
+
+    path = tmp_path / "r.mcap"
+    rec = Recorder(path, "trial: {}\n")
+    rec.write(RawChunk("imu", 1.0, b"abc"))
+    rec.close("completed")
+    reader = RecordingReader(path)
+
+    def failing(record):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(reader, "_take", failing)
+    with pytest.raises(DataError, match=r"r\.mcap: cannot read: Input/output error"):
+        list(reader)

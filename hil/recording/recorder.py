@@ -38,6 +38,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from drivers.codec import RawChunk, StreamEvent
+from hil.recording.csv_input import DataError
 
 FORMAT = "turntable-hil/1"
 BYTES = "application/octet-stream"
@@ -231,6 +232,9 @@ class RecordingReader:
                     yield item
         except (McapError, EOFError, struct.error, ValueError):
             self._truncated = True
+        except OSError as exc:  # the disk, not the file's content: say so, in one line
+            self._finish()
+            raise DataError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
         self._finish()
 
     def _take(self, record: object) -> RawChunk | StreamEvent | None:
