@@ -208,8 +208,9 @@ def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
 
 
 def test_the_acl_port_answers_bad_commands_with_errors_and_is_loopback_only():
-    cfg = static_config(duration=1.0)
-    with EmulatorThread(cfg, speed=None, wait_readers=False) as emu:
+    cfg = static_config(duration=2.0)
+    # at real time: as fast as possible, the emulated trial can end (and close its port) before the replies
+    with EmulatorThread(cfg, speed=1.0, wait_readers=False) as emu:
         host, port = emu.ports["turntable_cmd"].removeprefix("socket://").split(":")
         assert host == "127.0.0.1"
         with socket.create_connection((host, int(port)), timeout=2) as conn:
