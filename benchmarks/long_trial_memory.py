@@ -38,7 +38,7 @@ from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
 from hil.recording.recorder import Recorder, RecordingReader
 from hil.recording.replay import open_recording
-from hil.trial.offline import replay_recording
+from hil.trial.offline import how_it_ended, replay_recording
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.units import HOUR
 
@@ -134,7 +134,7 @@ def replay(path: Path, every: float) -> None:
     rows = Rows(every)
     with reader:
         processor = replay_recording(Hourly(reader, rows), cfg)  # type: ignore[arg-type]  # the reader, watched
-    ended = reader.ended or ("early: the recording was cut short" if reader.truncated else COMPLETED)
+    ended = how_it_ended(reader)
     rows.row("replayed", f"   {reader.metadata['duration_s']} s recorded, truncated {reader.truncated}, "
                          f"ended {reader.ended!r}")
     samples = processor.counts().aligned

@@ -28,9 +28,14 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
     # how the recording ends is known once every item has been read
     if recording.truncated:
         print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
-    ended = recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
+    ended = how_it_ended(recording)
     outcome = TrialOutcome.of(processor, cfg, recording.metadata["config"], out, ended, emulated_truth(cfg))
     return outcome, viewer
+
+
+def how_it_ended(recording: RecordingReader | Recording) -> str:
+    """How the recorded trial ended (its ``trial_end`` record), for a recording read to its end."""
+    return recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
 
 
 def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer: Viewer | None = None
