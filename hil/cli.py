@@ -31,11 +31,13 @@ def _viewer(args: argparse.Namespace):
     return ViewerOptions(args.viewer, args.bind)
 
 
-def _finish(args: argparse.Namespace, outcome, viewer=None) -> int:
-    """Write the outputs, close the viewer of a completed trial; the exit code of the outcome."""
+def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
+    """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
+    when given), close the viewer of a completed trial; the exit code of the outcome."""
     from hil.trial.viewer_feed import finish_viewer
 
-    code = outcome.exit_code(outcome.write(figures=not args.no_figures))
+    draw = {} if figures is None else {"draw": figures.draw}
+    code = outcome.exit_code(outcome.write(figures=not args.no_figures, **draw))
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
     else:
@@ -71,23 +73,32 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from hil.trial.offline import run_replay
+    from hil.outputs.figure_process import FigureProcess  # started first: matplotlib loads while the trial runs
 
-    return _finish(args, *run_replay(args.source, args.out, _viewer(args)))
+    with FigureProcess() as figures:
+        from hil.trial.offline import run_replay
+
+        return _finish(args, *run_replay(args.source, args.out, _viewer(args)), figures)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from hil.trial.offline import run_simulation
+    from hil.outputs.figure_process import FigureProcess
 
-    cfg, out = _trial_config(args)
-    return _finish(args, *run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)))
+    with FigureProcess() as figures:
+        from hil.trial.offline import run_simulation
+
+        cfg, out = _trial_config(args)
+        return _finish(args, *run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)), figures)
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
-    from hil.trial.offline import run_csv
+    from hil.outputs.figure_process import FigureProcess
 
-    cfg, out = _trial_config(args)
-    return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out))
+    with FigureProcess() as figures:
+        from hil.trial.offline import run_csv
+
+        cfg, out = _trial_config(args)
+        return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out), None, figures)
 
 
 def cmd_noise(args: argparse.Namespace) -> int:

@@ -36,14 +36,19 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
 
 
 @pytest.mark.parametrize("flags", [[], ["--no-figures"]])
-def test_simulate_draws_each_figure_once(tmp_path, monkeypatch, flags):
+def test_simulate_draws_each_figure_once_in_the_figure_process(tmp_path, monkeypatch, flags):
+    import hil.outputs.figure_process
     import hil.outputs.figures
 
-    draw, drawn = hil.outputs.figures.write_figures, []
-    monkeypatch.setattr(hil.outputs.figures, "write_figures", lambda out, *args: drawn.append(out) or draw(out, *args))
+    handed, here = [], []
+    draw = hil.outputs.figure_process.FigureProcess.draw
+    monkeypatch.setattr(hil.outputs.figure_process.FigureProcess, "draw",
+                        lambda self, out, *args: handed.append(out) or draw(self, out, *args))
+    monkeypatch.setattr(hil.outputs.figure_process, "write_figures", lambda out, *args: here.append(out))
     write_config(tmp_path / "c.yaml", duration=60, errors=PAPER_ERRORS)
     assert main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "out"), *flags]) == 0
-    assert len(drawn) == 1
+    assert len(handed) == 1 and here == []  # drawn once, by the child
+    assert all((tmp_path / "out" / name).exists() != bool(flags) for name in hil.outputs.figures.FIGURES)
     page = (tmp_path / "out" / "report.html").read_text()
     assert len(re.findall(r"src='data:image/png;base64,", page)) == len(hil.outputs.figures.FIGURES)
 

@@ -5,6 +5,7 @@ matplotlib is imported when figures are drawn, not with this module.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import numpy as np
 from hil.outputs.series import SERIES_COLUMNS
 
 FIGURES = ("observability.png", "bias.png", "alignment.png")
+Draw = Callable[[Path, np.ndarray, dict], None]  # draws a trial's figures: write_figures, FigureProcess.draw
 
 
 def _col(series: np.ndarray, name: str) -> np.ndarray:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.config import InputError, ReportLimits, load_config
-from hil.outputs.figures import FIGURES
+from hil.outputs.figures import FIGURES, Draw, write_figures
 from hil.outputs.junit import write_junit
 from hil.outputs.measurements import (
     FAIL,
@@ -46,9 +46,11 @@ class ReportError(InputError, ValueError):
     """A report that cannot be built from the directory given."""
 
 
-def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
+def write_report(out_dir: Path, limits: ReportLimits | None = None,
+                 draw: Draw = write_figures) -> Path:
     """Write ``out_dir/report.html`` from result.json, the figures and series.csv, and junit.xml beside it
-    (:mod:`hil.outputs.junit`); returns the report's path.
+    (:mod:`hil.outputs.junit`); returns the report's path. Figures missing from ``out_dir`` are drawn from
+    series.csv by ``draw`` (as :func:`~hil.outputs.figures.write_figures`).
 
     Without ``limits`` the limits come from ``out_dir/config.yaml`` (the trial config's copy);
     without that file nothing is judged.
@@ -75,7 +77,7 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None) -> Path:
     if not any(m.outcome != NOT_JUDGED for m in results):
         notes.append("No limits are set (output.limits in the trial config): the verdict judges nothing.")
     series = read_series(out_dir / SERIES_NAME)
-    page = _render(result, results, _figures(out_dir, series, result), series, notes, _noise(out_dir))
+    page = _render(result, results, _figures(out_dir, series, result, draw), series, notes, _noise(out_dir))
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     write_junit(out_dir, result, results)
@@ -102,17 +104,14 @@ def _noise(out_dir: Path) -> str:
 # --- page ------------------------------------------------------------------------------------------
 
 
-def _figures(out_dir: Path, series: dict[str, np.ndarray] | None, result: dict) -> list[tuple[str, bytes]]:
+def _figures(out_dir: Path, series: dict[str, np.ndarray] | None, result: dict,
+             draw: Draw = write_figures) -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the trial's figures; drawn from series.csv when the PNGs are missing."""
     names = list(FIGURES) + sorted(p.name for p in out_dir.glob("*.png") if p.name not in FIGURES)
     if series is not None and not all((out_dir / n).exists() for n in FIGURES):
-        from hil.outputs.figures import (
-            write_figures,  # matplotlib only when figures are drawn
-        )
-
         if all(c in series for c in SERIES_COLUMNS):
             with tempfile.TemporaryDirectory() as tmp:
-                write_figures(Path(tmp), np.column_stack([series[c] for c in SERIES_COLUMNS]), result)
+                draw(Path(tmp), np.column_stack([series[c] for c in SERIES_COLUMNS]), result)
                 drawn = {n: (Path(tmp) / n).read_bytes() for n in FIGURES}
             return [(n, (out_dir / n).read_bytes() if (out_dir / n).exists() else drawn[n]) for n in names
                     if (out_dir / n).exists() or n in drawn]  # fmt: skip

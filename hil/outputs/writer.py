@@ -7,6 +7,7 @@ from pathlib import Path
 
 from hil.config import ReportLimits
 from hil.estimation.online import Snapshot
+from hil.outputs.figures import Draw, write_figures
 from hil.outputs.measurements import measurements, overall
 from hil.outputs.report import write_report
 from hil.outputs.result import write_result
@@ -14,19 +15,17 @@ from hil.outputs.series import write_series
 
 
 def write_trial_outputs(out: Path, result: dict, snapshots: list[Snapshot], limits: ReportLimits,
-                        config_text: str | None = None, figures: bool = True) -> str:
-    """Write the outputs of a finished trial (figures drawn once, from the snapshots); returns the
-    outcome (PASS or FAIL) against ``limits``."""
+                        config_text: str | None = None, figures: bool = True,
+                        draw: Draw = write_figures) -> str:
+    """Write the outputs of a finished trial (figures drawn once, from the snapshots, by ``draw``: e.g. a
+    :class:`~hil.outputs.figure_process.FigureProcess`'s); returns the outcome (PASS or FAIL) against
+    ``limits``. Without ``figures`` the report still embeds them, drawn into a temporary directory."""
     out.mkdir(parents=True, exist_ok=True)
     if config_text is not None:
         (out / "config.yaml").write_text(config_text)
     write_result(out, result)
     series = write_series(out, snapshots)
     if figures and len(series):
-        from hil.outputs.figures import (
-            write_figures,  # matplotlib only when figures are drawn
-        )
-
-        write_figures(out, series, result)
-    write_report(out, limits)
+        draw(out, series, result)
+    write_report(out, limits, draw)
     return overall(measurements(result, limits))

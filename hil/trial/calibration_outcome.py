@@ -13,6 +13,7 @@ from hil.config import Config
 from hil.estimation.calibration_model import Window
 from hil.estimation.calibration_schedule import Schedule
 from hil.outputs.calibration_report import Residuals
+from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import COMPLETED
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 
@@ -78,7 +79,7 @@ class CalibrationOutcome(TrialOutcome):
         fields["result"]["calibration"] = calibration_summary(document)
         return cls(**fields, calibration=document, residuals=residuals)
 
-    def write(self, figures: bool = True) -> str:
+    def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
         """calibration.json and calibration.html (when calibrated), then the trial's outputs."""
         if self.calibration is not None:
             from hil.outputs.calibration import write_calibration
@@ -87,7 +88,7 @@ class CalibrationOutcome(TrialOutcome):
             self.out.mkdir(parents=True, exist_ok=True)
             write_calibration(self.out / "calibration.json", self.calibration)
             write_calibration_report(self.out, self.calibration, self.residuals, figures and self.cfg.output.figures)
-        return super().write(figures)
+        return super().write(figures, draw)
 
 
 def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:

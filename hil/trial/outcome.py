@@ -8,6 +8,7 @@ from pathlib import Path
 
 from hil.config import Config, InputError
 from hil.estimation.online import Snapshot
+from hil.outputs.figures import Draw, write_figures
 from hil.outputs.measurements import FAIL
 from hil.outputs.result import COMPLETED, summary_text, trial_result
 from hil.outputs.writer import write_trial_outputs
@@ -69,10 +70,11 @@ class TrialOutcome:
             return 1
         return 3 if verdict == FAIL else 0
 
-    def write(self, figures: bool = True) -> str:
-        """Write every output and print the summary; returns PASS or FAIL against ``output.limits``."""
+    def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
+        """Write every output and print the summary (the figures drawn by ``draw``); returns PASS or FAIL
+        against ``output.limits``."""
         outcome = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.output.limits,
-                                      self.config_text, figures=figures and self.cfg.output.figures)
+                                      self.config_text, figures=figures and self.cfg.output.figures, draw=draw)
         print(summary_text(self.result, self.out))
         print(f"  report: {outcome} against output.limits ({self.out / 'report.html'})")
         return outcome

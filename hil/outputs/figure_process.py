@@ -1,0 +1,106 @@
+"""The trial's figures drawn by a child process that is started before the trial is computed.
+
+Importing matplotlib costs about 0.4 s, as much as drawing the three figures; a child that imports it at
+once does so on the other core while the trial runs, and then only draws. The job goes over the child's
+standard input: one line of JSON (output directory, result, the series' shape), then the series as
+little-endian float64 bytes. Whatever goes wrong with the child, the figures are drawn in this process
+instead (one line on stderr says why): they are never lost.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import hil
+from hil.outputs.figures import write_figures
+
+WAIT_S = 120.0  # drawing takes well under a second; a child that takes this long is stuck
+
+
+class FigureProcess:
+    """A child process ready to draw one trial's figures (:func:`hil.outputs.figures.write_figures`).
+
+    Use as a context manager; :meth:`draw` has the signature of ``write_figures``. A child not given a
+    job exits when this process closes its input.
+    """
+
+    def __init__(self) -> None:
+        root = str(Path(hil.__file__).resolve().parent.parent)  # the child imports this same package
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH"))))}
+        self._child: subprocess.Popen | None = subprocess.Popen(
+            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE, env=env)  # fmt: skip
+
+    def __enter__(self) -> FigureProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def draw(self, out: Path, series: np.ndarray, result: dict) -> None:
+        """Draw the figures of ``series`` into ``out`` in the child; in this process if the child fails."""
+        child, self._child = self._child, None
+        reason = "used once already"
+        if child is not None:
+            reason = _hand_over(child, out, series, result)
+        if reason:
+            print(f"hil: the figure process failed ({reason}); drawing the figures here", file=sys.stderr)
+            write_figures(out, series, result)
+
+    def close(self) -> None:
+        """End a child that was given no job."""
+        child, self._child = self._child, None
+        if child is not None:
+            child.stdin.close()
+            try:
+                child.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+            child.stderr.close()
+
+
+def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: dict) -> str:
+    """Give ``child`` the job and wait for it; '' when it drew the figures, else why not."""
+    data = np.ascontiguousarray(series, dtype="<f8")
+    header = json.dumps({"out": str(Path(out).resolve()), "shape": data.shape, "result": result})
+    try:
+        _, err = child.communicate(header.encode() + b"\n" + data.tobytes(), timeout=WAIT_S)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.communicate()
+        return f"no answer within {WAIT_S:.0f} s"
+    except OSError as exc:  # the child is gone: its input pipe is closed
+        child.kill()
+        child.wait()
+        return str(exc)
+    if child.returncode != 0:
+        lines = err.decode(errors="replace").strip().splitlines()
+        return lines[-1] if lines else f"exit code {child.returncode}"
+    return ""
+
+
+def _serve() -> None:
+    """The child: import matplotlib, then draw the job read from standard input (none: exit)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401 - imported now, while the parent computes the trial
+
+    line = sys.stdin.buffer.readline()
+    if not line:
+        return
+    job = json.loads(line)
+    shape = tuple(job["shape"])
+    data = sys.stdin.buffer.read(8 * int(np.prod(shape)))
+    write_figures(Path(job["out"]), np.frombuffer(data, dtype="<f8").reshape(shape), job["result"])
+
+
+if __name__ == "__main__":
+    _serve()
