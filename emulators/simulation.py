@@ -18,6 +18,9 @@ from hil.samples import AlignedBatch
 from hil.units import ARCSEC
 
 MGAL = 1e-5  # m/s^2 per milligal
+# Samples a batch. The batch's arrays (e.g. (N, 3, 3, 3) node rotations in the strapdown) stay in the caches at
+# this size: the paper scenario emulates and estimates in 1.2 s at 5000 against 1.4 s at 20 000.
+CHUNK = 5000
 
 
 @dataclass
@@ -39,7 +42,7 @@ class Simulation:
     def samples(self) -> int:
         return round(self.duration * self.rate_hz)
 
-    def batches(self, chunk: int = 20000) -> Iterator[AlignedBatch]:
+    def batches(self, chunk: int = CHUNK) -> Iterator[AlignedBatch]:
         """Consecutive batches covering the trial; sample k ends at (k + 1) / rate."""
         n = self.samples
         for start in range(0, n, chunk):
