@@ -22,7 +22,10 @@ from drivers.codec import RawChunk, StreamEvent
 from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
 
-GATHER_S = 0.01  # s between reads of a live trial's byte streams: 2 frames at 200 Hz, 20 at 2 kHz
+# s between reads of a live trial's byte streams: 4 frames at 200 Hz, 40 at 2 kHz. At 10 ms the harness took 15-16 %
+# of a core at 200 Hz against 10-11 % at 20 ms (benchmarks/live_harness.py, paired 60 s runs); the estimate's age
+# (its 10-sample blocks) stays, the wait of a block's last frame for its table frame grows (latency p99 4-5 -> 8-10 ms).
+GATHER_S = 0.02
 
 
 def next_tick(now: float, period: float) -> float:
