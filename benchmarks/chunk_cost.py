@@ -72,7 +72,7 @@ def main() -> None:
     counts = processor.counts()
     trial_s = processor.trial_time
     print(f"imu {cfg.imu_rate_hz:g} Hz, table {cfg.trial.rate_hz:g} Hz, reads of {args.gather * 1e3:g} ms, "
-          f"estimator.batch_samples {cfg.estimator.batch_samples}, {args.pause * 1e3:g} ms between reads: {len(chunks)} reads, {counts.aligned} samples "
+          f"estimator.batch_samples {cfg.block_samples}, {args.pause * 1e3:g} ms between reads: {len(chunks)} reads, {counts.aligned} samples "
           f"aligned ({counts.dropped} dropped, {counts.corrupt} corrupt), {processor.updates} estimator updates")
     print(f"best of {args.repeat}: {best:.3f} s of CPU for {trial_s:.1f} s of trial = {100 * best / trial_s:.2f} % of one core; "
           f"{1e6 * best / len(chunks):.0f} us per read, {1e6 * best / max(counts.aligned, 1):.1f} us per IMU sample")

@@ -99,7 +99,7 @@ def main() -> None:
         counts = trial.processor.counts()
         load_after = os.getloadavg()
         print(f"imu {cfg.imu_rate_hz:g} Hz ({cfg.imu.protocol}), table {cfg.trial.rate_hz:g} Hz, "
-              f"estimator.batch_samples {cfg.estimator.batch_samples}; load average (1, 5, 15 min) before "
+              f"estimator.batch_samples {cfg.block_samples}; load average (1, 5, 15 min) before "
               + " ".join(f"{x:.2f}" for x in load_before) + ", after " + " ".join(f"{x:.2f}" for x in load_after))
         print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
               f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")

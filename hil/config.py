@@ -23,6 +23,7 @@ from pydantic import (
     model_validator,
 )
 
+BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
 
@@ -281,7 +282,8 @@ class ImuConfig(_Model):
 class EstimatorConfig(_Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
-    batch_samples: int = Field(10, ge=1, le=10000)  # live: samples handed to the estimator at once
+    # live: samples handed to the estimator at once; None: those of BLOCK_S at the IMU rate (10 at 200 Hz)
+    batch_samples: int | None = Field(None, ge=1, le=10000)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
 
 
@@ -347,6 +349,13 @@ class Config(_Model):
     def imu_rate_hz(self) -> float:
         """The rate of the sync pulse train (and of the IMU's samples)."""
         return self.imu.rate_hz or self.trial.rate_hz
+
+    @property
+    def block_samples(self) -> int:
+        """Samples the estimator takes at once: ``estimator.batch_samples``, else those of :data:`BLOCK_S`. Each
+        update costs about the same whatever its size, so blocks of one duration keep an IMU at 2 kHz as cheap
+        to estimate as one at 200 Hz, the estimate as old."""
+        return self.estimator.batch_samples or max(1, round(BLOCK_S * self.imu_rate_hz))
 
     @property
     def table_divider(self) -> int:

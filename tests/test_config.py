@@ -93,3 +93,10 @@ def test_a_free_running_table_counts_its_own_frames():
 def test_an_imu_rate_that_is_not_a_multiple_of_the_table_rate_is_rejected(imu_rate):
     with pytest.raises(ConfigError, match=r"imu\.rate_hz: .* not an integer multiple of trial\.rate_hz"):
         parse_config({**MINIMAL, "imu": {"rate_hz": imu_rate}})
+
+
+@pytest.mark.parametrize(("imu_rate", "batch", "block"), [(None, None, 10), (1000, None, 50), (2000, None, 100),
+                                                          (2000, 10, 10), (None, 1, 1)])
+def test_the_estimator_takes_50_ms_of_samples_at_once_unless_batch_samples_says(imu_rate, batch, block):
+    data = {**MINIMAL, "imu": {"rate_hz": imu_rate}, "estimator": {"batch_samples": batch}}
+    assert parse_config(data).block_samples == block

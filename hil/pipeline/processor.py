@@ -226,7 +226,7 @@ class TrialProcessor:
         return out
 
     def _estimate(self, ready: list[AlignedBatch | ImuGap], final: bool = False) -> None:
-        """Hand aligned samples to the estimator in blocks of ``estimator.batch_samples`` (a gap or the
+        """Hand aligned samples to the estimator in blocks of ``Config.block_samples`` (a gap or the
         end closes a block early): the block boundaries depend on the samples only, so a replay
         updates the estimator exactly as the live run did."""
         if self.estimator is None:
@@ -238,7 +238,7 @@ class TrialProcessor:
         if ready:
             last = ready[-1]
             self._t_end = float(last.t[-1]) if isinstance(last, AlignedBatch) else last.t_end
-        size = self.cfg.estimator.batch_samples
+        size = self.cfg.block_samples
         for item in ready:
             if isinstance(item, AlignedBatch):
                 self._block.append(item)

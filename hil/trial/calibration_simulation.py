@@ -4,7 +4,7 @@ fast as the CPU allows; deterministic for a ``trial.seed``.
 The :class:`~hil.trial.calibration_sequence.CalibrationSequence` of the live trial commands a real servo in
 this process (:class:`emulators.servo_simulation.ServoSimulation`) through the drivers' table client:
 every command is formatted and parsed as on the wire, and a refusal raises as it does live. Simulated time
-goes on in steps of ``estimator.batch_samples`` samples (0.05 s at 200 Hz by default), the blocks in which
+goes on in steps of ``Config.block_samples`` samples (0.05 s at 200 Hz by default), the blocks in which
 the live processor hands samples and angles on: each step's samples, under the servo's plan so far (a
 command acts at the first pulse after the step it was sent in), go through the
 :class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, whose ``on_table`` (the table's
@@ -43,7 +43,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     sim = ServoSimulation.from_config(cfg)
     rate = cfg.imu_rate_hz
     end = round(emulated_length(cfg, schedule) * rate)  # samples
-    step = cfg.estimator.batch_samples
+    step = cfg.block_samples
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable.limits, cfg.turntable.baudrate)
     sequence = CalibrationSequence(schedule, client, 1.0 / rate, **sequence_views(viewer, schedule, cfg))
