@@ -19,6 +19,11 @@ ANGLE_COLUMNS = ("outer_deg", "middle_deg", "inner_deg")
 class DataError(InputError, ValueError):
     """Input data that cannot be used; the message names the file, line and reason."""
 
+    @classmethod
+    def unreadable(cls, path: str | Path, exc: OSError) -> DataError:
+        """The error for a file the disk would not give (not its content), in one line."""
+        return cls(f"{path}: cannot read: {exc.strerror or exc}")
+
 
 def read_increments_csv(path: str | Path) -> AlignedBatch:
     """Rows of increments (each covering the interval that ends at t_s) and, if present, table angles."""
@@ -26,7 +31,7 @@ def read_increments_csv(path: str | Path) -> AlignedBatch:
     try:
         fh = open(path, newline="", encoding="utf-8")
     except OSError as exc:
-        raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        raise DataError.unreadable(path, exc) from None
     with fh:
         reader = csv.reader(fh)
         header = [h.strip() for h in next(reader, [])]

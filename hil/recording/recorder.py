@@ -234,7 +234,7 @@ class RecordingReader:
             self._truncated = True
         except OSError as exc:  # the disk, not the file's content: say so, in one line
             self._finish()
-            raise DataError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+            raise DataError.unreadable(self.path, exc) from None
         self._finish()
 
     def _take(self, record: object) -> RawChunk | StreamEvent | None:

@@ -35,7 +35,7 @@ def open_recording(source: str | Path) -> tuple[RecordingReader, Config]:
     try:
         recording = RecordingReader(path)
     except OSError as exc:
-        raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        raise DataError.unreadable(path, exc) from None
     except ValueError as exc:  # not a recording; the message names the file
         raise DataError(str(exc)) from None
     try:
