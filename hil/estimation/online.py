@@ -227,9 +227,11 @@ class OnlineEstimator:
         return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, as_stacked(c_end[..., 1:])
 
     def _snapshot(self) -> Snapshot:
-        drift = self.gravity.solve(N_DRIFT)
-        full = drift if BIAS_MODELS[self.bias_model] == N_DRIFT else self.gravity.solve(N_FULL)
-        gravity_only = self.gravity.solve(N_GRAVITY)
+        if BIAS_MODELS[self.bias_model] == N_DRIFT:
+            drift, gravity_only = self.gravity.solve_nested((N_DRIFT, N_GRAVITY))
+            full = drift
+        else:
+            drift, full, gravity_only = self.gravity.solve_nested((N_DRIFT, N_FULL, N_GRAVITY))
         t = self._t_last - self.t0
         errors: list[np.ndarray | None] = [None, None, None]
         reference = self._reference
