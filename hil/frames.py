@@ -75,9 +75,14 @@ class Earth:
         ``I + sin(Wt) [u x] + 2 sin^2(Wt/2) [u x]^2`` (no cancellation at small angles; equal to the
         scipy rotation's matrix to rounding, without its per-call input handling)."""
         angle = EARTH_RATE * np.asarray(t, dtype=float).reshape(-1)
+        k, k2 = self._axis_cross
+        return np.eye(3) + np.sin(angle)[:, None, None] * k + (2.0 * np.sin(0.5 * angle) ** 2)[:, None, None] * k2
+
+    @cached_property
+    def _axis_cross(self) -> tuple[np.ndarray, np.ndarray]:
+        """``[u x]`` and ``[u x]^2`` of the earth axis u, formed once."""
         k = skew(self.omega_n / EARTH_RATE)
-        return (np.eye(3) + np.sin(angle)[:, None, None] * k
-                + (2.0 * np.sin(0.5 * angle) ** 2)[:, None, None] * (k @ k))
+        return k, k @ k
 
     @classmethod
     def from_degrees(cls, latitude_deg: float, height_m: float = 0.0) -> Earth:
@@ -102,16 +107,18 @@ def euler_rotation(yaw_pitch_roll: np.ndarray) -> Rotation:
     return Rotation.from_euler(EULER_SEQ, yaw_pitch_roll)
 
 
+def level_angles(up: np.ndarray) -> tuple[float, float]:
+    """(pitch, roll) of a C_b^n matrix from its last row (the up axis in b): C32 = sin p, C31 = -cos p sin r,
+    C33 = cos p cos r (pitch within +-90 deg)."""
+    return math.asin(max(-1.0, min(1.0, up[1]))), math.atan2(-up[0], up[2])
+
+
 def euler_from_matrix(c: np.ndarray) -> np.ndarray:
     """(yaw, pitch, roll) of one C_b^n matrix in closed form (pitch within +-90 deg); cheap per call.
 
-    From ``Rz(y) Rx(p) Ry(r)``: C32 = sin p, C31 = -cos p sin r, C33 = cos p cos r, C12 = -sin y cos p, C22 = cos y cos p.
+    From ``Rz(y) Rx(p) Ry(r)``: C12 = -sin y cos p, C22 = cos y cos p, and :func:`level_angles`.
     """
-    return np.array([
-        math.atan2(-c[0, 1], c[1, 1]),
-        math.asin(max(-1.0, min(1.0, c[2, 1]))),
-        math.atan2(-c[2, 0], c[2, 2]),
-    ])  # fmt: skip
+    return np.array([math.atan2(-c[0, 1], c[1, 1]), *level_angles(c[2])])
 
 
 @dataclass(frozen=True)

@@ -61,6 +61,15 @@ def gravity_basis(t_start: np.ndarray, t_end: np.ndarray, omega: float = EARTH_R
     return np.column_stack((one_minus_cos, np.sin(mid) * sinc, np.ones_like(mid)))
 
 
+def reconstruction_basis(t: np.ndarray | float, omega: float = EARTH_RATE) -> np.ndarray:
+    """The internal basis ``[1 - cos wt, sin wt, 1]`` at instants t, (N, 3): ``f^ib0(t) = basis A^T`` (2014 eq. 17)."""
+    wt = omega * np.atleast_1d(np.asarray(t, dtype=float))
+    basis = np.ones((len(wt), 3))
+    basis[:, 0] = 2.0 * np.sin(0.5 * wt) ** 2
+    basis[:, 1] = np.sin(wt)
+    return basis
+
+
 def paper_basis_matrix(a_internal: np.ndarray) -> np.ndarray:
     """A in the paper's basis [cos, sin, 1] from A in the internal basis [1 - cos, sin, 1]."""
     a = a_internal.copy()
@@ -110,10 +119,7 @@ class Solution:
 
     def apparent_gravity(self, t: np.ndarray | float, omega: float = EARTH_RATE) -> np.ndarray:
         """Reconstructed gravitational apparent acceleration f^ib0 at instants t (2014 eq. 17), (N, 3)."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        wt = omega * t
-        basis = np.column_stack((2.0 * np.sin(0.5 * wt) ** 2, np.sin(wt), np.ones_like(wt)))
-        return basis @ self.a_internal.T
+        return reconstruction_basis(t, omega) @ self.a_internal.T
 
 
 @dataclass(frozen=True)

@@ -238,8 +238,7 @@ class OnlineEstimator:
         if reference is not None and t > 0:
             turn = EarthTurn.at(t, self.earth)
             for k, solution in enumerate((gravity_only, full)):
-                vectors = solution.apparent_gravity(np.array([0.0, t]))
-                c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], turn, self.earth)
+                c_ib0_n0 = alignment_matrix(*turn.apparent_gravity(solution), turn)
                 errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, turn), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
