@@ -20,9 +20,6 @@ from hil.estimation.apparent_gravity import Solution, reconstruction_basis
 from hil.frames import Earth, euler_from_matrix, level_angles
 
 
-_PITCH_ROLL_YAW = np.array([1, 2, 0])  # euler_from_matrix gives (yaw, pitch, roll)
-
-
 def _cross(u: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
     """u x v of two 3-vectors."""
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
@@ -84,14 +81,15 @@ def body_attitude(c_ib0_n0: np.ndarray, c_b_ib0: np.ndarray, turn: EarthTurn) ->
     return turn.c_n0_n @ c_ib0_n0 @ c_b_ib0
 
 
-def _wrapped(angles: np.ndarray) -> np.ndarray:
-    """Angles (rad) wrapped to [-pi, pi)."""
-    return (angles + np.pi) % (2 * np.pi) - np.pi
+def _differences(angles: Sequence[float], reference: Sequence[float]) -> list[float]:
+    """``angles - reference`` (rad), each wrapped to [-pi, pi)."""
+    return [(a - b + math.pi) % (2 * math.pi) - math.pi for a, b in zip(angles, reference)]
 
 
 def attitude_error(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """(pitch, roll, yaw) of the estimate minus the reference, rad, wrapped to [-pi, pi)."""
-    return _wrapped(euler_from_matrix(estimate) - euler_from_matrix(reference))[_PITCH_ROLL_YAW]
+    yaw, pitch, roll = _differences(euler_from_matrix(estimate), euler_from_matrix(reference))
+    return np.array([pitch, roll, yaw])
 
 
 def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.ndarray:
@@ -107,4 +105,4 @@ def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.nda
     angle = math.hypot(phi_e, phi_n)
     cos, sinc = math.cos(angle), (math.sin(angle) / angle if angle else 1.0)
     tilted = [cos * u + sinc * (phi_e * n - phi_n * e) for e, n, u in zip(east, north, up)]
-    return _wrapped(np.subtract(level_angles(tilted), level_angles(up)))
+    return np.array(_differences(level_angles(tilted), level_angles(up)))

@@ -135,7 +135,7 @@ class DriftCheck:
         """The check from a 15-state solution; None while the drift is not observable."""
         if solution.drift is None:
             return None
-        significant = bool(np.any(np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma))
+        significant = bool((np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma).any())
         return cls(solution.drift, solution.drift_sigma, significant)
 
 
@@ -276,9 +276,9 @@ class ApparentGravityEstimator:
 
     def _observability(self, scaled: np.ndarray, check_finite: bool = True) -> Observability:
         eig = symmetric_eigenvalues(scaled, check_finite)
-        top = max(float(eig[-1]), _TINY)
+        low, top = float(eig[0]), max(float(eig[-1]), _TINY)
         rank = int(np.count_nonzero(eig > self.rank_tolerance * top))
-        condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
+        condition = top / low if low > 0 else float("inf")
         return Observability(rank, condition, eig)
 
     @staticmethod

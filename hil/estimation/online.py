@@ -43,6 +43,8 @@ OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neigh
 OUTLIER_WINDOW = 25  # samples before it that it is judged against
 OUTLIER_FLOOR = 5e-3  # m/s^2 (~0.5 mg): the gate is never tighter than this (quiet sensors, noise-free data)
 BIAS_MODELS = {"constant": N_FULL, "drift": N_DRIFT}  # estimator.bias_model -> states of Snapshot.full
+_NAN3 = np.full(3, np.nan)  # a track entry that does not exist (read-only)
+_NAN3.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -242,9 +244,8 @@ class OnlineEstimator:
                 errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, turn), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
-        nan3 = np.full(3, np.nan)
         self.track.append(np.concatenate((
-            [t], *(nan3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
+            [t], *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
         )))  # fmt: skip
         return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors,
                         drift_check=DriftCheck.from_solution(drift))
@@ -256,7 +257,6 @@ def convergence_time(snapshots: list[Snapshot]) -> float | None:
     On the estimator's own history prefer :meth:`OnlineEstimator.bias_converged_at`, which sees every
     solve where the history beyond ``max_snapshots`` is thinned.
     """
-    nan3 = np.full(3, np.nan)
-    bias = np.array([nan3 if s.full.bias is None else s.full.bias for s in snapshots]).reshape(-1, 3)
-    sigma = np.array([nan3 if s.full.bias_sigma is None else s.full.bias_sigma for s in snapshots]).reshape(-1, 3)
+    bias = np.array([_NAN3 if s.full.bias is None else s.full.bias for s in snapshots]).reshape(-1, 3)
+    sigma = np.array([_NAN3 if s.full.bias_sigma is None else s.full.bias_sigma for s in snapshots]).reshape(-1, 3)
     return settled_from(np.array([s.t for s in snapshots]), bias, sigma, BIAS_TOLERANCE)
