@@ -8,9 +8,10 @@ timed where it happens (between batches, as in the trial: caches as the batch wo
     PYTHONPATH=. .venv/bin/python benchmarks/snapshot_cost.py [--repeat 3] [--loop 2000]
 
 Prints the median and mean per-snapshot cost in us of the in-trial snapshots (median over the
-repeats) and the per-snapshot cost of the back-to-back loop (median over blocks of 100). Run it on
-two trees alternately (``PYTHONPATH=tree-a``, ``PYTHONPATH=tree-b``) to compare them; the machine's
-load moves both.
+repeats), the estimator's whole time over the trial and the snapshots' share of it, and the
+per-snapshot cost of the back-to-back loop (median over blocks of 100). Run it on two trees
+alternately (``PYTHONPATH=tree-a``, ``PYTHONPATH=tree-b``) to compare them; the machine's load moves
+both.
 """
 
 from __future__ import annotations
@@ -69,15 +70,19 @@ def main() -> None:
     sim = Simulation.from_config(cfg)
     batches = list(sim.batches())
     period = 1.0 / cfg.estimator.solve_rate_hz
-    medians, means = [], []
+    medians, means, totals = [], [], []
     for _ in range(args.repeat):
+        t0 = time.perf_counter()
         est = in_trial(sim, batches, period)
+        totals.append(time.perf_counter() - t0)
         medians.append(statistics.median(est.costs))
         means.append(statistics.fmean(est.costs))
     loop = back_to_back(est, args.loop)
     print(f"snapshots per run               {len(est.costs)}")
     print(f"in trial, per snapshot          {statistics.median(medians) * 1e6:.0f} us median"
           f"   {statistics.median(means) * 1e6:.0f} us mean   (median of {args.repeat} runs)")
+    print(f"estimation of the trial         {statistics.median(totals):.3f} s   of which the snapshots"
+          f" {statistics.median(means) * len(est.costs):.3f} s   (medians)")
     print(f"back to back, per snapshot      {loop * 1e6:.0f} us   (median of blocks of 100, {args.loop} at the end"
           " of the trial)")
 
