@@ -100,8 +100,8 @@ def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.nda
     ``cos|phi| C[2] + sin|phi|/|phi| (phi_E C[1] - phi_N C[0])``.
     """
     east, north, up = c_b_n.tolist()
-    b_e, b_n = (c_b_n[:2] @ bias_b).tolist()
-    phi_e, phi_n = b_n / g, -b_e / g
+    b_east, b_north = (c_b_n[:2] @ bias_b).tolist()
+    phi_e, phi_n = b_north / g, -b_east / g
     angle = math.hypot(phi_e, phi_n)
     cos, sinc = math.cos(angle), (math.sin(angle) / angle if angle else 1.0)
     tilted = [cos * u + sinc * (phi_e * n - phi_n * e) for e, n, u in zip(east, north, up)]

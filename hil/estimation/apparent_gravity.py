@@ -216,7 +216,7 @@ class ApparentGravityEstimator:
         observable = obs.full(n)
         factor = None
         if observable:
-            factor = cholesky(scaled, check_finite=False)
+            factor = cholesky(scaled)
             y = cholesky_solve(factor, rhs)
         else:
             y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]

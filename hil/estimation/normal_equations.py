@@ -45,10 +45,9 @@ def symmetric_eigenvalues(a: np.ndarray, check_finite: bool = True) -> np.ndarra
     return w
 
 
-def cholesky(a: np.ndarray, check_finite: bool = True) -> np.ndarray:
-    """Upper Cholesky factor of a positive definite matrix: ``scipy.linalg.cho_factor(a)[0]``."""
-    if check_finite:
-        require_finite(a)
+def cholesky(a: np.ndarray) -> np.ndarray:
+    """Upper Cholesky factor of a positive definite matrix: ``scipy.linalg.cho_factor(a, check_finite=False)[0]``
+    (the caller has checked ``a`` for infs and NaNs: the display solves do so once per snapshot)."""
     c, info = lapack.dpotrf(a, lower=0, clean=0)
     if info != 0:
         raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive definite")
