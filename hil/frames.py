@@ -8,6 +8,7 @@ i.e. scipy's intrinsic ``"ZXY"`` sequence. Gimbal angle arrays are ordered (oute
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING
@@ -74,10 +75,15 @@ class Earth:
         """:meth:`n_to_n0` as (N, 3, 3) matrices, by Rodrigues' formula about the fixed earth axis u:
         ``I + sin(Wt) [u x] + 2 sin^2(Wt/2) [u x]^2`` (no cancellation at small angles; equal to the
         scipy rotation's matrix to rounding, without its per-call input handling)."""
-        angle = EARTH_RATE * np.asarray(t, dtype=float).reshape(-1)
+        angle = EARTH_RATE * np.asarray(t, dtype=float).reshape(-1, 1, 1)
+        eye, k, k2 = self._rodrigues_terms
+        return eye + np.sin(angle) * k + (2.0 * np.sin(0.5 * angle) ** 2) * k2
+
+    @cached_property
+    def _rodrigues_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """I, ``[u x]`` and ``[u x]^2`` of the earth axis u, formed once."""
         k = skew(self.omega_n / EARTH_RATE)
-        return (np.eye(3) + np.sin(angle)[:, None, None] * k
-                + (2.0 * np.sin(0.5 * angle) ** 2)[:, None, None] * (k @ k))
+        return np.eye(3), k, k @ k
 
     @classmethod
     def from_degrees(cls, latitude_deg: float, height_m: float = 0.0) -> Earth:
@@ -102,16 +108,19 @@ def euler_rotation(yaw_pitch_roll: np.ndarray) -> Rotation:
     return Rotation.from_euler(EULER_SEQ, yaw_pitch_roll)
 
 
-def euler_from_matrix(c: np.ndarray) -> np.ndarray:
+def level_angles(up: Sequence[float]) -> tuple[float, float]:
+    """(pitch, roll) of a C_b^n matrix from its last row (the up axis in b): C32 = sin p, C31 = -cos p sin r,
+    C33 = cos p cos r (pitch within +-90 deg)."""
+    return math.asin(max(-1.0, min(1.0, up[1]))), math.atan2(-up[0], up[2])
+
+
+def euler_from_matrix(c: np.ndarray) -> tuple[float, float, float]:
     """(yaw, pitch, roll) of one C_b^n matrix in closed form (pitch within +-90 deg); cheap per call.
 
-    From ``Rz(y) Rx(p) Ry(r)``: C32 = sin p, C31 = -cos p sin r, C33 = cos p cos r, C12 = -sin y cos p, C22 = cos y cos p.
+    From ``Rz(y) Rx(p) Ry(r)``: C12 = -sin y cos p, C22 = cos y cos p, and :func:`level_angles`.
     """
-    return np.array([
-        math.atan2(-c[0, 1], c[1, 1]),
-        math.asin(max(-1.0, min(1.0, c[2, 1]))),
-        math.atan2(-c[2, 0], c[2, 2]),
-    ])  # fmt: skip
+    rows = c.tolist()
+    return (math.atan2(-rows[0][1], rows[1][1]), *level_angles(rows[2]))
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ drift columns nearly orthogonal before the scaling (the fit itself does not depe
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -35,6 +36,7 @@ from hil.estimation.normal_equations import (
     NormalEquations,
     cholesky,
     cholesky_solve,
+    require_finite,
     symmetric_eigenvalues,
     unit_diagonal,
 )
@@ -44,6 +46,9 @@ N_GRAVITY = 9  # A11..A33
 N_FULL = 12  # plus bias x, y, z
 N_DRIFT = 15  # plus bias drift rate x, y, z
 DRIFT_SIGNIFICANCE = 4.0  # a drift beyond this many sigma on some axis is significant
+_TINY = np.finfo(float).tiny
+_IDENTITY = np.eye(N_DRIFT)  # read-only: copied or sliced, never written
+_IDENTITY.setflags(write=False)
 
 
 def gravity_basis(t_start: np.ndarray, t_end: np.ndarray, omega: float = EARTH_RATE) -> np.ndarray:
@@ -54,6 +59,15 @@ def gravity_basis(t_start: np.ndarray, t_end: np.ndarray, omega: float = EARTH_R
     one_minus_sinc = np.where(np.abs(half) < 1e-4, half**2 / 6.0 - half**4 / 120.0, 1.0 - sinc)
     one_minus_cos = 2.0 * np.sin(0.5 * mid) ** 2 + np.cos(mid) * one_minus_sinc
     return np.column_stack((one_minus_cos, np.sin(mid) * sinc, np.ones_like(mid)))
+
+
+def reconstruction_basis(t: np.ndarray | float, omega: float = EARTH_RATE) -> np.ndarray:
+    """The internal basis ``[1 - cos wt, sin wt, 1]`` at instants t, (N, 3): ``f^ib0(t) = basis A^T`` (2014 eq. 17)."""
+    wt = omega * np.atleast_1d(np.asarray(t, dtype=float))
+    basis = np.ones((len(wt), 3))
+    basis[:, 0] = 2.0 * np.sin(0.5 * wt) ** 2
+    basis[:, 1] = np.sin(wt)
+    return basis
 
 
 def paper_basis_matrix(a_internal: np.ndarray) -> np.ndarray:
@@ -105,10 +119,7 @@ class Solution:
 
     def apparent_gravity(self, t: np.ndarray | float, omega: float = EARTH_RATE) -> np.ndarray:
         """Reconstructed gravitational apparent acceleration f^ib0 at instants t (2014 eq. 17), (N, 3)."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        wt = omega * t
-        basis = np.column_stack((2.0 * np.sin(0.5 * wt) ** 2, np.sin(wt), np.ones_like(wt)))
-        return basis @ self.a_internal.T
+        return reconstruction_basis(t, omega) @ self.a_internal.T
 
 
 @dataclass(frozen=True)
@@ -124,7 +135,7 @@ class DriftCheck:
         """The check from a 15-state solution; None while the drift is not observable."""
         if solution.drift is None:
             return None
-        significant = bool(np.any(np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma))
+        significant = bool((np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma).any())
         return cls(solution.drift, solution.drift_sigma, significant)
 
 
@@ -182,47 +193,71 @@ class ApparentGravityEstimator:
 
     def solve(self, states: int = N_FULL) -> Solution:
         """The least-squares solution now: 15-state (bias and drift), 12-state (bias) or 9-state ("method 1")."""
-        n = states
-        info, rhs = self._normal_equations(n)
+        return self.solve_nested((states,))[0]
+
+    def solve_nested(self, states: Sequence[int]) -> list[Solution]:
+        """:meth:`solve` for several of the nested models at once, e.g. ``(N_DRIFT, N_FULL, N_GRAVITY)``.
+
+        The normal equations are formed and scaled once, for the largest model; the scaled systems of
+        the others are its leading blocks, bit for bit (the re-centring of the 15-state model leaves
+        the first 12 rows and columns as they are, and the scale factors are per state).
+        """
+        info, rhs = self._normal_equations(max(states))
         scaled, scale = unit_diagonal(info)
-        obs = self._observability(scaled)
+        require_finite(scaled)  # once: its leading blocks are then finite too
         rhs = rhs * scale
+        return [self._solve_scaled(np.ascontiguousarray(scaled[:n, :n]), rhs[:n], scale[:n]) for n in states]
+
+    def _solve_scaled(self, scaled: np.ndarray, rhs: np.ndarray, scale: np.ndarray) -> Solution:
+        """The solution of the first n states from their normal equations scaled to unit diagonal
+        (``scaled y = rhs``, ``x = scale y``), with the noise level from the residual sum of squares."""
+        n = len(rhs)
+        obs = self._observability(scaled, check_finite=False)
         observable = obs.full(n)
+        factor = None
         if observable:
             factor = cholesky(scaled)
             y = cholesky_solve(factor, rhs)
-            cov_scaled = cholesky_solve(factor, np.eye(n))
         else:
             y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
-            cov_scaled = np.full((n, n), np.nan)
         x = y * scale
         dof = max(3 * self.samples - n, 1)
         rss = max(self.normal.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
         noise_var = rss / dof
-        sigma = np.sqrt(noise_var * np.diag(cov_scaled)) * scale
-        drift: dict[str, np.ndarray] = {}
-        bias = bias_sigma = None
-        if n > N_GRAVITY and observable:
-            bias, bias_sigma = x[N_GRAVITY:N_FULL].copy(), sigma[N_GRAVITY:N_FULL]
-        if n == N_DRIFT and observable:
-            cov = noise_var * cov_scaled * np.outer(scale, scale)
-            k = x[N_FULL:]
-            tau = self.drift_origin
-            b_t0, b_t0_sigma = self._bias_at(bias, k, cov, -tau)
-            bias, bias_sigma = self._bias_at(bias, k, cov, self.t - tau)
-            drift = {"bias_t0": b_t0, "bias_t0_sigma": b_t0_sigma, "drift": k.copy(), "drift_sigma": sigma[N_FULL:]}
+        bias_fields: dict[str, np.ndarray | None] = {"bias": None, "bias_sigma": None}
+        if factor is not None and n > N_GRAVITY:
+            bias_fields = self._bias_and_drift(x, factor, scale, noise_var)
         return Solution(
             t=self.t,
             samples=self.samples,
             a_internal=x[:N_GRAVITY].reshape(3, 3),
-            bias=bias,
-            bias_sigma=bias_sigma,
-            noise_sigma=float(np.sqrt(noise_var)),
+            noise_sigma=math.sqrt(noise_var),
             observability=obs,
             observable=observable,
             states=n,
-            **drift,
+            **bias_fields,
         )
+
+    def _bias_and_drift(self, x: np.ndarray, factor: np.ndarray, scale: np.ndarray, noise_var: float
+                        ) -> dict[str, np.ndarray]:
+        """The bias at t with its sigma and, for 15 states, ``bias_t0`` and the drift rate with theirs.
+
+        Only the bias and drift block of the covariance ``noise_var W^-1`` is formed: the trailing
+        columns of the scaled inverse, from the Cholesky factor.
+        """
+        n = len(x)
+        block = cholesky_solve(factor, _IDENTITY[:n, N_GRAVITY:n])[N_GRAVITY:]  # scaled, (n - 9) square
+        s = scale[N_GRAVITY:]
+        sigma = np.sqrt(noise_var * block.diagonal()) * s
+        if n == N_FULL:
+            return {"bias": x[N_GRAVITY:].copy(), "bias_sigma": sigma}
+        cov = noise_var * block * (s[:, None] * s)
+        k = x[N_FULL:]
+        tau = self.drift_origin
+        offsets = np.array([-tau, self.t - tau])  # t = 0 and now, from the drift origin
+        (b_t0, bias), (b_t0_sigma, bias_sigma) = self._bias_at(x[N_GRAVITY:N_FULL], k, cov, offsets)
+        return {"bias": bias, "bias_sigma": bias_sigma, "bias_t0": b_t0, "bias_t0_sigma": b_t0_sigma,
+                "drift": k.copy(), "drift_sigma": sigma[N_FULL - N_GRAVITY:]}
 
     @property
     def drift_origin(self) -> float:
@@ -234,21 +269,23 @@ class ApparentGravityEstimator:
         time origin at :attr:`drift_origin` (``H' = H T``: the drift column ``C (t - tau)``)."""
         info, rhs = self.normal.info[:n, :n], self.normal.rhs[:n]
         if n == N_DRIFT:
-            change = np.eye(n)
-            change[N_GRAVITY:N_FULL, N_FULL:] = -self.drift_origin * np.eye(3)
+            change = _IDENTITY.copy()
+            change[N_GRAVITY:N_FULL, N_FULL:] = -self.drift_origin * _IDENTITY[:3, :3]
             info, rhs = change.T @ info @ change, change.T @ rhs
         return info, rhs
 
-    def _observability(self, scaled: np.ndarray) -> Observability:
-        eig = symmetric_eigenvalues(scaled)
-        top = max(float(eig[-1]), np.finfo(float).tiny)
-        rank = int(np.sum(eig > self.rank_tolerance * top))
-        condition = top / float(eig[0]) if eig[0] > 0 else float("inf")
+    def _observability(self, scaled: np.ndarray, check_finite: bool = True) -> Observability:
+        eig = symmetric_eigenvalues(scaled, check_finite)
+        low, top = float(eig[0]), max(float(eig[-1]), _TINY)
+        rank = int(np.count_nonzero(eig > self.rank_tolerance * top))
+        condition = top / low if low > 0 else float("inf")
         return Observability(rank, condition, eig)
 
     @staticmethod
-    def _bias_at(b_c: np.ndarray, k: np.ndarray, cov: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """``b_c + k dt`` and its 1-sigma from the covariance of the centred 15-state solution."""
-        ib, ik = np.arange(N_GRAVITY, N_FULL), np.arange(N_FULL, N_DRIFT)
-        var = cov[ib, ib] + 2.0 * dt * cov[ib, ik] + dt * dt * cov[ik, ik]
+    def _bias_at(b_c: np.ndarray, k: np.ndarray, cov: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``b_c + k dt`` and its 1-sigma, (m, 3) each, at m offsets ``dt`` (s) from the drift origin, from
+        the covariance (6, 6) of the centred bias and drift."""
+        dt = dt[:, None]
+        variance = cov.diagonal()
+        var = variance[:3] + 2.0 * dt * cov.diagonal(3) + dt * dt * variance[3:]
         return b_c + k * dt, np.sqrt(np.maximum(var, 0.0))

@@ -16,12 +16,13 @@ from scipy.linalg import lapack
 
 def unit_diagonal(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A symmetric matrix scaled to unit diagonal, ``D info D``, and the scale factors ``diag(D)``."""
-    diag = np.diag(info)
+    diag = info.diagonal()
     scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
-    return info * np.outer(scale, scale), scale
+    return info * (scale[:, None] * scale), scale
 
 
-def _finite(a: np.ndarray) -> None:
+def require_finite(a: np.ndarray) -> None:
+    """The ValueError scipy's ``check_finite`` raises when ``a`` holds an inf or NaN."""
     if not np.isfinite(a).all():
         raise ValueError("array must not contain infs or NaNs")
 
@@ -33,9 +34,10 @@ def _eigenvalue_work(n: int) -> tuple[int, int]:
     return int(work), int(iwork)
 
 
-def symmetric_eigenvalues(a: np.ndarray) -> np.ndarray:
+def symmetric_eigenvalues(a: np.ndarray, check_finite: bool = True) -> np.ndarray:
     """Eigenvalues of a symmetric matrix (lower triangle), ascending: ``scipy.linalg.eigh(a, eigvals_only=True)``."""
-    _finite(a)
+    if check_finite:
+        require_finite(a)
     lwork, liwork = _eigenvalue_work(len(a))
     w, _, _, _, info = lapack.dsyevr(a, compute_v=0, lower=1, lwork=lwork, liwork=liwork)
     if info != 0:
@@ -44,8 +46,8 @@ def symmetric_eigenvalues(a: np.ndarray) -> np.ndarray:
 
 
 def cholesky(a: np.ndarray) -> np.ndarray:
-    """Upper Cholesky factor of a positive definite matrix: ``scipy.linalg.cho_factor(a)[0]``."""
-    _finite(a)
+    """Upper Cholesky factor of a positive definite matrix: ``scipy.linalg.cho_factor(a, check_finite=False)[0]``
+    (the caller has checked ``a`` for infs and NaNs: the display solves do so once per snapshot)."""
     c, info = lapack.dpotrf(a, lower=0, clean=0)
     if info != 0:
         raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive definite")

@@ -43,6 +43,8 @@ OUTLIER_SIGMAS = 10.0  # a specific force this many robust sigmas from its neigh
 OUTLIER_WINDOW = 25  # samples before it that it is judged against
 OUTLIER_FLOOR = 5e-3  # m/s^2 (~0.5 mg): the gate is never tighter than this (quiet sensors, noise-free data)
 BIAS_MODELS = {"constant": N_FULL, "drift": N_DRIFT}  # estimator.bias_model -> states of Snapshot.full
+_NAN3 = np.full(3, np.nan)  # a track entry that does not exist (read-only)
+_NAN3.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -227,23 +229,23 @@ class OnlineEstimator:
         return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, as_stacked(c_end[..., 1:])
 
     def _snapshot(self) -> Snapshot:
-        drift = self.gravity.solve(N_DRIFT)
-        full = drift if BIAS_MODELS[self.bias_model] == N_DRIFT else self.gravity.solve(N_FULL)
-        gravity_only = self.gravity.solve(N_GRAVITY)
+        if BIAS_MODELS[self.bias_model] == N_DRIFT:
+            drift, gravity_only = self.gravity.solve_nested((N_DRIFT, N_GRAVITY))
+            full = drift
+        else:
+            drift, full, gravity_only = self.gravity.solve_nested((N_DRIFT, N_FULL, N_GRAVITY))
         t = self._t_last - self.t0
         errors: list[np.ndarray | None] = [None, None, None]
         reference = self._reference
         if reference is not None and t > 0:
             turn = EarthTurn.at(t, self.earth)
             for k, solution in enumerate((gravity_only, full)):
-                vectors = solution.apparent_gravity(np.array([0.0, t]))
-                c_ib0_n0 = alignment_matrix(vectors[0], vectors[1], turn, self.earth)
+                c_ib0_n0 = alignment_matrix(*turn.apparent_gravity(solution), turn)
                 errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, turn), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
-        nan3 = np.full(3, np.nan)
         self.track.append(np.concatenate((
-            [t], *(nan3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
+            [t], *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
         )))  # fmt: skip
         return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors,
                         drift_check=DriftCheck.from_solution(drift))
@@ -255,7 +257,6 @@ def convergence_time(snapshots: list[Snapshot]) -> float | None:
     On the estimator's own history prefer :meth:`OnlineEstimator.bias_converged_at`, which sees every
     solve where the history beyond ``max_snapshots`` is thinned.
     """
-    nan3 = np.full(3, np.nan)
-    bias = np.array([nan3 if s.full.bias is None else s.full.bias for s in snapshots]).reshape(-1, 3)
-    sigma = np.array([nan3 if s.full.bias_sigma is None else s.full.bias_sigma for s in snapshots]).reshape(-1, 3)
+    bias = np.array([_NAN3 if s.full.bias is None else s.full.bias for s in snapshots]).reshape(-1, 3)
+    sigma = np.array([_NAN3 if s.full.bias_sigma is None else s.full.bias_sigma for s in snapshots]).reshape(-1, 3)
     return settled_from(np.array([s.t for s in snapshots]), bias, sigma, BIAS_TOLERANCE)
