@@ -14,14 +14,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import (
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    ValidationError,
-    model_validator,
-)
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
@@ -282,8 +275,7 @@ class ImuConfig(_Model):
 class EstimatorConfig(_Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
-    # live: samples handed to the estimator at once; None: those of BLOCK_S at the IMU rate (10 at 200 Hz)
-    batch_samples: int | None = Field(None, ge=1, le=10000)
+    batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples per estimator call (Config.block_samples)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
 
 
@@ -352,9 +344,8 @@ class Config(_Model):
 
     @property
     def block_samples(self) -> int:
-        """Samples the estimator takes at once: ``estimator.batch_samples``, else those of :data:`BLOCK_S`. Each
-        update costs about the same whatever its size, so blocks of one duration keep an IMU at 2 kHz as cheap
-        to estimate as one at 200 Hz, the estimate as old."""
+        """Samples the estimator takes at once: ``estimator.batch_samples``, else those of :data:`BLOCK_S` (an update
+        costs about the same whatever its size: an IMU at 2 kHz is then as cheap to estimate as one at 200 Hz)."""
         return self.estimator.batch_samples or max(1, round(BLOCK_S * self.imu_rate_hz))
 
     @property
