@@ -21,20 +21,21 @@ import hil
 from hil.outputs.figures import write_figures
 
 WAIT_S = 120.0  # drawing takes well under a second; a child that takes this long is stuck
+DONE = b"drawn\n"  # what the child answers on its standard output
 
 
 class FigureProcess:
     """A child process ready to draw one trial's figures (:func:`hil.outputs.figures.write_figures`).
 
     Use as a context manager; :meth:`draw` has the signature of ``write_figures``. A child not given a
-    job exits when this process closes its input.
+    job is ended on :meth:`close`.
     """
 
     def __init__(self) -> None:
         root = str(Path(hil.__file__).resolve().parent.parent)  # the child imports this same package
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH"))))}
         self._child: subprocess.Popen | None = subprocess.Popen(
-            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, env=env)  # fmt: skip
 
     def __enter__(self) -> FigureProcess:
@@ -54,16 +55,13 @@ class FigureProcess:
             write_figures(out, series, result)
 
     def close(self) -> None:
-        """End a child that was given no job."""
+        """End a child that was given no job, at once (it has only imported)."""
         child, self._child = self._child, None
         if child is not None:
-            child.stdin.close()
-            try:
-                child.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                child.kill()
-                child.wait()
-            child.stderr.close()
+            child.kill()
+            child.wait()
+            for pipe in (child.stdin, child.stdout, child.stderr):
+                pipe.close()
 
 
 def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: dict) -> str:
@@ -71,7 +69,7 @@ def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: d
     data = np.ascontiguousarray(series, dtype="<f8")
     header = json.dumps({"out": str(Path(out).resolve()), "shape": data.shape, "result": result})
     try:
-        _, err = child.communicate(header.encode() + b"\n" + data.tobytes(), timeout=WAIT_S)
+        answer, err = child.communicate(header.encode() + b"\n" + data.tobytes(), timeout=WAIT_S)
     except subprocess.TimeoutExpired:
         child.kill()
         child.communicate()
@@ -80,7 +78,7 @@ def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: d
         child.kill()
         child.wait()
         return str(exc)
-    if child.returncode != 0:
+    if child.returncode != 0 or answer != DONE:
         lines = err.decode(errors="replace").strip().splitlines()
         return lines[-1] if lines else f"exit code {child.returncode}"
     return ""
@@ -100,6 +98,9 @@ def _serve() -> None:
     shape = tuple(job["shape"])
     data = sys.stdin.buffer.read(8 * int(np.prod(shape)))
     write_figures(Path(job["out"]), np.frombuffer(data, dtype="<f8").reshape(shape), job["result"])
+    sys.stdout.buffer.write(DONE)
+    sys.stdout.flush()
+    os._exit(0)  # the figures are written and closed: no interpreter teardown (0.1-0.2 s) for the parent to wait for
 
 
 if __name__ == "__main__":

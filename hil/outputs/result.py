@@ -11,15 +11,12 @@ import numpy as np
 
 from hil.estimation.apparent_gravity import DriftCheck
 from hil.estimation.online import OnlineEstimator, Snapshot
+from hil.outputs.conversions import to_ug, to_ug_per_h
 from hil.samples import StreamCounts
-from hil.units import DEG, HOUR, UG
+from hil.units import DEG, UG
 
 RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
-
-def to_ug(v: np.ndarray | None) -> list[float] | None:
-    return None if v is None else [float(x) for x in np.asarray(v) / UG]
-
 
 def _angles(v: np.ndarray | None, names=("pitch", "roll", "yaw")) -> dict[str, float] | None:
     return None if v is None else {n: float(x) / DEG for n, x in zip(names, v)}
@@ -29,11 +26,6 @@ def _tail_mean(snapshots: list[Snapshot], attr: str, duration: float) -> np.ndar
     """Mean of a snapshot error over the last 10 % of the trial."""
     rows = [getattr(s, attr) for s in snapshots if s.t >= 0.9 * duration and getattr(s, attr) is not None]
     return np.mean(rows, axis=0) if rows else None
-
-
-def to_ug_per_h(v: np.ndarray | None) -> list[float] | None:
-    """m/s^3 as micro-g per hour."""
-    return None if v is None else [float(x) for x in np.asarray(v) / UG * HOUR]
 
 
 def _drift_check(check: DriftCheck | None) -> dict | None:

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hil.estimation.online import Snapshot
-from hil.outputs.result import to_ug, to_ug_per_h
+from hil.outputs.conversions import to_ug, to_ug_per_h
 from hil.units import DEG
+
+if TYPE_CHECKING:  # the figure process reads series without the estimator's modules
+    from hil.estimation.online import Snapshot
 
 SERIES_NAME = "series.csv"
 SERIES_COLUMNS = (
