@@ -34,10 +34,11 @@ def _viewer(args: argparse.Namespace):
 def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
     when given), close the viewer of a completed trial; the exit code of the outcome."""
+    from hil.outputs.figures import write_figures
     from hil.trial.viewer_feed import finish_viewer
 
-    draw = {} if figures is None else {"draw": figures.draw}
-    code = outcome.exit_code(outcome.write(figures=not args.no_figures, **draw))
+    draw = write_figures if figures is None else figures.draw
+    code = outcome.exit_code(outcome.write(figures=not args.no_figures, draw=draw))
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
     else:

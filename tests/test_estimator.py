@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hil.estimation.alignment import EarthTurn, attitude_error, dual_vector, theoretical_error
+from hil.estimation.alignment import EarthTurn, alignment_matrix, attitude_error, theoretical_error
 from hil.estimation.apparent_gravity import ApparentGravityEstimator
 from hil.estimation.strapdown import cumulative_product
 from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_rotation
@@ -86,10 +86,12 @@ def test_method2_level_error_is_a_twentieth_of_method1_without_gyro_errors():
     assert np.all(level2 <= 0.05 * level1)
 
 
-def test_dual_vector_recovers_a_known_rotation():
+def test_the_dual_vector_alignment_recovers_a_known_rotation():
     c = Rotation.from_rotvec([0.3, -1.1, 0.4]).as_matrix()
-    v1, v2 = np.array([0.1, 0.2, 9.8]), np.array([0.5, -0.3, 9.7])
-    np.testing.assert_allclose(dual_vector(v1, v2, c @ v1, c @ v2), c, atol=1e-14)
+    earth = Earth.from_degrees(32.0)
+    turn = EarthTurn.at(3 * 3600.0, earth)  # the n0 pair: f^n at 0 and f^n0 at t
+    v1, v2 = c.T @ earth.f_n, c.T @ turn.f_n0_t
+    np.testing.assert_allclose(alignment_matrix(v1, v2, turn), c, atol=1e-14)
 
 
 def test_theoretical_error_on_a_level_table_is_eq8():

@@ -38,16 +38,6 @@ def unit_triad(v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
     return np.array([_unit(a), _unit(c), _unit(_cross(c, a))])
 
 
-def dual_vector(v1_b: np.ndarray, v2_b: np.ndarray, v1_n: np.ndarray, v2_n: np.ndarray) -> np.ndarray:
-    """C such that v_n = C v_b, from two non-collinear vector pairs (2014 eq. 8), orthogonalised (eq. 9).
-
-    The rows of each eq.-8 triad are mutually orthogonal, so eq. 8 is ``C = N^T D B`` with N and B the
-    triads scaled to unit rows (orthogonal matrices) and D = diag(|n_i| / |b_i|) positive. Its
-    orthogonal polar factor ``C (C^T C)^(-1/2)`` (eq. 9) is therefore ``N^T B``, formed here directly.
-    """
-    return unit_triad(v1_n, v2_n).T @ unit_triad(v1_b, v2_b)
-
-
 @dataclass(frozen=True)
 class EarthTurn:
     """What the alignment at time t needs of the earth's rotation since the start (formed once per solve)."""
@@ -71,8 +61,14 @@ class EarthTurn:
 
 
 def alignment_matrix(apparent_gravity_0: np.ndarray, apparent_gravity_t: np.ndarray, turn: EarthTurn) -> np.ndarray:
-    """C_ib0^n0 from the reconstructed apparent gravity at 0 and t (each (3,)): :func:`dual_vector` against
-    the specific force at rest in n0 at the same instants, whose triad ``turn`` holds."""
+    """C_ib0^n0 such that v_n0 = C v_ib0, from the reconstructed apparent gravity at 0 and t (each (3,)) and the
+    specific force at rest in n0 at the same instants, whose triad ``turn`` holds (2014 eq. 8), orthogonalised
+    (eq. 9).
+
+    The rows of each eq.-8 triad are mutually orthogonal, so eq. 8 is ``C = N^T D B`` with N and B the
+    triads scaled to unit rows (orthogonal matrices) and D = diag(|n_i| / |b_i|) positive. Its
+    orthogonal polar factor ``C (C^T C)^(-1/2)`` (eq. 9) is therefore ``N^T B``, formed here directly.
+    """
     return turn.triad_n0.T @ unit_triad(apparent_gravity_0, apparent_gravity_t)
 
 

@@ -18,6 +18,7 @@ from hil.units import DEG, UG
 RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
 
+
 def _angles(v: np.ndarray | None, names=("pitch", "roll", "yaw")) -> dict[str, float] | None:
     return None if v is None else {n: float(x) / DEG for n, x in zip(names, v)}
 
