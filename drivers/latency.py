@@ -24,10 +24,13 @@ class LatencyHistogram:
         self.counts = np.zeros(bins, dtype=np.int64)
         self.count = 0  # values added so far
         self._max: float | None = None
+        self._top = 0  # the highest bin counted in: percentiles sum the bins up to it only
 
     def add(self, seconds: float) -> None:
-        self.counts[min(max(int(seconds / self.bin_s), 0), self.bins - 1)] += 1
+        k = min(max(int(seconds / self.bin_s), 0), self.bins - 1)
+        self.counts[k] += 1
         self.count += 1
+        self._top = max(self._top, k)
         self._max = seconds if self._max is None else max(self._max, seconds)
 
     def percentile_ms(self, q: float) -> float | None:
@@ -38,7 +41,7 @@ class LatencyHistogram:
         """:meth:`percentile_ms` of each of ``qs``, from one pass over the bins."""
         if self.count == 0:
             return [None] * len(qs)
-        ks = np.searchsorted(np.cumsum(self.counts), np.asarray(qs) / 100.0 * self.count)
+        ks = np.searchsorted(np.cumsum(self.counts[: self._top + 1]), np.asarray(qs) / 100.0 * self.count)
         return [round((int(k) + 1) * self.bin_s * 1e3, 3) for k in ks]
 
     def max_ms(self) -> float | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from drivers.latency import LatencyHistogram
@@ -42,3 +43,15 @@ def test_percentiles_at_once_are_the_percentiles_one_by_one():
     assert h.count == 1000
     # the 500th value is in bin 499, whose upper edge is 5.00 ms; the 990th in bin 989 (9.90 ms)
     assert h.percentiles_ms([50, 99]) == [h.percentile_ms(50), h.percentile_ms(99)] == [5.0, 9.9]
+
+
+def test_percentiles_equal_the_bin_of_the_sorted_values_in_a_wide_histogram():
+    rng = np.random.default_rng(7)
+    values = rng.gamma(2.0, 2e-3, 5000)  # a few ms, in a histogram reaching 1 s
+    h = LatencyHistogram(bins=100_000)
+    for v in values:
+        h.add(float(v))
+    ordered = np.sort(values)
+    for q in (1, 50, 99, 100):
+        kth = ordered[int(np.ceil(q / 100 * len(values))) - 1]  # the value the q-th percentile falls on
+        assert h.percentile_ms(q) == round((int(kth / 1e-5) + 1) * 1e-2, 3)
