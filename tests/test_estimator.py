@@ -175,6 +175,32 @@ def test_rodrigues_and_cross_kernels_match_scipy_and_numpy():
     np.testing.assert_allclose(orthonormalised(c) @ orthonormalised(c).T, np.eye(3), atol=1e-15)
 
 
+def test_rodrigues_factors_match_the_trigonometric_forms_on_both_sides_of_the_series_limit():
+    from hil.estimation.strapdown import SERIES_LIMIT, rodrigues_factors
+
+    rng = np.random.default_rng(6)
+    directions = rng.normal(size=(400, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    angles = np.concatenate((np.geomspace(1e-12, 2.0, 380), np.sqrt(SERIES_LIMIT) * (1 + np.linspace(-1e-6, 1e-6, 20))))
+    sin_a, cos_a = rodrigues_factors(directions * angles[:, None])
+    np.testing.assert_allclose(sin_a, np.sin(angles) / angles, rtol=4e-16)
+    np.testing.assert_allclose(cos_a, 2.0 * np.sin(angles / 2.0) ** 2 / angles**2, rtol=4e-16)  # no cancellation
+
+
+def test_mean_rotation_is_the_weighted_mean_of_the_rotation_matrices():
+    from scipy.spatial.transform import Rotation
+
+    from hil.estimation.strapdown import WEIGHTS, mean_rotation, rodrigues_factors
+
+    rng = np.random.default_rng(7)
+    for scale in (1e-6, 0.01, 0.5):
+        vectors = rng.normal(size=(40, 3, 3)) * scale
+        sin_a, cos_a = (f.reshape(40, 3) for f in rodrigues_factors(vectors.reshape(-1, 3)))
+        expected = np.einsum("nkij,k->nij", Rotation.from_rotvec(vectors.reshape(-1, 3)).as_matrix().reshape(40, 3, 3, 3),
+                             WEIGHTS)
+        np.testing.assert_allclose(mean_rotation(vectors, sin_a, cos_a, WEIGHTS), expected, atol=1e-15)
+
+
 def test_a_damaged_specific_force_is_left_out():
     import dataclasses
 

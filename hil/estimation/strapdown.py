@@ -26,6 +26,10 @@ from scipy.spatial.transform import Rotation
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
 NODES = 0.5 * (_NODES + 1.0)  # on [0, 1]
 WEIGHTS = 0.5 * _WEIGHTS
+# At the nodes s, the quadratic coefficients (A, B, C) of quadratic_coefficients give the integral
+# A s + B s^2/2 + C s^3/3 (the rotation vector) and the rate A + B s + C s^2: (node, coefficient) matrices.
+NODE_ANGLE = np.column_stack((NODES, NODES**2 / 2.0, NODES**3 / 3.0))
+NODE_RATE = np.column_stack((np.ones(3), NODES, NODES**2))
 
 
 @dataclass(frozen=True)
@@ -52,21 +56,34 @@ def cumulative_product(steps: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rodrigues_factors(rotvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``sin(a)/a`` and ``(1 - cos a)/a^2`` of (N, 3) rotation vectors, both from ``np.sinc`` (no loss at small a)."""
-    angle = np.sqrt(np.einsum("ni,ni->n", rotvec, rotvec))
-    return np.sinc(angle / np.pi), 0.5 * np.sinc(angle / (2.0 * np.pi)) ** 2
+SERIES_LIMIT = 1e-2  # rad^2: below, the factors' series to a^8 are exact to rounding (the next terms are < 3e-18)
+
+
+def rodrigues_factors(rotvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sin(a)/a`` and ``(1 - cos a)/a^2`` of (N, 3) rotation vectors of angle a.
+
+    Their Taylor series in ``a^2`` to the a^8 term where ``a^2 < SERIES_LIMIT`` (a sample's rotation, far
+    below 0.1 rad), ``np.sinc`` elsewhere: no square root, no sine for the common case, no loss at small a.
+    """
+    a2 = np.einsum("ni,ni->n", rotvec, rotvec)
+    sin_a = 1.0 + a2 * (-1.0 / 6.0 + a2 * (1.0 / 120.0 + a2 * (-1.0 / 5040.0 + a2 / 362880.0)))
+    cos_a = 0.5 + a2 * (-1.0 / 24.0 + a2 * (1.0 / 720.0 + a2 * (-1.0 / 40320.0 + a2 / 3628800.0)))
+    large = np.flatnonzero(a2 >= SERIES_LIMIT)
+    if len(large):
+        angle = np.sqrt(a2[large])
+        sin_a[large], cos_a[large] = np.sinc(angle / np.pi), 0.5 * np.sinc(angle / (2.0 * np.pi)) ** 2
+    return sin_a, cos_a
 
 
 def rotation_matrices(rotvec: np.ndarray, factors: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """exp([phi x]) for (N, 3) rotation vectors (Rodrigues), (N, 3, 3); ``factors`` their
-    :func:`_rodrigues_factors` when already formed.
+    :func:`rodrigues_factors` when already formed.
 
     ``I + sin(a)/a K + (1 - cos a)/a^2 K^2`` with ``K^2 = phi phi^T - a^2 I`` written out element by
     element; equal to scipy's ``Rotation.from_rotvec(...).as_matrix()`` to rounding at a few
     microseconds per call where scipy's input handling costs ~100 us for small batches.
     """
-    a, b = factors or _rodrigues_factors(rotvec)
+    a, b = factors or rodrigues_factors(rotvec)
     x, y, z = rotvec[:, 0], rotvec[:, 1], rotvec[:, 2]
     ax, ay, az = a * x, a * y, a * z
     bxy, bxz, byz = b * x * y, b * x * z, b * y * z
@@ -79,9 +96,24 @@ def rotation_matrices(rotvec: np.ndarray, factors: tuple[np.ndarray, np.ndarray]
 def rotate(rotvec: np.ndarray, v: np.ndarray, factors: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """exp([phi x]) v for (N, 3) rotation vectors and vectors: ``v + sin(a)/a phi x v + (1 - cos a)/a^2 phi x (phi x v)``;
     ``factors`` as for :func:`rotation_matrices`."""
-    a, b = factors or _rodrigues_factors(rotvec)
+    a, b = factors or rodrigues_factors(rotvec)
     pv = cross(rotvec, v)
     return v + a[:, None] * pv + b[:, None] * cross(rotvec, pv)
+
+
+def mean_rotation(vectors: np.ndarray, sin_a: np.ndarray, cos_a: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``sum_k w_k exp([phi_k x])`` for (N, K, 3) rotation vectors with their (N, K) :func:`rodrigues_factors`,
+    (N, 3, 3), without forming the K rotations: with ``K^2 = phi phi^T - a^2 I`` the sum is
+    ``(sum w - tr M) I + [(sum_k w_k sin_a_k phi_k) x] + M``, ``M = sum_k w_k cos_a_k phi_k phi_k^T``."""
+    m = np.matmul(vectors.transpose(0, 2, 1), (cos_a * weights)[..., None] * vectors)
+    axial = np.einsum("nk,nki->ni", sin_a * weights, vectors)
+    diagonal = weights.sum() - np.einsum("nii->n", m)
+    for i in range(3):
+        m[:, i, i] += diagonal
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # [u x] has -u_k at (i, j) and +u_k at (j, i)
+        m[:, i, j] -= axial[:, k]
+        m[:, j, i] += axial[:, k]
+    return m
 
 
 def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -113,7 +145,7 @@ class Strapdown:
 
     def __init__(self) -> None:
         self.attitude = np.eye(3)
-        self._history: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # last 2 (dtheta, dv, dt)
+        self._history: tuple[np.ndarray, np.ndarray] | None = None  # last 2 ([dtheta dv] (2, 6), dt)
 
     def carry(self, rotation: np.ndarray) -> None:
         """Jump the attitude by a known body rotation ``C_b(end)^b(start)`` over a gap in the increments;
@@ -123,36 +155,31 @@ class Strapdown:
 
     def update_many(self, dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray) -> StrapdownStep:
         """Advance over N consecutive increments (N, 3) with interval lengths dt (N,)."""
+        x = np.hstack((dtheta, dv))  # both sensors' increments, so that each step below is one numpy call
         if self._history is None:  # no history: constant rate over the first intervals
-            self._history = (np.vstack((dtheta[0], dtheta[0])), np.vstack((dv[0], dv[0])), np.full(2, dt[0]))
-        th_all = np.vstack((self._history[0], dtheta))
-        v_all = np.vstack((self._history[1], dv))
-        dt_all = np.concatenate((self._history[2], dt))
+            self._history = (np.vstack((x[0], x[0])), np.full(2, dt[0]))
+        x_all = np.vstack((self._history[0], x))
+        dt_all = np.concatenate((self._history[1], dt))
         even = (np.abs(dt_all[1:-1] - dt) <= 1e-3 * dt) & (np.abs(dt_all[:-2] - dt) <= 1e-3 * dt)
-        keep = even[:, None].astype(float)  # uneven history: drop to the constant-rate case
-        a_th, b_th, c_th = quadratic_coefficients(dtheta, th_all[1:-1], th_all[:-2])
-        a_v, b_v, c_v = quadratic_coefficients(dv, v_all[1:-1], v_all[:-2])
-        a_th, b_th, c_th = np.where(keep > 0, a_th, dtheta), b_th * keep, c_th * keep
-        a_v, b_v, c_v = np.where(keep > 0, a_v, dv), b_v * keep, c_v * keep
+        a, b, c = quadratic_coefficients(x, x_all[1:-1], x_all[:-2])
+        if not even.all():  # uneven history: drop to the constant-rate case
+            a, b, c = np.where(even[:, None], a, x), b * even[:, None], c * even[:, None]
+        a_th, b_th, c_th = a[:, :3], b[:, :3], c[:, :3]
 
         phi = dtheta + (cross(a_th, b_th) + cross(a_th, c_th)) / 12.0 + cross(b_th, c_th) / 60.0
-        s = NODES[None, :, None]
-        alpha = a_th[:, None] * s + b_th[:, None] * s**2 / 2.0 + c_th[:, None] * s**3 / 3.0  # (N, 3 nodes, 3)
-        force = a_v[:, None] + b_v[:, None] * s + c_v[:, None] * s**2
+        coefficients = np.stack((a, b, c), axis=1)  # (N, 3 coefficients, 6)
+        alpha = NODE_ANGLE @ coefficients[:, :, :3]  # (N, 3 nodes, 3): the rotation vector at each node
+        force = NODE_RATE @ coefficients[:, :, 3:]  # (N, 3 nodes, 3): the specific force there, times h
         n = len(dtheta)
         nodes = alpha.reshape(-1, 3)
-        # the step rotations and the node rotations in one pass (one set of numpy calls for small batches)
-        vectors = np.concatenate((phi, nodes))
-        factors = _rodrigues_factors(vectors)
-        rotations = rotation_matrices(vectors, factors)
-        c_end = self.attitude @ cumulative_product(rotations[:n])
+        sin_a, cos_a = rodrigues_factors(np.concatenate((phi, nodes)))  # the step and node factors in one pass
+        c_end = self.attitude @ cumulative_product(rotation_matrices(phi, (sin_a[:n], cos_a[:n])))
         c_start = np.concatenate((self.attitude[None], c_end[:-1]))
-        rot = rotations[n:].reshape(n, 3, 3, 3)  # (N, node, 3, 3)
-        node_factors = (factors[0][n:], factors[1][n:])
+        node_factors = (sin_a[n:], cos_a[n:])
         dv_body = np.einsum("nki,k->ni", rotate(nodes, force.reshape(-1, 3), node_factors).reshape(n, 3, 3), WEIGHTS)
-        r_mean = np.einsum("nkij,k->nij", rot, WEIGHTS)
+        r_mean = mean_rotation(alpha, node_factors[0].reshape(n, 3), node_factors[1].reshape(n, 3), WEIGHTS)
 
         # Re-orthonormalise the carried attitude so rounding cannot build up over a long trial.
         self.attitude = orthonormalised(c_end[-1])
-        self._history = (th_all[-2:], v_all[-2:], dt_all[-2:])
+        self._history = (x_all[-2:], dt_all[-2:])
         return StrapdownStep(c_start, c_end, c_start @ r_mean, np.einsum("nij,nj->ni", c_start, dv_body))
