@@ -47,6 +47,15 @@ def test_a_child_whose_drawing_fails_names_the_reason(tmp_path):
     assert child.returncode != 0 and "not-a-directory" in reason
 
 
+def test_a_figure_the_childs_fork_fails_to_draw_fails_the_child(tmp_path):
+    (tmp_path / FIGURES[0]).mkdir()  # the fork cannot write the first figure; the child writes the others
+    with FigureProcess() as figures:
+        child, figures._child = figures._child, None
+        reason = _hand_over(child, tmp_path, _series(), RESULT)
+    assert child.returncode != 0 and f"drawing {FIGURES[0]} failed" in reason
+    assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES[1:])
+
+
 def test_a_child_given_no_job_ends_when_closed():
     figures = FigureProcess()
     child = figures._child

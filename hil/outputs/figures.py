@@ -7,10 +7,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hil.outputs.series import SERIES_COLUMNS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 FIGURES = ("observability.png", "bias.png", "alignment.png")
 Draw = Callable[[Path, np.ndarray, dict], None]  # draws a trial's figures: write_figures, FigureProcess.draw
@@ -20,15 +25,26 @@ def _col(series: np.ndarray, name: str) -> np.ndarray:
     return series[:, SERIES_COLUMNS.index(name)]
 
 
-def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
+def write_figures(out: Path, series: np.ndarray, result: dict, names: tuple[str, ...] = FIGURES) -> None:
+    """Draw the figures ``names`` (of :data:`FIGURES`) of a trial's series into ``out``."""
+    plt = _pyplot()
+    for name in names:
+        fig = _DRAWERS[name](plt, series, result)
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+
+
+def _pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = _col(series, "t_s")
-    truth = (result.get("truth") or {}).get("accel_bias_ug")
+    return plt
 
+
+def _observability(plt: ModuleType, series: np.ndarray, result: dict) -> Figure:
+    t = _col(series, "t_s")
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax1.step(t, _col(series, "gram_rank"), where="post", label="12-state")
     ax1.step(t, _col(series, "gram_rank_9"), where="post", label="9-state", linestyle="--")
@@ -38,9 +54,12 @@ def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
     ax2.set_ylabel("condition number")
     ax2.set_xlabel("time (s)")
     fig.suptitle("Observability (cf. Liu 2019 Fig. 2)")
-    fig.savefig(out / FIGURES[0], dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _bias(plt: ModuleType, series: np.ndarray, result: dict) -> Figure:
+    t = _col(series, "t_s")
+    truth = (result.get("truth") or {}).get("accel_bias_ug")
     fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
     for k, (ax, axis) in enumerate(zip(axes, "xyz")):
         b, s = _col(series, f"bias_{axis}_ug"), _col(series, f"sigma_{axis}_ug")
@@ -56,9 +75,11 @@ def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
     axes[0].legend(loc="upper right")
     axes[-1].set_xlabel("time (s)")
     fig.suptitle("Accelerometer bias (cf. Liu 2019 Fig. 3)")
-    fig.savefig(out / FIGURES[1], dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _alignment(plt: ModuleType, series: np.ndarray, result: dict) -> Figure:
+    t = _col(series, "t_s")
     fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
     for ax, angle in zip(axes, ("pitch", "roll", "yaw")):
         ax.plot(t, _col(series, f"method1_{angle}_deg"), "--", label="method 1")
@@ -75,5 +96,7 @@ def write_figures(out: Path, series: np.ndarray, result: dict) -> None:
     axes[0].legend(loc="upper right")
     axes[-1].set_xlabel("time (s)")
     fig.suptitle("Alignment error against the turntable (cf. Liu 2019 Fig. 4)")
-    fig.savefig(out / FIGURES[2], dpi=100)
-    plt.close(fig)
+    return fig
+
+
+_DRAWERS = dict(zip(FIGURES, (_observability, _bias, _alignment)))
