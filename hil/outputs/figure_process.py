@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-import hil
+from hil import child_env
 from hil.outputs.figures import FIGURES, write_figures
 
 WAIT_S = 120.0  # drawing takes well under a second; a child that takes this long is stuck
@@ -34,9 +34,7 @@ class FigureProcess:
     """
 
     def __init__(self) -> None:
-        root = str(Path(hil.__file__).resolve().parent.parent)  # the child imports this same package
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH")))),
-               "OPENBLAS_NUM_THREADS": "1"}  # drawing needs no BLAS threads, and the child forks
+        env = child_env(OPENBLAS_NUM_THREADS="1")  # drawing needs no BLAS threads, and the child forks
         self._child: subprocess.Popen | None = subprocess.Popen(
             [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, env=env)  # fmt: skip
