@@ -62,7 +62,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")  # an inf survives JSON
 
 
 class TrialConfig(_Model):
