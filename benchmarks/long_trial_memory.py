@@ -1,7 +1,7 @@
 """A long trial in flat memory: `hil simulate` or `hil replay` of the default swing for 24 h at 200 Hz (17.3 M samples).
 
-Simulate (the default) runs what `hil simulate` runs (the emulator's batches, computed on a thread ahead,
-into the trial processor, then every output, figures and report included) in this process.
+Simulate (the default) runs what `hil simulate` runs (the emulator's batches, computed ahead by a child
+process, into the trial processor, then every output, figures and report included) in this process.
 
 `--replay` first writes the trial's recording with the harness's own Recorder, in its MCAP format: the
 emulated devices' wire frames (KVH 1750 and tts1, from `emulators.reads`) in reads of 0.1 s per stream,
@@ -33,6 +33,7 @@ from live_harness import rss_mib
 from drivers.codec import RawChunk, StreamEvent
 from emulators.reads import emulated_reads
 from emulators.simulation import Simulation
+from emulators.simulation_process import SimulationProcess
 from hil.config import Config, parse_config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
@@ -85,9 +86,10 @@ def simulate(cfg: Config, config_text: str, every: float) -> None:
     sim = Simulation.from_config(cfg)
     rows = Rows(every)
     processor = TrialProcessor(cfg)
-    for batch in sim.batches_ahead():  # as run_simulation: computed on a thread ahead
-        processor.feed_batch(batch)
-        rows.at(float(batch.t[-1]))
+    with SimulationProcess() as simulation:
+        for batch in simulation.batches(cfg):  # as hil simulate: computed by a child process, ahead
+            processor.feed_batch(batch)
+            rows.at(float(batch.t[-1]))
     outputs(processor, cfg, config_text, COMPLETED, rows)
     print(f"peak RSS {peak_mib():.1f} MiB, {sim.samples / rows.wall():,.0f} samples/s over the whole run")
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import queue
-import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -52,45 +50,6 @@ class Simulation:
             dtheta, dv = self.truth.increments(t0, t)
             dtheta, dv = self.errors.apply(t, dtheta, dv)
             yield AlignedBatch(t, dtheta, dv, self.truth.angles(t), t0)
-
-    def batches_ahead(self, depth: int = 2) -> Iterator[AlignedBatch]:
-        """:meth:`batches`, computed on a thread up to ``depth`` batches ahead of the consumer: the emulator's
-        array work overlaps the estimator's (numpy releases the GIL inside it). The same batches in the same
-        order; an error in the emulator is raised here; a consumer that stops early stops the thread."""
-        ready: queue.Queue = queue.Queue(depth)
-        stop = threading.Event()
-
-        def produce() -> None:
-            try:
-                for item in self.batches():
-                    if not _put(ready, item, stop):
-                        return
-            except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
-                _put(ready, exc, stop)
-                return
-            _put(ready, None, stop)
-
-        thread = threading.Thread(target=produce, name="simulation", daemon=True)
-        thread.start()
-        try:
-            while (item := ready.get()) is not None:
-                if isinstance(item, BaseException):
-                    raise item
-                yield item
-        finally:
-            stop.set()
-            thread.join()
-
-
-def _put(ready: queue.Queue, item: object, stop: threading.Event) -> bool:
-    """Put ``item`` when there is room; False once ``stop`` is set."""
-    while not stop.is_set():
-        try:
-            ready.put(item, timeout=0.05)
-            return True
-        except queue.Full:
-            continue
-    return False
 
 
 def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:

@@ -83,13 +83,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    from emulators.simulation_process import SimulationProcess  # first: its child imports the emulator meanwhile
     from hil.outputs.figure_process import FigureProcess
 
-    with FigureProcess() as figures:
+    with SimulationProcess() as simulation, FigureProcess() as figures:
         from hil.trial.offline import run_simulation
 
         cfg, out = _trial_config(args)
-        return _finish(args, *run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)), figures)
+        outcome = run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args), simulation)
+        return _finish(args, *outcome, figures)
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:

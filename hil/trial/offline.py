@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.config import Config
 from hil.outputs.result import COMPLETED
@@ -13,6 +14,9 @@ from hil.pipeline.processor import TrialProcessor
 from hil.recording.recorder import Recording, RecordingReader
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
+
+if TYPE_CHECKING:
+    from emulators.simulation_process import SimulationProcess
 
 
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
@@ -55,15 +59,20 @@ def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer
     return processor
 
 
-def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions
-                   ) -> tuple[TrialOutcome, Viewer | None]:
-    """The emulator's samples, already aligned, in batches into the processor: no transport, no alignment."""
-    from emulators.simulation import Simulation
+def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions,
+                   process: SimulationProcess | None = None) -> tuple[TrialOutcome, Viewer | None]:
+    """The emulator's samples, already aligned, in batches into the processor: no transport, no alignment.
+    The batches are computed by ``process`` ahead of the estimator, on another core (``hil simulate``), or
+    without one in line (a campaign's run: its worker has no core to spare)."""
+    if process is None:
+        from emulators.simulation import Simulation
 
-    sim = Simulation.from_config(cfg)
+        batches = Simulation.from_config(cfg).batches()
+    else:
+        batches = process.batches(cfg)
     viewer = open_viewer(options, cfg, out, blocking=True)
     processor = TrialProcessor(cfg, on_table=ViewerFeed(viewer).on_table)
-    for batch in sim.batches_ahead():
+    for batch in batches:
         processor.feed_batch(batch)
     if viewer is not None and processor.estimator is not None:
         viewer.log_snapshots(processor.estimator.snapshots)  # as columns, in one go
