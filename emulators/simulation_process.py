@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
-from hil import child_env
+from hil import child_env, end_child
 from hil.samples import AlignedBatch
 
 if TYPE_CHECKING:  # imported by the child: this process starts it before it imports pydantic
@@ -67,10 +67,7 @@ class SimulationProcess:
         """End the child at once (if it has not exited) and close its pipes."""
         child, self._child = self._child, None
         if child is not None:
-            child.kill()
-            child.wait()
-            for pipe in (child.stdin, child.stdout, self._err):
-                pipe.close()
+            end_child(child, (child.stdin, child.stdout, self._err))
 
     def _read(self, child: subprocess.Popen) -> Iterator[AlignedBatch]:
         try:

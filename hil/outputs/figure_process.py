@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil import child_env
+from hil import child_env, end_child
 from hil.outputs.figures import FIGURES, write_figures
 
 WAIT_S = 120.0  # drawing takes well under a second; a child that takes this long is stuck
@@ -59,10 +59,7 @@ class FigureProcess:
         """End a child that was given no job, at once (it has only imported)."""
         child, self._child = self._child, None
         if child is not None:
-            child.kill()
-            child.wait()
-            for pipe in (child.stdin, child.stdout, child.stderr):
-                pipe.close()
+            end_child(child, (child.stdin, child.stdout, child.stderr))
 
 
 def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: dict) -> str:
