@@ -16,8 +16,8 @@ from hil.samples import AlignedBatch
 from hil.units import ARCSEC
 
 MGAL = 1e-5  # m/s^2 per milligal
-# Samples a batch. The batch's arrays (e.g. (N, 3, 3, 3) node rotations in the strapdown) stay in the caches at
-# this size: the paper scenario emulates and estimates in 1.2 s at 5000 against 1.4 s at 20 000.
+# Samples a batch. The batch's arrays (e.g. the strapdown's (N, 3 nodes, 3) ones) stay in the caches at this
+# size: the paper scenario emulated and estimated in 1.2 s at 5000 against 1.4 s at 20 000.
 CHUNK = 5000
 
 

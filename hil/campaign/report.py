@@ -18,6 +18,7 @@ import numpy as np
 from hil.campaign.summary import SIGMA, bias_error
 from hil.campaign.task import point_label
 from hil.outputs.report import html_page
+from hil.outputs.figures import pyplot
 
 REPORT_NAME = "campaign.html"
 AXES = "xyz"
@@ -194,10 +195,7 @@ def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]],
                           section: Callable[[dict, list[dict[str, Any]], Any], str] = swing_section) -> Path:
     """Write ``out/campaign.html`` from the summary and the rows, with the ``section`` of the campaign's kind;
     returns its path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     cluster = summary["cluster"]
     body = (f"<p class='meta'>{summary['runs']} runs, {summary['failed']} failed, on {html.escape(cluster['scheduler'])} "

@@ -26,6 +26,7 @@ from hil.estimation.calibration_model import TERMS, Fit, Window, fold_inner_rota
 from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
+from hil.outputs.figures import pyplot
 from hil.units import ARCSEC, DEG_PER_H, UG
 
 BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))
@@ -103,10 +104,7 @@ def window_residuals(windows: Sequence[Window], accel: AccelCalibration, gyro: F
 def residual_figure(residuals: Residuals) -> bytes:
     """PNG: per-position specific-force residuals (µg) before and after calibration, and the gyros' (°/h)
     per window (positions, then plateaus P1..) when they were fitted."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     panels = [("specific force", "µg", residuals.accel_before / UG, residuals.accel_after / UG)]
     if residuals.gyro_before is not None:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hil import child_env, end_child
-from hil.outputs.figures import FIGURES, write_figures
+from hil.outputs.figures import FIGURES, pyplot, write_figures
 
 WAIT_S = 120.0  # drawing takes well under a second; a child that takes this long is stuck
 DONE = b"drawn\n"  # what the child answers on its standard output
@@ -84,11 +84,7 @@ def _hand_over(child: subprocess.Popen, out: Path, series: np.ndarray, result: d
 
 def _serve() -> None:
     """The child: import matplotlib, then draw the job read from standard input (none: exit)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot  # noqa: F401 - imported now, while the parent computes the trial
-
+    pyplot()  # imported now, while the parent computes the trial
     line = sys.stdin.buffer.readline()
     if not line:
         return
@@ -120,9 +116,9 @@ def _draw_in_two(out: Path, series: np.ndarray, result: dict) -> None:
     try:
         write_figures(out, series, result, FIGURES[1:])
     finally:
-        status = os.waitpid(pid, 0)[1]
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"drawing {FIGURES[0]} failed (exit code {os.waitstatus_to_exitcode(status)})")
+        code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+    if code != 0:
+        raise RuntimeError(f"drawing {FIGURES[0]} failed (exit code {code})")
 
 
 if __name__ == "__main__":

@@ -27,14 +27,15 @@ def _col(series: np.ndarray, name: str) -> np.ndarray:
 
 def write_figures(out: Path, series: np.ndarray, result: dict, names: tuple[str, ...] = FIGURES) -> None:
     """Draw the figures ``names`` (of :data:`FIGURES`) of a trial's series into ``out``."""
-    plt = _pyplot()
+    plt = pyplot()
     for name in names:
         fig = _DRAWERS[name](plt, series, result)
         fig.savefig(out / name, dpi=100)
         plt.close(fig)
 
 
-def _pyplot() -> ModuleType:
+def pyplot() -> ModuleType:
+    """matplotlib's pyplot on the Agg backend (files only, no display), imported on first use."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -20,6 +20,7 @@ from hil.estimation.allan import (
     Term,
     TermUnits,
 )
+from hil.outputs.figures import pyplot
 
 NOISE_JSON, ALLAN_PNG = "noise.json", "allan.png"
 # (sensor, its units, the DESIGN.md key of each term in the order white, bias instability, random walk)
@@ -87,10 +88,7 @@ def noise_summary(doc: dict, out: Path) -> str:
 def plot_allan(path: Path, gyro: AllanAnalysis, accel: AllanAnalysis) -> None:
     """Log-log Allan deviation, one panel per sensor kind: the three axes with their intervals, each
     fitted term as its slope line (-1/2, 0, +1/2) and the points the terms are read at."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, panels = plt.subplots(1, 2, figsize=(12, 5))
     for ax, (sensor, units, _), analysis in zip(panels, SENSORS, (gyro, accel)):
