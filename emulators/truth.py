@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from emulators.motion import MotionProfile, motion_breaks
 from hil.estimation.gimbal import gimbal_matrices, row_times
@@ -45,10 +44,6 @@ class Truth:
     def angles(self, t: np.ndarray) -> np.ndarray:
         """Gimbal angles (N, 3), rad, ordered (outer, middle, inner)."""
         return self.motion(np.asarray(t, dtype=float))[0]
-
-    def attitude_n(self, t: np.ndarray) -> Rotation:
-        """C_b^n(t) from the gimbal angles."""
-        return self.geometry.attitude(self.angles(t))
 
     def rates_and_forces(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """omega_ib^b (rad/s) and f^b (m/s^2) at instants t (N,), each component-major (3, N); the body rate

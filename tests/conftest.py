@@ -83,7 +83,18 @@ class Decoding(RawListener):
         self.stopped = True
 
 
+def scipy_attitude(geometry, angles: np.ndarray) -> Rotation:
+    """C_b^n = C_table^n Rz(outer) Rx(middle) Ry(inner) C_b^mount from scipy's rotations, independent of hil.frames."""
+    table = Rotation.from_rotvec([geometry.tilt[0], geometry.tilt[1], 0.0]) * Rotation.from_euler("z", geometry.azimuth)
+    return table * Rotation.from_euler("ZXY", angles) * Rotation.from_euler("ZXY", geometry.mounting)
+
+
+def earth_turn(earth, t) -> Rotation:
+    """C_n^n0(t) from scipy: the turn by omega_ie t about the earth axis."""
+    return Rotation.from_rotvec(np.outer(np.atleast_1d(np.asarray(t, dtype=float)), earth.omega_n))
+
+
 def true_attitude_ib0(truth, t: np.ndarray) -> Rotation:
     """C_b^ib0(t) = C_n^b(0) C_n^n0(t) C_b^n(t): the body at t in the body frame frozen at t = 0."""
-    c0 = truth.attitude_n(np.zeros(1))
-    return c0.inv() * truth.earth.n_to_n0(t) * truth.attitude_n(t)
+    c0 = scipy_attitude(truth.geometry, truth.angles(np.zeros(1)))
+    return c0.inv() * earth_turn(truth.earth, t) * scipy_attitude(truth.geometry, truth.angles(t))

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
+from conftest import scipy_attitude
 
 from hil.estimation.gimbal import as_stacked, gimbal_matrices, row_times
 from hil.frames import TableGeometry
@@ -22,7 +22,7 @@ def test_gimbal_matrices_compose_the_elementary_rotations():
     """Independent of frames.py: C_b^n = C_table^n Rz(outer) Rx(middle) Ry(inner) C_b^mount from scipy."""
     geometry = GEOMETRIES[1]
     angles = np.random.default_rng(1).uniform(-4.0, 4.0, (200, 3))
-    expected = (geometry.table_to_n * Rotation.from_euler("ZXY", angles) * geometry.body_to_mount).as_matrix()
+    expected = scipy_attitude(geometry, angles).as_matrix()
     np.testing.assert_allclose(as_stacked(gimbal_matrices(geometry, angles)[0]), expected, rtol=0, atol=1e-14)
 
 

@@ -34,8 +34,6 @@ import numpy as np
 
 from hil.estimation.normal_equations import (
     NormalEquations,
-    cholesky,
-    cholesky_solve,
     require_finite,
     symmetric_eigenvalues,
     unit_diagonal,
@@ -214,10 +212,10 @@ class ApparentGravityEstimator:
         n = len(rhs)
         obs = self._observability(scaled, check_finite=False)
         observable = obs.full(n)
-        factor = None
-        if observable:
-            factor = cholesky(scaled)
-            y = cholesky_solve(factor, rhs)
+        inverse_columns = None
+        if observable:  # positive definite: y and the inverse's bias and drift columns in one solve
+            solved = np.linalg.solve(scaled, np.column_stack((rhs, _IDENTITY[:n, N_GRAVITY:n])))
+            y, inverse_columns = solved[:, 0], solved[:, 1:]
         else:
             y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
         x = y * scale
@@ -225,8 +223,8 @@ class ApparentGravityEstimator:
         rss = max(self.normal.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
         noise_var = rss / dof
         bias_fields: dict[str, np.ndarray | None] = {"bias": None, "bias_sigma": None}
-        if factor is not None and n > N_GRAVITY:
-            bias_fields = self._bias_and_drift(x, factor, scale, noise_var)
+        if inverse_columns is not None and n > N_GRAVITY:
+            bias_fields = self._bias_and_drift(x, inverse_columns[N_GRAVITY:], scale, noise_var)
         return Solution(
             t=self.t,
             samples=self.samples,
@@ -238,15 +236,14 @@ class ApparentGravityEstimator:
             **bias_fields,
         )
 
-    def _bias_and_drift(self, x: np.ndarray, factor: np.ndarray, scale: np.ndarray, noise_var: float
+    def _bias_and_drift(self, x: np.ndarray, block: np.ndarray, scale: np.ndarray, noise_var: float
                         ) -> dict[str, np.ndarray]:
         """The bias at t with its sigma and, for 15 states, ``bias_t0`` and the drift rate with theirs.
 
-        Only the bias and drift block of the covariance ``noise_var W^-1`` is formed: the trailing
-        columns of the scaled inverse, from the Cholesky factor.
+        Only the bias and drift block of the covariance ``noise_var W^-1`` is formed: ``block`` is that
+        block of the scaled inverse, (n - 9) square.
         """
         n = len(x)
-        block = cholesky_solve(factor, _IDENTITY[:n, N_GRAVITY:n])[N_GRAVITY:]  # scaled, (n - 9) square
         s = scale[N_GRAVITY:]
         sigma = np.sqrt(noise_var * block.diagonal()) * s
         if n == N_FULL:

@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(3)
 NODES = 0.5 * (_NODES + 1.0)  # on [0, 1]
@@ -150,7 +149,7 @@ class Strapdown:
     def carry(self, rotation: np.ndarray) -> None:
         """Jump the attitude by a known body rotation ``C_b(end)^b(start)`` over a gap in the increments;
         the rate history restarts after it."""
-        self.attitude = Rotation.from_matrix(self.attitude @ rotation).as_matrix()
+        self.attitude = orthonormalised(self.attitude @ rotation)
         self._history = None
 
     def update_many(self, dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray) -> StrapdownStep:

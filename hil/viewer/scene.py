@@ -47,7 +47,7 @@ def cone_strips(solution, t: float, points: int = CONE_POINTS) -> tuple[list[np.
 def log_turntable(rec: rr.RecordingStream, geometry: TableGeometry) -> None:
     """The base, three gimbal rings with their axles, the IMU case on the inner gimbal (static)."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log("world/table", rr.Transform3D(mat3x3=geometry.table_to_n.as_matrix()), static=True)
+    rec.log("world/table", rr.Transform3D(mat3x3=geometry.table_to_n_matrix), static=True)
     rec.log("world/table/base", rr.Boxes3D(centers=[0, 0, -1.28], half_sizes=[0.7, 0.7, 0.06],
                                            colors=(90, 90, 90), fill_mode="solid"), static=True)  # fmt: skip
     rec.log("world/table/shaft", rr.LineStrips3D([[[0, 0, -1.22], [0, 0, -1.0]]], radii=0.03, colors=(150, 150, 150)),
@@ -61,7 +61,7 @@ def log_turntable(rec: rr.RecordingStream, geometry: TableGeometry) -> None:
     ):  # fmt: skip
         rec.log(path, rr.LineStrips3D(strips, radii=0.02, colors=color), static=True)
     imu = "world/table/outer/middle/inner/imu"
-    rec.log(imu, rr.Transform3D(mat3x3=geometry.body_to_mount.as_matrix()), rr.TransformAxes3D(0.45),
+    rec.log(imu, rr.Transform3D(mat3x3=geometry.body_to_mount_matrix), rr.TransformAxes3D(0.45),
             static=True)  # fmt: skip
     rec.log(f"{imu}/case", rr.Boxes3D(half_sizes=[0.22, 0.18, 0.1], colors=(200, 200, 200), fill_mode="solid",
                                      labels="IMU"), static=True)  # fmt: skip
