@@ -1,8 +1,8 @@
 """The trial's figures drawn by a child process that is started before the trial is computed.
 
-Importing matplotlib costs about 0.4 s, as much as drawing the three figures; a child that imports it at
-once does so on the other core while the trial runs, and then only draws: the first figure in a fork of itself,
-the other two itself, on both cores (0.2 s instead of 0.4). The job goes over the child's
+Importing matplotlib costs about 0.4 s, more than drawing the three figures; a child that imports it at
+once does so on the other core while the trial runs, and then only draws: each figure but the last in a
+fork of itself, the last itself, on both cores. The job goes over the child's
 standard input: one line of JSON (output directory, result, the series' shape), then the series as
 little-endian float64 bytes. Whatever goes wrong with the child, the figures are drawn in this process
 instead (one line on stderr says why): they are never lost.
@@ -91,34 +91,42 @@ def _serve() -> None:
     job = json.loads(line)
     shape = tuple(job["shape"])
     data = sys.stdin.buffer.read(8 * int(np.prod(shape)))
-    _draw_in_two(Path(job["out"]), np.frombuffer(data, dtype="<f8").reshape(shape), job["result"])
+    _draw_apart(Path(job["out"]), np.frombuffer(data, dtype="<f8").reshape(shape), job["result"])
     sys.stdout.buffer.write(DONE)
     sys.stdout.flush()
     os._exit(0)  # the figures are written and closed: no interpreter teardown (0.1-0.2 s) for the parent to wait for
 
 
-def _draw_in_two(out: Path, series: np.ndarray, result: dict) -> None:
-    """The first figure drawn by a fork of this process (matplotlib already imported), the others here: the
-    trial is computed by then and both cores are free. Raises if either part fails."""
+def _draw_apart(out: Path, series: np.ndarray, result: dict) -> None:
+    """Each figure but the last drawn by a fork of this process (matplotlib already imported), the last
+    here: the trial is computed by then and both cores are free. Raises if any part fails."""
     if not hasattr(os, "fork"):
         write_figures(out, series, result)
         return
-    pid = os.fork()
-    if pid == 0:
-        code = 0
-        try:
-            write_figures(out, series, result, FIGURES[:1])
-        except BaseException:  # noqa: BLE001 - told by the exit code, the traceback on stderr
-            traceback.print_exc()
-            code = 1
-        sys.stderr.flush()
-        os._exit(code)
+    forks = {}
     try:
-        write_figures(out, series, result, FIGURES[1:])
+        for name in FIGURES[:-1]:
+            pid = os.fork()
+            if pid == 0:
+                _draw_and_exit(out, series, result, name)
+            forks[pid] = name
+        write_figures(out, series, result, FIGURES[-1:])
     finally:
-        code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
-    if code != 0:
-        raise RuntimeError(f"drawing {FIGURES[0]} failed (exit code {code})")
+        failed = [name for pid, name in forks.items() if os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) != 0]
+    if failed:
+        raise RuntimeError(f"drawing {', '.join(failed)} failed")
+
+
+def _draw_and_exit(out: Path, series: np.ndarray, result: dict, name: str) -> None:
+    """A fork's work: draw one figure, exit 0 if it is written, 1 with the traceback on stderr if not."""
+    code = 0
+    try:
+        write_figures(out, series, result, (name,))
+    except BaseException:  # noqa: BLE001 - told by the exit code, the traceback on stderr
+        traceback.print_exc()
+        code = 1
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == "__main__":

@@ -45,6 +45,8 @@ def pyplot() -> ModuleType:
 
 
 def _observability(plt: ModuleType, series: np.ndarray, result: dict) -> Figure:
+    from hil.outputs.log_labels import use_plain_log_labels  # with matplotlib, which pyplot() has imported
+
     t = _col(series, "t_s")
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax1.step(t, _col(series, "gram_rank"), where="post", label="12-state")
@@ -52,6 +54,7 @@ def _observability(plt: ModuleType, series: np.ndarray, result: dict) -> Figure:
     ax1.set_ylabel("rank of scaled Gram matrix")
     ax1.legend()
     ax2.semilogy(t, _col(series, "gram_condition"))
+    use_plain_log_labels(ax2.yaxis)
     ax2.set_ylabel("condition number")
     ax2.set_xlabel("time (s)")
     fig.suptitle("Observability (cf. Liu 2019 Fig. 2)")

@@ -89,6 +89,7 @@ def plot_allan(path: Path, gyro: AllanAnalysis, accel: AllanAnalysis) -> None:
     """Log-log Allan deviation, one panel per sensor kind: the three axes with their intervals, each
     fitted term as its slope line (-1/2, 0, +1/2) and the points the terms are read at."""
     plt = pyplot()
+    from hil.outputs.log_labels import use_plain_log_labels  # with matplotlib, which pyplot() has imported
 
     fig, panels = plt.subplots(1, 2, figsize=(12, 5))
     for ax, (sensor, units, _), analysis in zip(panels, SENSORS, (gyro, accel)):
@@ -104,6 +105,8 @@ def plot_allan(path: Path, gyro: AllanAnalysis, accel: AllanAnalysis) -> None:
             _slope_lines(ax, tau, colour, (white[k], flicker[k], walk[k]), floor_tau, units)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        use_plain_log_labels(ax.xaxis)
+        use_plain_log_labels(ax.yaxis)
         ax.set_xlabel("tau (s)")
         ax.set_ylabel(f"Allan deviation ({ADEV_UNITS[sensor]})")
         ax.set_title(f"{sensor}: slopes -1/2 (:), 0 (--), +1/2 (-.); read-off points marked")
