@@ -16,7 +16,8 @@ import cantools
 
 from drivers.codec import Codec, Decoded, Framer, RawChunk
 from drivers.framing import SequenceUnwrapper, host_rate
-from hil.config import CanSignals, resolve_path
+from hil.config import CanSignals
+from hil.inputs import resolve_path
 from hil.samples import ImuSample
 from hil.units import G0
 
@@ -61,7 +62,7 @@ class CanDbcCodec(Codec[CanImuFrame]):
 
     def __init__(self, dbc: str | Path, rate_hz: float, gyro: tuple[str, str, str], accel: tuple[str, str, str],
                  sync: str | None = None, status: str | None = None) -> None:
-        """``dbc`` is a path or a shipped DBC's name (:func:`hil.config.resolve_path`)."""
+        """``dbc`` is a path or a shipped DBC's name (:func:`hil.inputs.resolve_path`)."""
         self.db = cantools.database.load_file(str(resolve_path(dbc)))
         self.rate_hz = rate_hz
         self.sync, self.status = sync, status

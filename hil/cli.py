@@ -19,8 +19,8 @@ EXIT_CODES = """exit codes:
 
 
 def _config_path(text: str) -> Path:
-    """:func:`hil.config.resolve_path`, imported when an argument is converted: ``--help`` needs no pydantic."""
-    from hil.config import resolve_path
+    """:func:`hil.inputs.resolve_path`, imported when an argument is converted."""
+    from hil.inputs import resolve_path
 
     return resolve_path(text)
 
@@ -262,7 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from hil.config import InputError  # after parsing: --help needs no pydantic
+    from hil.inputs import InputError  # no schema yet: a command that starts a child does so first
 
     try:
         return args.func(args)

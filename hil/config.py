@@ -9,32 +9,16 @@ converts at the edges through the ``*_si`` helpers below. Unknown keys and bad v
 from __future__ import annotations
 
 import math
-from importlib.resources import files
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
+from hil.inputs import InputError
+
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
-SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
-
-
-def resolve_path(path: str | Path) -> Path:
-    """A config or DBC path as named in a config or a default: the path itself if it exists, else the shipped
-    file of that name (``configs/NAME`` or ``NAME``), else the path unchanged so that its error names it."""
-    path = Path(path)
-    if path.exists() or path.parent not in (Path("."), Path("configs")):
-        return path
-    shipped = Path(files(SHIPPED) / path.name)  # an installed package is a directory
-    return shipped if shipped.is_file() else path
-
-
-class InputError(Exception):
-    """Input that cannot be used (config, data, port, arguments): one line naming it and why, exit 2."""
-
-
 class ConfigError(InputError, ValueError):
     """A configuration that cannot be used; the message names the key path and the reason."""
 

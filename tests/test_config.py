@@ -3,7 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from hil.config import ConfigError, load_config, parse_config, resolve_path
+from hil.config import ConfigError, load_config, parse_config
+from hil.inputs import resolve_path
 
 MINIMAL = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
 

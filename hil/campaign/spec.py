@@ -22,7 +22,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hil.campaign.task import RunTask, point_label
-from hil.config import Config, ConfigError, InputError, describe_validation, parse_config, resolve_path
+from hil.config import Config, ConfigError, InputError, describe_validation, parse_config
+from hil.inputs import resolve_path
 
 
 class SpecError(InputError, ValueError):
@@ -114,7 +115,7 @@ def _read_yaml(path: Path, what: str) -> Any:
 
 
 def _base_path(spec_path: Path, base: str) -> Path:
-    """``base`` beside the SPEC if it is there, else as :func:`hil.config.resolve_path` finds it."""
+    """``base`` beside the SPEC if it is there, else as :func:`hil.inputs.resolve_path` finds it."""
     beside = spec_path.parent / base
     return beside if beside.exists() else resolve_path(base)
 

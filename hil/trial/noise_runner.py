@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import Config, ImuErrors, load_config, resolve_path
+from hil.config import Config, ImuErrors, load_config
+from hil.inputs import resolve_path
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
 from hil.frames import Earth, TableGeometry
 from hil.outputs.noise import SENSORS
