@@ -7,6 +7,7 @@ goes into a :class:`drivers.latency.LatencyHistogram`.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 import time
@@ -104,6 +105,10 @@ class DeviceWriter:
         return True
 
     def finish(self, timeout_s: float | None) -> None:
-        """Write what is queued, then return (the thread ends); ``timeout_s`` None: however long it takes."""
-        if self.put(None, None):
-            self.thread.join(timeout_s)
+        """Write what is queued, then return (the thread ends); ``timeout_s`` None: however long it takes.
+        Stopped, the thread ends at its next frame: this waits for the frame in flight, so that
+        :attr:`frames` counts every frame written."""
+        if not self.put(None, None):
+            with contextlib.suppress(queue.Full):  # a full queue: the thread is writing, not waiting for one
+                self.queue.put_nowait((None, None))
+        self.thread.join(timeout_s)
