@@ -1,7 +1,7 @@
 """A simulation's batches (:meth:`emulators.simulation.Simulation.batches`) computed by a child process.
 
 On a thread the emulator barely overlaps the estimator (the GIL); a child started with ``hil simulate``
-imports the emulator (about 0.5 s, scipy's included) while this process imports the estimator, then
+imports the emulator (about 0.25 s) while this process imports the estimator, then
 computes the batches on the other core, about two ahead of the estimator (what its output pipe holds). The
 config goes over the child's standard input as JSON (``Config.model_dump_json``); each batch comes back on
 its standard output as a header (sample count, t0, whether angles follow), then its arrays as little-endian
