@@ -105,8 +105,8 @@ def main() -> None:
               f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")
         print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
-        print("frame arrival -> estimate updated, ms (latency: from the frame completing a block; "
-              "age: from its first frame): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
+        print("chunk arrival -> estimate updated, ms (latency: from the chunk completing a block; age: from the "
+              "chunk that completed its oldest sample): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
         threads.update(thread_cpu())
         print("CPU by thread, s (to its last second): " + ", ".join(f"{name} {s:.2f}" for name, s in sorted(threads.items())))
         print("resident memory (trial s, MiB): " + ", ".join(f"({t:.0f}, {m:.1f})" for t, m in memory))

@@ -13,6 +13,7 @@ import pytest
 from hil.cli import main
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
+from hil.trial.live import LatencyStats
 from hil.trial.offline import replay_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -153,3 +154,18 @@ def test_fault_run_completes_counts_every_fault_and_keeps_the_bias(tmp_path):
     again = tmp_path / "again"
     assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0
     assert json.loads((again / "result.json").read_text()) == faulty
+
+
+def test_age_counts_from_the_chunk_that_completed_the_oldest_sample_taken():
+    """Blocks of 3 from chunks of 4 samples: the sample left over waits for the next chunk, and the age of
+    the block it opens counts from the chunk that brought it, not from the chunk that closed the block."""
+    stats = LatencyStats()
+    now = time.time()
+    stats.fed(now - 0.040, 4)  # samples 1-4; the estimator takes 1-3, 4 waits
+    stats.updated(now - 0.040, 4, 1)
+    stats.fed(now - 0.035, 4)  # a chunk that completes no sample is not kept
+    stats.fed(now - 0.020, 8)  # samples 5-8: blocks 4-6, then 7-8 wait
+    stats.updated(now - 0.020, 8, 2)
+    (age_p50, _), (latency_p50, _) = stats.age.percentiles_ms([50, 99]), stats.latency.percentiles_ms([50, 99])
+    assert age_p50 >= 40.0 and 20.0 <= latency_p50 < 40.0  # both blocks' oldest sample came at -40 ms
+    assert [done for _, done in stats._arrivals] == [8]  # kept until samples 7 and 8 are taken

@@ -175,6 +175,16 @@ class TrialProcessor:
         return self.duration is not None and self.trial_time >= self.duration - half_sample
 
     @property
+    def aligned(self) -> int:
+        """Samples aligned so far."""
+        return self.aligner.counters.aligned
+
+    @property
+    def waiting(self) -> int:
+        """Aligned samples held for the estimator's next block."""
+        return self._blocked
+
+    @property
     def trial_time(self) -> float:
         """Trial time (s) at the end of the last sample aligned."""
         return 0.0 if self.estimator is None else self._t_end - self.estimator.t0

@@ -15,6 +15,7 @@ import dataclasses
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -73,19 +74,33 @@ class Fanout(RawListener):
 class LatencyStats:
     """How fresh the estimate is (ms), in constant memory however long the trial:
 
-    - ``latency``: from the arrival of the frame that completed a block of samples to the estimator
+    - ``latency``: from the arrival of the chunk that completed a block of samples to the estimator
       having taken the block;
-    - ``age``: from the arrival of the first frame of that block (the oldest sample it held).
+    - ``age``: from the arrival of the chunk that completed the oldest sample the estimator took then
+      (a sample left over from a block waits for the next one, and its age counts from its own chunk).
     """
 
     def __init__(self) -> None:
         self.latency = LatencyHistogram(bins=LATENCY_BINS)
         self.age = LatencyHistogram(bins=LATENCY_BINS)
+        self._arrivals: deque[tuple[float, int]] = deque()  # (chunk arrival, samples aligned once it was fed)
+        self._taken = 0  # samples aligned before the estimator's last update
 
-    def add(self, first_arrival: float, last_arrival: float) -> None:
+    def fed(self, arrival: float, aligned: int) -> None:
+        """A chunk that arrived at ``arrival`` has been fed; ``aligned`` samples are now aligned in all. Only
+        chunks that completed samples are kept, and only until the estimator has taken those."""
+        if aligned > (self._arrivals[-1][1] if self._arrivals else self._taken):
+            self._arrivals.append((arrival, aligned))
+
+    def updated(self, arrival: float, aligned: int, waiting: int) -> None:
+        """The estimator took every aligned sample but ``waiting`` with the chunk that arrived at ``arrival``."""
         now = time.time()
-        self.latency.add(now - last_arrival)
-        self.age.add(now - first_arrival)
+        oldest = next((t for t, done in self._arrivals if done > self._taken), arrival)
+        self.latency.add(now - arrival)
+        self.age.add(now - oldest)
+        self._taken = aligned - waiting
+        while self._arrivals and self._arrivals[0][1] <= self._taken:
+            self._arrivals.popleft()
 
     def percentiles_ms(self) -> dict[str, float]:
         if not self.latency.count:
@@ -209,7 +224,6 @@ class LiveTrial:
     def _loop(self) -> None:
         started = time.monotonic()
         next_progress = started
-        first_arrival: float | None = None  # the first chunk since the estimator's last update
         while not (self.processor.complete or self.ended_by_source or self.finished()):
             self.interrupted = self.stop_requested()
             if self.interrupted:
@@ -220,16 +234,15 @@ class LiveTrial:
                 item = None
             if item is not None:
                 updates = self.processor.updates
-                if isinstance(item, RawChunk) and first_arrival is None:
-                    first_arrival = item.host_time
                 self.processor.feed(item)
                 if self.motion_check is not None and self.motion_check.failure:
                     raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
                 if self.processor.stalled:
                     raise TrialAborted(self.processor.stalled)
-                if self.processor.updates != updates and isinstance(item, RawChunk):
-                    self.latency.add(first_arrival, item.host_time)
-                    first_arrival = None
+                if isinstance(item, RawChunk):
+                    self.latency.fed(item.host_time, self.processor.aligned)
+                    if self.processor.updates != updates:
+                        self.latency.updated(item.host_time, self.processor.aligned, self.processor.waiting)
             now = time.monotonic()
             if now >= next_progress:
                 next_progress = now + 0.5
