@@ -22,9 +22,9 @@ from drivers.codec import RawChunk, StreamEvent
 from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
 
-# s between reads of a live trial's byte streams: 4 frames at 200 Hz, 40 at 2 kHz. At 10 ms the harness took 15-16 %
-# of a core at 200 Hz against 10-11 % at 20 ms (benchmarks/live_harness.py, paired 60 s runs); the estimate's age
-# (its 50 ms blocks) stays, the wait of a block's last frame for its table frame grows (latency p99 4-5 -> 5-10 ms).
+# The shortest time between reads of a live trial's byte streams (hil.trial.live.read_period: longer for slower
+# IMUs): 4 frames at 200 Hz, 40 at 2 kHz. At 10 ms the harness took 15-16 % of a core at 200 Hz against 10-11 % at
+# 20 ms (benchmarks/live_harness.py, paired 60 s runs).
 GATHER_S = 0.02
 
 

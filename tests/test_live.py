@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from hil.cli import main
+from hil.config import load_config
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
-from hil.trial.live import LatencyStats
+from hil.trial.live import LatencyStats, read_period
 from hil.trial.offline import replay_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -169,3 +170,17 @@ def test_age_counts_from_the_chunk_that_completed_the_oldest_sample_taken():
     (age_p50, _), (latency_p50, _) = stats.age.percentiles_ms([50, 99]), stats.latency.percentiles_ms([50, 99])
     assert age_p50 >= 40.0 and 20.0 <= latency_p50 < 40.0  # both blocks' oldest sample came at -40 ms
     assert [done for _, done in stats._arrivals] == [8]  # kept until samples 7 and 8 are taken
+
+
+@pytest.mark.parametrize(("imu_rate", "batch", "period"), [
+    (200.0, None, 0.05),  # the default block, 50 ms
+    (1000.0, None, 0.04),  # 40 frames at most
+    (2000.0, None, 0.02),
+    (200.0, 3, 0.02),  # a block shorter than the shortest read period
+    (200.0, 20, 0.1),
+])
+def test_the_read_period_is_one_block_within_its_bounds(imu_rate, batch, period):
+    cfg = load_config("configs/emulated_swing.yaml")
+    cfg = cfg.model_copy(update={"imu": cfg.imu.model_copy(update={"rate_hz": imu_rate}),
+                                 "estimator": cfg.estimator.model_copy(update={"batch_samples": batch})})
+    assert read_period(cfg) == pytest.approx(period)

@@ -36,6 +36,7 @@ from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
+MAX_READ_FRAMES = 40  # IMU frames a read holds at most: 20 ms at 2 kHz (1.4 kB of KVH frames, a third of a pty's buffer)
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
@@ -112,6 +113,16 @@ class LatencyStats:
         return out
 
 
+def read_period(cfg: Config) -> float:
+    """s between the reads of a live trial's byte streams: one estimator block, so that the processing thread
+    wakes once a block (a thread woken from idle pays a fixed cost: 8.4 % of a core at 200 Hz with blocks of
+    50 ms read every 50 ms, against 13.9 % read every 20 ms, paired 30 s runs of benchmarks/live_harness.py);
+    at least :data:`~drivers.reader.GATHER_S`, and at most :data:`MAX_READ_FRAMES` IMU frames a read unless
+    that is shorter."""
+    block_s = cfg.block_samples / cfg.imu_rate_hz
+    return min(max(block_s, GATHER_S), max(MAX_READ_FRAMES / cfg.imu_rate_hz, GATHER_S))
+
+
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
     """The IMU and table transports, from the emulator's ports (ports.json) or from the config."""
     ports = ports or {}
@@ -169,7 +180,7 @@ class LiveTrial:
         feed = ViewerFeed(viewer, self._live_health)
         self.motion_check = motion_check
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
-        gather = GATHER_S if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
+        gather = read_period(cfg) if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather)
                         for t in transports(cfg, ports).values()]
 
