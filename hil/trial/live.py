@@ -12,6 +12,7 @@ driver's buffers hold the bytes): nothing is lost, and the live result stays equ
 from __future__ import annotations
 
 import dataclasses
+import math
 import queue
 import threading
 import time
@@ -114,13 +115,14 @@ class LatencyStats:
 
 
 def read_period(cfg: Config) -> float:
-    """s between the reads of a live trial's byte streams: one estimator block, so that the processing thread
-    wakes once a block (a thread woken from idle pays a fixed cost: 8.4 % of a core at 200 Hz with blocks of
-    50 ms read every 50 ms, against 13.9 % read every 20 ms, paired 30 s runs of benchmarks/live_harness.py);
-    at least :data:`~drivers.reader.GATHER_S`, and at most :data:`MAX_READ_FRAMES` IMU frames a read unless
-    that is shorter."""
+    """s between the reads of a live trial's byte streams: one estimator block, or the largest whole fraction
+    of it that holds at most :data:`MAX_READ_FRAMES` IMU frames, so that the processing thread wakes once a
+    block or a few times (a thread woken from idle pays a fixed cost: 8.4 % of a core at 200 Hz with blocks
+    of 50 ms read every 50 ms, against 13.9 % read every 20 ms, paired 30 s runs of
+    benchmarks/live_harness.py); at least :data:`~drivers.reader.GATHER_S`."""
     block_s = cfg.block_samples / cfg.imu_rate_hz
-    return min(max(block_s, GATHER_S), max(MAX_READ_FRAMES / cfg.imu_rate_hz, GATHER_S))
+    reads = math.ceil(cfg.block_samples / MAX_READ_FRAMES)  # reads a block
+    return max(block_s / reads, GATHER_S)
 
 
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
