@@ -174,8 +174,8 @@ def test_age_counts_from_the_chunk_that_completed_the_oldest_sample_taken():
 
 @pytest.mark.parametrize(("imu_rate", "batch", "period"), [
     (200.0, None, 0.05),  # the default block, 50 ms
-    (1000.0, None, 0.025),  # 40 frames at most: half a block
-    (2000.0, None, 0.02),
+    (1000.0, None, 0.05),  # 50 frames
+    (2000.0, None, 0.025),  # 50 frames at most: half a block
     (200.0, 3, 0.02),  # a block shorter than the shortest read period
     (200.0, 20, 0.1),
 ])

@@ -37,7 +37,7 @@ from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
-MAX_READ_FRAMES = 40  # IMU frames a read holds at most: 20 ms at 2 kHz (1.4 kB of KVH frames, a third of a pty's buffer)
+MAX_READ_FRAMES = 50  # IMU frames a read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
