@@ -103,7 +103,7 @@ def euler_matrix(yaw_pitch_roll: np.ndarray) -> np.ndarray:
     """Rz(yaw) Rx(pitch) Ry(roll) from angles (rad): (3, 3) from shape (3,), (N, 3, 3) from (N, 3)."""
     angles = np.asarray(yaw_pitch_roll, dtype=float)
     rows = np.atleast_2d(angles)
-    rz, rx, ry = (_axis_matrices(rows[:, k], axis) for k, axis in enumerate((2, 0, 1)))
+    rz, rx, ry = _euler_factors(rows)
     m = rz @ rx @ ry
     return m[0] if angles.ndim == 1 else m
 
@@ -164,7 +164,7 @@ class TableGeometry:
         the two inner products :meth:`body_rate_from` needs: (C_b^n, Rx(middle) Ry(inner), Ry(inner)), each (N, 3, 3).
         """
         angles = np.atleast_2d(angles)
-        rz, rx, ry = (_axis_matrices(angles[:, k], axis) for k, axis in enumerate((2, 0, 1)))
+        rz, rx, ry = _euler_factors(angles)
         inner = ry
         middle_inner = rx @ ry
         c_bn = self.table_to_n_matrix @ rz @ middle_inner @ self.body_to_mount_matrix
@@ -190,6 +190,13 @@ def table_body_rotation(geometry: TableGeometry, earth: Earth, dt: np.ndarray, a
     c = geometry.attitude_matrix(np.vstack((start, end)))[0]
     n = len(start)
     return np.swapaxes(c[:n], 1, 2) @ (earth.turn_matrices(dt) @ c[n:])
+
+
+def _euler_factors(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rz, Rx and Ry of angle rows (N, 3) in the gimbal order (outer or yaw, middle or pitch, inner or roll),
+    each (N, 3, 3)."""
+    rz, rx, ry = (_axis_matrices(rows[:, k], axis) for k, axis in enumerate((2, 0, 1)))
+    return rz, rx, ry
 
 
 def _axis_matrices(angle: np.ndarray, axis: int) -> np.ndarray:
