@@ -32,12 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.estimation.normal_equations import (
-    NormalEquations,
-    require_finite,
-    symmetric_eigenvalues,
-    unit_diagonal,
-)
+from hil.estimation.normal_equations import NormalEquations, require_finite, unit_diagonal
 from hil.frames import EARTH_RATE
 
 N_GRAVITY = 9  # A11..A33
@@ -185,104 +180,142 @@ class ApparentGravityEstimator:
             self.t = float(t_end[stop - 1])
             yield stop
 
+    def sums(self) -> Sums:
+        """The normal equations now (a copy)."""
+        return Sums(self.normal.info.copy(), self.normal.rhs.copy(), self.normal.zz, self.samples, self.t)
+
     def observability(self, n: int = N_FULL) -> Observability:
         """Rank and condition number of the diagonally scaled Gram matrix of the first n states."""
-        return self._observability(unit_diagonal(self._normal_equations(n)[0])[0])
+        scaled = unit_diagonal(self._normal_equations([self.sums()], n)[0])[0]
+        require_finite(scaled)
+        return _observability(np.linalg.eigvalsh(scaled)[0], self.rank_tolerance)
 
     def solve(self, states: int = N_FULL) -> Solution:
         """The least-squares solution now: 15-state (bias and drift), 12-state (bias) or 9-state ("method 1")."""
         return self.solve_nested((states,))[0]
 
     def solve_nested(self, states: Sequence[int]) -> list[Solution]:
-        """:meth:`solve` for several of the nested models at once, e.g. ``(N_DRIFT, N_FULL, N_GRAVITY)``.
+        """:meth:`solve` for several of the nested models at once, e.g. ``(N_DRIFT, N_FULL, N_GRAVITY)``."""
+        return self.solve_many([self.sums()], states)[0]
+
+    def solve_many(self, instants: Sequence[Sums], states: Sequence[int]) -> list[list[Solution]]:
+        """:meth:`solve_nested` at several instants (the solve instants one batch of samples passes).
 
         The normal equations are formed and scaled once, for the largest model; the scaled systems of
         the others are its leading blocks, bit for bit (the re-centring of the 15-state model leaves
-        the first 12 rows and columns as they are, and the scale factors are per state).
+        the first 12 rows and columns as they are, and the scale factors are per state). Scaling,
+        eigenvalues and solves run over the stack of instants; LAPACK solves each matrix of a stack on
+        its own, so an instant's solution is the same to the bit however many are stacked.
         """
-        info, rhs = self._normal_equations(max(states))
+        info, rhs = self._normal_equations(instants, max(states))
         scaled, scale = unit_diagonal(info)
         require_finite(scaled)  # once: its leading blocks are then finite too
         rhs = rhs * scale
-        return [self._solve_scaled(np.ascontiguousarray(scaled[:n, :n]), rhs[:n], scale[:n]) for n in states]
+        out: list[list[Solution]] = [[] for _ in instants]
+        for n in states:
+            block = np.ascontiguousarray(scaled[:, :n, :n])
+            obs = [_observability(eig, self.rank_tolerance) for eig in np.linalg.eigvalsh(block)]
+            full = np.array([o.full(n) for o in obs])
+            solved = np.empty((len(instants), n, 1 + n - N_GRAVITY))
+            if full.any():  # positive definite: y and the inverse's bias and drift columns in one solve
+                columns = np.broadcast_to(_IDENTITY[:n, N_GRAVITY:n], (int(full.sum()), n, n - N_GRAVITY))
+                solved[full] = np.linalg.solve(block[full], np.concatenate((rhs[full, :n, None], columns), axis=2))
+            for k, sums in enumerate(instants):
+                if full[k]:
+                    y, inverse_columns = solved[k, :, 0], solved[k, :, 1:]
+                else:
+                    y, inverse_columns = np.linalg.lstsq(block[k], rhs[k, :n], rcond=self.rank_tolerance)[0], None
+                out[k].append(self._solution(sums, block[k], rhs[k, :n], scale[k, :n], y, inverse_columns, obs[k]))
+        return out
 
-    def _solve_scaled(self, scaled: np.ndarray, rhs: np.ndarray, scale: np.ndarray) -> Solution:
-        """The solution of the first n states from their normal equations scaled to unit diagonal
-        (``scaled y = rhs``, ``x = scale y``), with the noise level from the residual sum of squares."""
+    @staticmethod
+    def _solution(sums: Sums, scaled: np.ndarray, rhs: np.ndarray, scale: np.ndarray, y: np.ndarray,
+                  inverse_columns: np.ndarray | None, obs: Observability) -> Solution:
+        """The solution of the first n states from the solution y of their scaled normal equations
+        (``scaled y = rhs``, ``x = scale y``), with the noise level from the residual sum of squares;
+        ``inverse_columns`` the scaled inverse's bias and drift columns, None when not observable."""
         n = len(rhs)
-        obs = self._observability(scaled, check_finite=False)
-        observable = obs.full(n)
-        inverse_columns = None
-        if observable:  # positive definite: y and the inverse's bias and drift columns in one solve
-            solved = np.linalg.solve(scaled, np.column_stack((rhs, _IDENTITY[:n, N_GRAVITY:n])))
-            y, inverse_columns = solved[:, 0], solved[:, 1:]
-        else:
-            y = np.linalg.lstsq(scaled, rhs, rcond=self.rank_tolerance)[0]
         x = y * scale
-        dof = max(3 * self.samples - n, 1)
-        rss = max(self.normal.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
+        dof = max(3 * sums.samples - n, 1)
+        rss = max(sums.zz - 2.0 * float(y @ rhs) + float(y @ scaled @ y), 0.0)
         noise_var = rss / dof
         bias_fields: dict[str, np.ndarray | None] = {"bias": None, "bias_sigma": None}
         if inverse_columns is not None and n > N_GRAVITY:
-            bias_fields = self._bias_and_drift(x, inverse_columns[N_GRAVITY:], scale, noise_var)
+            bias_fields = _bias_and_drift(x, inverse_columns[N_GRAVITY:], scale, noise_var, sums.t)
         return Solution(
-            t=self.t,
-            samples=self.samples,
+            t=sums.t,
+            samples=sums.samples,
             a_internal=x[:N_GRAVITY].reshape(3, 3),
             noise_sigma=math.sqrt(noise_var),
             observability=obs,
-            observable=observable,
+            observable=inverse_columns is not None,
             states=n,
             **bias_fields,
         )
 
-    def _bias_and_drift(self, x: np.ndarray, block: np.ndarray, scale: np.ndarray, noise_var: float
-                        ) -> dict[str, np.ndarray]:
-        """The bias at t with its sigma and, for 15 states, ``bias_t0`` and the drift rate with theirs.
-
-        Only the bias and drift block of the covariance ``noise_var W^-1`` is formed: ``block`` is that
-        block of the scaled inverse, (n - 9) square.
-        """
-        n = len(x)
-        s = scale[N_GRAVITY:]
-        sigma = np.sqrt(noise_var * block.diagonal()) * s
-        if n == N_FULL:
-            return {"bias": x[N_GRAVITY:].copy(), "bias_sigma": sigma}
-        cov = noise_var * block * (s[:, None] * s)
-        k = x[N_FULL:]
-        tau = self.drift_origin
-        offsets = np.array([-tau, self.t - tau])  # t = 0 and now, from the drift origin
-        (b_t0, bias), (b_t0_sigma, bias_sigma) = self._bias_at(x[N_GRAVITY:N_FULL], k, cov, offsets)
-        return {"bias": bias, "bias_sigma": bias_sigma, "bias_t0": b_t0, "bias_t0_sigma": b_t0_sigma,
-                "drift": k.copy(), "drift_sigma": sigma[N_FULL - N_GRAVITY:]}
-
-    @property
-    def drift_origin(self) -> float:
-        """The time origin (s) of the drift in the 15-state solve: the middle of the data so far."""
-        return 0.5 * self.t
-
-    def _normal_equations(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The normal matrix and right-hand side of the first n states; for 15 states with the drift's
-        time origin at :attr:`drift_origin` (``H' = H T``: the drift column ``C (t - tau)``)."""
-        info, rhs = self.normal.info[:n, :n], self.normal.rhs[:n]
-        if n == N_DRIFT:
-            change = _IDENTITY.copy()
-            change[N_GRAVITY:N_FULL, N_FULL:] = -self.drift_origin * _IDENTITY[:3, :3]
-            info, rhs = change.T @ info @ change, change.T @ rhs
-        return info, rhs
-
-    def _observability(self, scaled: np.ndarray, check_finite: bool = True) -> Observability:
-        eig = symmetric_eigenvalues(scaled, check_finite)
-        low, top = float(eig[0]), max(float(eig[-1]), _TINY)
-        rank = int(np.count_nonzero(eig > self.rank_tolerance * top))
-        condition = top / low if low > 0 else float("inf")
-        return Observability(rank, condition, eig)
-
     @staticmethod
-    def _bias_at(b_c: np.ndarray, k: np.ndarray, cov: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``b_c + k dt`` and its 1-sigma, (m, 3) each, at m offsets ``dt`` (s) from the drift origin, from
-        the covariance (6, 6) of the centred bias and drift."""
-        dt = dt[:, None]
-        variance = cov.diagonal()
-        var = variance[:3] + 2.0 * dt * cov.diagonal(3) + dt * dt * variance[3:]
-        return b_c + k * dt, np.sqrt(np.maximum(var, 0.0))
+    def _normal_equations(instants: Sequence[Sums], n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The normal matrices (K, n, n) and right-hand sides (K, n) of the first n states at K instants; for
+        15 states with the drift's time origin at :func:`drift_origin` (``H' = H T``: the drift column ``C (t - tau)``)."""
+        info = np.stack([sums.info[:n, :n] for sums in instants])
+        rhs = np.stack([sums.rhs[:n] for sums in instants])[..., None]
+        if n == N_DRIFT:
+            change = np.repeat(_IDENTITY[None], len(instants), axis=0)
+            origins = np.array([drift_origin(sums.t) for sums in instants])
+            change[:, N_GRAVITY:N_FULL, N_FULL:] = -origins[:, None, None] * _IDENTITY[:3, :3]
+            turned = change.transpose(0, 2, 1)
+            info, rhs = turned @ info @ change, turned @ rhs
+        return info, rhs[..., 0]
+
+
+@dataclass(frozen=True)
+class Sums:
+    """The normal equations of the 15-state model at one instant: what a solve there needs."""
+
+    info: np.ndarray  # (15, 15) sum H^T H with the drift border
+    rhs: np.ndarray  # (15,) sum H^T z
+    zz: float  # sum z^T z
+    samples: int
+    t: float  # s, end of the last sample in
+
+
+def drift_origin(t: float) -> float:
+    """The time origin (s) of the drift in the 15-state solve at t: the middle of the data so far."""
+    return 0.5 * t
+
+
+def _observability(eig: np.ndarray, rank_tolerance: float) -> Observability:
+    """Rank and condition number from the ascending eigenvalues of a scaled Gram matrix."""
+    low, top = float(eig[0]), max(float(eig[-1]), _TINY)
+    rank = int(np.count_nonzero(eig > rank_tolerance * top))
+    return Observability(rank, top / low if low > 0 else float("inf"), eig)
+
+
+def _bias_and_drift(x: np.ndarray, block: np.ndarray, scale: np.ndarray, noise_var: float, t: float
+                    ) -> dict[str, np.ndarray]:
+    """The bias at t with its sigma and, for 15 states, ``bias_t0`` and the drift rate with theirs.
+
+    Only the bias and drift block of the covariance ``noise_var W^-1`` is formed: ``block`` is that
+    block of the scaled inverse, (n - 9) square.
+    """
+    n = len(x)
+    s = scale[N_GRAVITY:]
+    sigma = np.sqrt(noise_var * block.diagonal()) * s
+    if n == N_FULL:
+        return {"bias": x[N_GRAVITY:].copy(), "bias_sigma": sigma}
+    cov = noise_var * block * (s[:, None] * s)
+    k = x[N_FULL:]
+    tau = drift_origin(t)
+    offsets = np.array([-tau, t - tau])  # t = 0 and now, from the drift origin
+    (b_t0, bias), (b_t0_sigma, bias_sigma) = _bias_at(x[N_GRAVITY:N_FULL], k, cov, offsets)
+    return {"bias": bias, "bias_sigma": bias_sigma, "bias_t0": b_t0, "bias_t0_sigma": b_t0_sigma,
+            "drift": k.copy(), "drift_sigma": sigma[N_FULL - N_GRAVITY:]}
+
+
+def _bias_at(b_c: np.ndarray, k: np.ndarray, cov: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``b_c + k dt`` and its 1-sigma, (m, 3) each, at m offsets ``dt`` (s) from the drift origin, from
+    the covariance (6, 6) of the centred bias and drift."""
+    dt = dt[:, None]
+    variance = cov.diagonal()
+    var = variance[:3] + 2.0 * dt * cov.diagonal(3) + dt * dt * variance[3:]
+    return b_c + k * dt, np.sqrt(np.maximum(var, 0.0))

@@ -12,10 +12,10 @@ import numpy as np
 
 
 def unit_diagonal(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A symmetric matrix scaled to unit diagonal, ``D info D``, and the scale factors ``diag(D)``."""
-    diag = info.diagonal()
+    """A symmetric matrix (or a stack of them) scaled to unit diagonal, ``D info D``, and the scale factors ``diag(D)``."""
+    diag = np.diagonal(info, axis1=-2, axis2=-1)
     scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
-    return info * (scale[:, None] * scale), scale
+    return info * (scale[..., :, None] * scale[..., None, :]), scale
 
 
 def require_finite(a: np.ndarray) -> None:

@@ -28,6 +28,7 @@ from hil.estimation.apparent_gravity import (
     ApparentGravityEstimator,
     DriftCheck,
     Solution,
+    Sums,
 )
 from hil.estimation.convergence import BIAS_TOLERANCE, DRIFT_TOLERANCE, SolveTrack
 from hil.estimation.convergence import convergence_time as settled_from
@@ -60,6 +61,16 @@ class Snapshot:
     error_method2: np.ndarray | None
     error_theoretical: np.ndarray | None  # (pitch, roll) rad, 2019 eq. 8 with the estimated bias at t
     drift_check: DriftCheck | None = None  # from the 15-state sums whatever the model; None: not observable
+
+
+@dataclass(frozen=True)
+class _Instant:
+    """A solve instant passed within a batch: the normal equations there and the attitudes at it."""
+
+    sums: Sums
+    t: float  # s since t0
+    attitude: np.ndarray  # C_b^ib0
+    reference: np.ndarray | None  # the table's C_b^n, None without angles
 
 
 class OnlineEstimator:
@@ -141,6 +152,7 @@ class OnlineEstimator:
             mean_attitude, attitude = self._table_attitudes(batch.angles)
             table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops, accept)
             references = attitude[np.array(stops) - 1]
+        instants: list[_Instant] = []  # solved together after the batch
         for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, f_ib0, step.c_mean, stops, accept)):
             if table is not None:
                 next(table)
@@ -148,7 +160,9 @@ class OnlineEstimator:
             self._attitude = step.c_end[stop - 1]
             self._t_last = float(batch.t[stop - 1])
             if stop in solve_stops:
-                self._keep(self._snapshot())
+                instants.append(self._instant())
+        for snap in self._snapshots(instants):
+            self._keep(snap)
 
     def bridge(self, gap: ImuGap) -> bool:
         """Carry the attitude across lost IMU samples with the table: the body rotation over the gap is
@@ -170,7 +184,7 @@ class OnlineEstimator:
     def solution(self) -> Snapshot:
         """The solution with everything received so far."""
         if not self.snapshots or self.snapshots[-1].samples != self.gravity.samples:
-            self._keep(self._snapshot())
+            self._keep(self._snapshots([self._instant()])[0])
         return self.snapshots[-1]
 
     def table_referenced(self) -> TableReferencedBias:
@@ -228,28 +242,34 @@ class OnlineEstimator:
         self._angle_history = series[-2:]
         return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, as_stacked(c_end[..., 1:])
 
-    def _snapshot(self) -> Snapshot:
-        if BIAS_MODELS[self.bias_model] == N_DRIFT:
-            drift, gravity_only = self.gravity.solve_nested((N_DRIFT, N_GRAVITY))
-            full = drift
-        else:
-            drift, full, gravity_only = self.gravity.solve_nested((N_DRIFT, N_FULL, N_GRAVITY))
-        t = self._t_last - self.t0
+    def _instant(self) -> _Instant:
+        """What a snapshot now needs: the normal equations, the time, and the attitudes."""
+        return _Instant(self.gravity.sums(), self._t_last - self.t0, self._attitude.copy(), self._reference)
+
+    def _snapshots(self, instants: list[_Instant]) -> list[Snapshot]:
+        """The snapshots at these instants, their least squares solved as one stack."""
+        if not instants:
+            return []
+        models = (N_DRIFT, N_GRAVITY) if BIAS_MODELS[self.bias_model] == N_DRIFT else (N_DRIFT, N_FULL, N_GRAVITY)
+        return [self._snapshot(instant, solutions)
+                for instant, solutions in zip(instants, self.gravity.solve_many([i.sums for i in instants], models))]
+
+    def _snapshot(self, instant: _Instant, solutions: list[Solution]) -> Snapshot:
+        drift, full, gravity_only = (solutions[0], *solutions) if len(solutions) == 2 else solutions
+        t, reference = instant.t, instant.reference
         errors: list[np.ndarray | None] = [None, None, None]
-        reference = self._reference
         if reference is not None and t > 0:
             turn = EarthTurn.at(t, self.earth)
             for k, solution in enumerate((gravity_only, full)):
                 c_ib0_n0 = alignment_matrix(*turn.apparent_gravity(solution), turn)
-                errors[k] = attitude_error(body_attitude(c_ib0_n0, self._attitude, turn), reference)
+                errors[k] = attitude_error(body_attitude(c_ib0_n0, instant.attitude, turn), reference)
             if full.bias is not None:
                 errors[2] = theoretical_error(full.bias, reference, self.earth.g)
         self.track.append(np.concatenate((
             [t], *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
         )))  # fmt: skip
-        return Snapshot(t, self.gravity.samples, full, gravity_only, self._attitude.copy(), *errors,
+        return Snapshot(t, instant.sums.samples, full, gravity_only, instant.attitude, *errors,
                         drift_check=DriftCheck.from_solution(drift))
-
 
 def convergence_time(snapshots: list[Snapshot]) -> float | None:
     """Convergence time (s) of the bias over these snapshots (:mod:`hil.estimation.convergence`).
