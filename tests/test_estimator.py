@@ -16,7 +16,8 @@ def test_cumulative_product_equals_sequential_products():
     expected = [steps[0]]
     for m in steps[1:]:
         expected.append(expected[-1] @ m)
-    np.testing.assert_allclose(cumulative_product(steps), np.array(expected), atol=1e-14)
+    prefix = cumulative_product(steps.transpose(1, 2, 0).copy())  # component-major (3, 3, N)
+    np.testing.assert_allclose(prefix.transpose(2, 0, 1), np.array(expected), atol=1e-14)
 
 
 def test_error_free_swing_gives_zero_bias_and_method2_level_error_after_600s():
@@ -168,9 +169,10 @@ def test_rodrigues_and_cross_kernels_match_scipy_and_numpy():
     rng = np.random.default_rng(5)
     for scale in (1e-9, 1e-4, 0.3, 3.0):
         v = rng.normal(size=(50, 3)) * scale
-        np.testing.assert_allclose(rotation_matrices(v), Rotation.from_rotvec(v).as_matrix(), atol=2e-16 * 8)
+        np.testing.assert_allclose(rotation_matrices(v.T).transpose(2, 0, 1), Rotation.from_rotvec(v).as_matrix(),
+                                   atol=2e-16 * 8)
     u, w = rng.normal(size=(2, 20, 3))
-    np.testing.assert_allclose(cross(u, w), np.cross(u, w), atol=1e-15)
+    np.testing.assert_allclose(cross(u.T, w.T).T, np.cross(u, w), atol=1e-15)
     c = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix() * (1 + 1e-9)
     np.testing.assert_allclose(orthonormalised(c) @ orthonormalised(c).T, np.eye(3), atol=1e-15)
 
@@ -182,7 +184,7 @@ def test_rodrigues_factors_match_the_trigonometric_forms_on_both_sides_of_the_se
     directions = rng.normal(size=(400, 3))
     directions /= np.linalg.norm(directions, axis=1)[:, None]
     angles = np.concatenate((np.geomspace(1e-12, 2.0, 380), np.sqrt(SERIES_LIMIT) * (1 + np.linspace(-1e-6, 1e-6, 20))))
-    sin_a, cos_a = rodrigues_factors(directions * angles[:, None])
+    sin_a, cos_a = rodrigues_factors((directions * angles[:, None]).T)
     np.testing.assert_allclose(sin_a, np.sin(angles) / angles, rtol=4e-16)
     np.testing.assert_allclose(cos_a, 2.0 * np.sin(angles / 2.0) ** 2 / angles**2, rtol=4e-16)  # no cancellation
 
@@ -195,10 +197,12 @@ def test_mean_rotation_is_the_weighted_mean_of_the_rotation_matrices():
     rng = np.random.default_rng(7)
     for scale in (1e-6, 0.01, 0.5):
         vectors = rng.normal(size=(40, 3, 3)) * scale
-        sin_a, cos_a = (f.reshape(40, 3) for f in rodrigues_factors(vectors.reshape(-1, 3)))
+        component_major = vectors.transpose(2, 1, 0)  # (3, K, N)
+        sin_a, cos_a = rodrigues_factors(component_major)
         expected = np.einsum("nkij,k->nij", Rotation.from_rotvec(vectors.reshape(-1, 3)).as_matrix().reshape(40, 3, 3, 3),
                              WEIGHTS)
-        np.testing.assert_allclose(mean_rotation(vectors, sin_a, cos_a, WEIGHTS), expected, atol=1e-15)
+        np.testing.assert_allclose(mean_rotation(component_major, sin_a, cos_a, WEIGHTS).transpose(2, 0, 1), expected,
+                                   atol=1e-15)
 
 
 def test_a_damaged_specific_force_is_left_out():

@@ -256,7 +256,8 @@ class ApparentGravityEstimator:
     @staticmethod
     def _normal_equations(instants: Sequence[Sums], n: int) -> tuple[np.ndarray, np.ndarray]:
         """The normal matrices (K, n, n) and right-hand sides (K, n) of the first n states at K instants; for
-        15 states with the drift's time origin at :func:`drift_origin` (``H' = H T``: the drift column ``C (t - tau)``)."""
+        15 states with the drift's time origin at :func:`drift_origin` (``H' = H T``: the drift column
+        ``C (t - tau)``)."""
         info = np.stack([sums.info[:n, :n] for sums in instants])
         rhs = np.stack([sums.rhs[:n] for sums in instants])[..., None]
         if n == N_DRIFT:

@@ -142,7 +142,7 @@ class OnlineEstimator:
         t_start = np.concatenate(([self._t_last - self.t0], t_end[:-1]))
         dt = t_end - t_start
         step = self.strapdown.update_many(batch.dtheta, batch.dv, dt)
-        f_ib0 = step.dv_ib0 / dt[:, None]
+        f_ib0 = step.dv_ib0.T / dt[:, None]
         if self._last_dt and dt[0] > 1.5 * self._last_dt:
             self._f_history = self._f_history[:0]  # data gap: judge afresh
         self._last_dt = float(dt[-1])
@@ -153,11 +153,12 @@ class OnlineEstimator:
             table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops, accept)
             references = attitude[np.array(stops) - 1]
         instants: list[_Instant] = []  # solved together after the batch
-        for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, f_ib0, step.c_mean, stops, accept)):
+        c_mean = step.c_mean.transpose(2, 0, 1)  # (N, 3, 3), as the measurement matrix takes it
+        for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, f_ib0, c_mean, stops, accept)):
             if table is not None:
                 next(table)
                 self._reference = references[k]
-            self._attitude = step.c_end[stop - 1]
+            self._attitude = step.c_end[..., stop - 1]
             self._t_last = float(batch.t[stop - 1])
             if stop in solve_stops:
                 instants.append(self._instant())
