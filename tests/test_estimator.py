@@ -247,3 +247,26 @@ def test_earth_turn_is_the_earth_rotation_since_the_start():
     c_n_n0 = earth_turn(earth, 5400.0).as_matrix()[0]
     np.testing.assert_allclose(turn.c_n0_n, c_n_n0.T, rtol=0, atol=1e-15)
     np.testing.assert_allclose(turn.f_n0_t, c_n_n0 @ earth.f_n, rtol=0, atol=1e-14)
+
+
+def test_table_angles_wrapped_at_180_deg_give_the_same_estimate_as_continuous_ones():
+    import dataclasses
+
+    from emulators.simulation import Simulation
+    from hil.estimation.online import OnlineEstimator
+
+    cfg = make_config(duration=40, rate=100, errors=PAPER_ERRORS,
+                      turntable={"motion": {"kind": "rate", "axes": {"outer": {"rate_dps": 10}}}})
+    sim = Simulation.from_config(cfg)
+    batches = list(sim.batches(chunk=1000))
+    assert np.ptp(np.concatenate([b.angles[:, 0] for b in batches])) > 350 * DEG  # the outer axis passes 180 deg
+    results = []
+    for wrap in (False, True):
+        est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=10.0)
+        for b in batches:
+            angles = (b.angles + np.pi) % (2 * np.pi) - np.pi if wrap else b.angles  # as a table reports them
+            est.update_many(dataclasses.replace(b, angles=angles))
+        results.append((est.table_referenced(), est.solution()))
+    (table_c, snap_c), (table_w, snap_w) = results
+    np.testing.assert_allclose(table_w.bias, table_c.bias, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(snap_w.error_method2, snap_c.error_method2, atol=1e-12)

@@ -235,7 +235,9 @@ class OnlineEstimator:
         (weights -1/8, 3/4, 3/8).
         """
         history = self._angle_history if self._angle_history is not None else np.vstack((angles[0], angles[0]))
-        series = np.unwrap(np.vstack((history, angles)), axis=0)
+        series = np.vstack((history, angles))
+        if (np.abs(np.diff(series, axis=0)) >= np.pi).any():  # else np.unwrap would return them unchanged
+            series = np.unwrap(series, axis=0)
         mid = -0.125 * series[:-2] + 0.75 * series[1:-1] + 0.375 * series[2:]
         n = len(series) - 1
         c = gimbal_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
