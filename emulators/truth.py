@@ -68,8 +68,8 @@ class Truth:
         omega, force = self.rates_and_forces(times)
         w = half[:, None] * _WEIGHTS[None, :]
         n = len(edges) - 1
-        dtheta = (omega.reshape(3, n, QUADRATURE_NODES) * w).sum(axis=-1).T
-        dv = (force.reshape(3, n, QUADRATURE_NODES) * w).sum(axis=-1).T
+        dtheta = np.einsum("ink,nk->ni", omega.reshape(3, n, QUADRATURE_NODES), w)
+        dv = np.einsum("ink,nk->ni", force.reshape(3, n, QUADRATURE_NODES), w)
         if len(breaks):  # sum the pieces of each split interval
             first = np.searchsorted(edges, ends[:-1])
             dtheta, dv = np.add.reduceat(dtheta, first), np.add.reduceat(dv, first)
