@@ -61,3 +61,17 @@ def test_a_child_given_no_job_ends_when_closed():
     child = figures._child
     figures.close()
     assert child.returncode is not None and child.stdin.closed
+
+
+def test_the_child_runs_nicer_than_this_process():
+    import os
+    import time
+
+    from hil.outputs.figure_process import NICENESS
+
+    mine = os.getpriority(os.PRIO_PROCESS, 0)
+    with FigureProcess() as figures:
+        deadline = time.monotonic() + 10.0
+        while os.getpriority(os.PRIO_PROCESS, figures._child.pid) == mine and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert os.getpriority(os.PRIO_PROCESS, figures._child.pid) == min(mine + NICENESS, 19)
