@@ -118,19 +118,20 @@ def rotation_vector_matrix(v: Sequence[float]) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * k + 2.0 * math.sin(0.5 * angle) ** 2 * (k @ k)
 
 
-def level_angles(up: Sequence[float]) -> tuple[float, float]:
-    """(pitch, roll) of a C_b^n matrix from its last row (the up axis in b): C32 = sin p, C31 = -cos p sin r,
-    C33 = cos p cos r (pitch within +-90 deg)."""
-    return math.asin(max(-1.0, min(1.0, up[1]))), math.atan2(-up[0], up[2])
+def level_angles(up: np.ndarray) -> np.ndarray:
+    """(pitch, roll), (..., 2), of C_b^n matrices from their last row (the up axis in b): C32 = sin p,
+    C31 = -cos p sin r, C33 = cos p cos r (pitch within +-90 deg)."""
+    up = np.asarray(up, dtype=float)
+    return np.stack((np.arcsin(np.clip(up[..., 1], -1.0, 1.0)), np.arctan2(-up[..., 0], up[..., 2])), axis=-1)
 
 
-def euler_from_matrix(c: np.ndarray) -> tuple[float, float, float]:
-    """(yaw, pitch, roll) of one C_b^n matrix in closed form (pitch within +-90 deg); cheap per call.
+def euler_from_matrix(c: np.ndarray) -> np.ndarray:
+    """(yaw, pitch, roll), (..., 3), of C_b^n matrices (..., 3, 3) in closed form (pitch within +-90 deg).
 
     From ``Rz(y) Rx(p) Ry(r)``: C12 = -sin y cos p, C22 = cos y cos p, and :func:`level_angles`.
     """
-    rows = c.tolist()
-    return (math.atan2(-rows[0][1], rows[1][1]), *level_angles(rows[2]))
+    yaw = np.arctan2(-c[..., 0, 1], c[..., 1, 1])
+    return np.concatenate((yaw[..., None], level_angles(c[..., 2, :])), axis=-1)
 
 
 @dataclass(frozen=True)

@@ -250,29 +250,47 @@ class OnlineEstimator:
         return _Instant(self.gravity.sums(), self._t_last - self.t0, self._attitude.copy(), self._reference)
 
     def _snapshots(self, instants: list[_Instant]) -> list[Snapshot]:
-        """The snapshots at these instants, their least squares solved as one stack."""
+        """The snapshots at these instants, their least squares solved and their alignments formed as stacks."""
         if not instants:
             return []
         models = (N_DRIFT, N_GRAVITY) if BIAS_MODELS[self.bias_model] == N_DRIFT else (N_DRIFT, N_FULL, N_GRAVITY)
-        return [self._snapshot(instant, solutions)
-                for instant, solutions in zip(instants, self.gravity.solve_many([i.sums for i in instants], models))]
+        solved = self.gravity.solve_many([i.sums for i in instants], models)
+        solutions = [(s[0], *s) if len(s) == 2 else s for s in solved]  # (drift, full, gravity_only)
+        errors = self._alignment_errors(instants, solutions)
+        snapshots = []
+        for instant, (drift, full, gravity_only), errs in zip(instants, solutions, errors):
+            self.track.append(np.concatenate((
+                [instant.t],
+                *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
+            )))  # fmt: skip
+            snapshots.append(Snapshot(instant.t, instant.sums.samples, full, gravity_only, instant.attitude, *errs,
+                                      drift_check=DriftCheck.from_solution(drift)))
+        return snapshots
 
-    def _snapshot(self, instant: _Instant, solutions: list[Solution]) -> Snapshot:
-        drift, full, gravity_only = (solutions[0], *solutions) if len(solutions) == 2 else solutions
-        t, reference = instant.t, instant.reference
-        errors: list[np.ndarray | None] = [None, None, None]
-        if reference is not None and t > 0:
-            turn = EarthTurn.at(t, self.earth)
-            for k, solution in enumerate((gravity_only, full)):
-                c_ib0_n0 = alignment_matrix(*turn.apparent_gravity(solution), turn)
-                errors[k] = attitude_error(body_attitude(c_ib0_n0, instant.attitude, turn), reference)
-            if full.bias is not None:
-                errors[2] = theoretical_error(full.bias, reference, self.earth.g)
-        self.track.append(np.concatenate((
-            [t], *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
-        )))  # fmt: skip
-        return Snapshot(t, instant.sums.samples, full, gravity_only, instant.attitude, *errors,
-                        drift_check=DriftCheck.from_solution(drift))
+    def _alignment_errors(self, instants: list[_Instant], solutions: list[list[Solution]]
+                          ) -> list[list[np.ndarray | None]]:
+        """Per instant: the method-1 and method-2 attitude errors against the table, and the theoretical error
+        of the bias (2019 eq. 8); None without table angles (or at t = 0, or for an unobservable bias)."""
+        errors: list[list[np.ndarray | None]] = [[None, None, None] for _ in instants]
+        rows = [k for k, instant in enumerate(instants) if instant.reference is not None and instant.t > 0]
+        if not rows:
+            return errors
+        turn = EarthTurn.at(np.array([instants[k].t for k in rows]), self.earth)
+        reference = np.array([instants[k].reference for k in rows])
+        attitude = np.array([instants[k].attitude for k in rows])
+        for method in (0, 1):  # the 9-state solution (method 1), the bias model's (method 2)
+            a_internal = np.array([solutions[k][2 - method].a_internal for k in rows])
+            gravity = turn.apparent_gravity(a_internal)
+            c_ib0_n0 = alignment_matrix(gravity[:, 0], gravity[:, 1], turn)
+            for k, error in zip(rows, attitude_error(body_attitude(c_ib0_n0, attitude, turn), reference)):
+                errors[k][method] = error
+        biased = [(k, j) for j, k in enumerate(rows) if solutions[k][1].bias is not None]
+        if biased:
+            bias = np.array([solutions[k][1].bias for k, _ in biased])
+            for (k, _), error in zip(biased, theoretical_error(bias, reference[[j for _, j in biased]], self.earth.g)):
+                errors[k][2] = error
+        return errors
+
 
 def convergence_time(snapshots: list[Snapshot]) -> float | None:
     """Convergence time (s) of the bias over these snapshots (:mod:`hil.estimation.convergence`).
