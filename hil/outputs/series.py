@@ -54,7 +54,7 @@ def write_series(out: Path, snapshots: list[Snapshot]) -> np.ndarray:
     with open(out / SERIES_NAME, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(SERIES_COLUMNS)
-        writer.writerows(["" if isinstance(v, float) and np.isnan(v) else v for v in row] for row in rows)
+        writer.writerows(["" if v != v else v for v in row] for row in rows)  # v != v: NaN, a cell that does not exist
     return np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
 
 
