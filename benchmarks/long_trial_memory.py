@@ -11,7 +11,8 @@ the file in this process through what `hil replay` runs (the streamed reader int
 then every output). `--recording PATH` keeps the file there, or replays PATH as it is if it exists.
 
 Both print the resident memory and the wall time at every hour of trial time (every quarter of the
-trial when it is shorter than 4 h), the peak resident memory and the samples per second:
+trial when it is shorter than 4 h), the peak resident memory (simulate: the emulator's process's too) and
+the samples per second:
 
     .venv/bin/python benchmarks/long_trial_memory.py [--hours 24] [--rate 200] [--config configs/emulated_swing.yaml]
     .venv/bin/python benchmarks/long_trial_memory.py --replay [--hours 24] [--recording PATH]
@@ -32,7 +33,6 @@ from live_harness import rss_mib
 
 from drivers.codec import RawChunk, StreamEvent
 from emulators.reads import emulated_reads
-from emulators.simulation import Simulation
 from emulators.simulation_process import SimulationProcess
 from hil.config import Config, parse_config
 from hil.outputs.result import COMPLETED
@@ -83,15 +83,17 @@ def trial_config(path: str, hours: float, rate: float) -> tuple[Config, str]:
 
 
 def simulate(cfg: Config, config_text: str, every: float) -> None:
-    sim = Simulation.from_config(cfg)
     rows = Rows(every)
     processor = TrialProcessor(cfg)
     with SimulationProcess() as simulation:
         for batch in simulation.batches(cfg):  # as hil simulate: computed by a child process, ahead
             processor.feed_batch(batch)
             rows.at(float(batch.t[-1]))
+    child_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # the emulator's, reaped by now
+    samples = processor.counts().aligned
     outputs(processor, cfg, config_text, COMPLETED, rows)
-    print(f"peak RSS {peak_mib():.1f} MiB, {sim.samples / rows.wall():,.0f} samples/s over the whole run")
+    print(f"peak RSS {peak_mib():.1f} MiB (the emulator's process: {child_mib:.1f} MiB), "
+          f"{samples / rows.wall():,.0f} samples/s over the whole run")
 
 
 def write_recording(cfg: Config, config_text: str, path: Path, every: float) -> None:
