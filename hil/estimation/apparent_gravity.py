@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.estimation.normal_equations import NormalEquations, require_finite, unit_diagonal
+from hil.estimation.normal_equations import NormalEquations, require_finite, symmetric_eigenvalues, unit_diagonal
 from hil.frames import EARTH_RATE
 
 N_GRAVITY = 9  # A11..A33
@@ -187,8 +187,7 @@ class ApparentGravityEstimator:
     def observability(self, n: int = N_FULL) -> Observability:
         """Rank and condition number of the diagonally scaled Gram matrix of the first n states."""
         scaled = unit_diagonal(self._normal_equations([self.sums()], n)[0])[0]
-        require_finite(scaled)
-        return _observability(np.linalg.eigvalsh(scaled)[0], self.rank_tolerance)
+        return _observability(symmetric_eigenvalues(scaled)[0], self.rank_tolerance)
 
     def solve(self, states: int = N_FULL) -> Solution:
         """The least-squares solution now: 15-state (bias and drift), 12-state (bias) or 9-state ("method 1")."""
@@ -214,7 +213,7 @@ class ApparentGravityEstimator:
         out: list[list[Solution]] = [[] for _ in instants]
         for n in states:
             block = np.ascontiguousarray(scaled[:, :n, :n])
-            obs = [_observability(eig, self.rank_tolerance) for eig in np.linalg.eigvalsh(block)]
+            obs = [_observability(eig, self.rank_tolerance) for eig in symmetric_eigenvalues(block, check_finite=False)]
             full = np.array([o.full(n) for o in obs])
             solved = np.empty((len(instants), n, 1 + n - N_GRAVITY))
             if full.any():  # positive definite: y and the inverse's bias and drift columns in one solve

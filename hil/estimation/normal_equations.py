@@ -25,7 +25,7 @@ def require_finite(a: np.ndarray) -> None:
 
 
 def symmetric_eigenvalues(a: np.ndarray, check_finite: bool = True) -> np.ndarray:
-    """Eigenvalues of a symmetric matrix (lower triangle), ascending."""
+    """Eigenvalues of a symmetric matrix (or a stack of them; lower triangle), ascending."""
     if check_finite:
         require_finite(a)
     return np.linalg.eigvalsh(a)
