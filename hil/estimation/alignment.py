@@ -18,25 +18,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.estimation.apparent_gravity import reconstruction_basis
+from hil.estimation.strapdown import cross
 from hil.frames import Earth, euler_from_matrix, level_angles
-
-
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """u x v along the last axis."""
-    return np.stack((u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1],
-                     u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-                     u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]), axis=-1)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
     """v scaled to unit length along the last axis."""
+    v = np.ascontiguousarray(v)  # einsum's sum along a strided axis rounds differently
     return v / np.sqrt(np.einsum("...i,...i->...", v, v))[..., None]
 
 
 def unit_triad(v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
-    """The rows ``v1, v1 x v2, (v1 x v2) x v1`` of a 2014 eq. 8 triad, each scaled to unit length (..., 3, 3)."""
-    c = _cross(v1, v2)
-    return np.stack((_unit(np.broadcast_to(v1, c.shape)), _unit(c), _unit(_cross(c, v1))), axis=-2)
+    """The rows ``v1, v1 x v2, (v1 x v2) x v1`` of a 2014 eq. 8 triad, each scaled to unit length, from
+    vectors (3,) or (K, 3): (3, 3) or (K, 3, 3)."""
+    c = cross(v1.T, v2.T).T  # the strapdown's cross product, along the first axis
+    return np.stack((_unit(np.broadcast_to(v1, c.shape)), _unit(c), _unit(cross(c.T, v1.T).T)), axis=-2)
 
 
 @dataclass(frozen=True)
