@@ -151,7 +151,7 @@ class OnlineEstimator:
         if batch.angles is not None:
             mean_attitude, attitude = self._table_attitudes(batch.angles)
             table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops, accept)
-            references = attitude[np.array(stops) - 1]
+            references = as_stacked(attitude[..., np.array(stops) - 1])  # (stops, 3, 3)
         instants: list[_Instant] = []  # solved together after the batch
         c_mean = step.c_mean.transpose(2, 0, 1)  # (N, 3, 3), as the measurement matrix takes it
         for k, stop in enumerate(self.gravity.update_segments(t_start, t_end, f_ib0, c_mean, stops, accept)):
@@ -228,8 +228,8 @@ class OnlineEstimator:
         return accept
 
     def _table_attitudes(self, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """C_b^n over each interval (mean, by Simpson's rule; (3, 3, N) component-major) and at its end
-        ((N, 3, 3)), from the latched angles.
+        """C_b^n over each interval (mean, by Simpson's rule) and at its end, each (3, 3, N) component-major,
+        from the latched angles.
 
         The mid-interval angles come from the quadratic through the last three latched angles
         (weights -1/8, 3/4, 3/8).
@@ -243,7 +243,7 @@ class OnlineEstimator:
         c = gimbal_matrices(self.geometry, np.vstack((series[1:], mid)))[0]
         c_end, c_mid = c[..., :n], c[..., n:]
         self._angle_history = series[-2:]
-        return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, as_stacked(c_end[..., 1:])
+        return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, c_end[..., 1:]
 
     def _instant(self) -> _Instant:
         """What a snapshot now needs: the normal equations, the time, and the attitudes."""
