@@ -163,10 +163,10 @@ def test_age_counts_from_the_chunk_that_completed_the_oldest_sample_taken():
     stats = LatencyStats()
     now = time.time()
     stats.fed(now - 0.040, 4)  # samples 1-4; the estimator takes 1-3, 4 waits
-    stats.updated(now - 0.040, 4, 1)
+    stats.updated(1)
     stats.fed(now - 0.035, 4)  # a chunk that completes no sample is not kept
     stats.fed(now - 0.020, 8)  # samples 5-8: blocks 4-6, then 7-8 wait
-    stats.updated(now - 0.020, 8, 2)
+    stats.updated(2)
     (age_p50, _), (latency_p50, _) = stats.age.percentiles_ms([50, 99]), stats.latency.percentiles_ms([50, 99])
     assert age_p50 >= 40.0 and 20.0 <= latency_p50 < 40.0  # both blocks' oldest sample came at -40 ms
     assert [done for _, done in stats._arrivals] == [8]  # kept until samples 7 and 8 are taken

@@ -87,16 +87,19 @@ class LatencyStats:
         self.age = LatencyHistogram(bins=LATENCY_BINS)
         self._arrivals: deque[tuple[float, int]] = deque()  # (chunk arrival, samples aligned once it was fed)
         self._taken = 0  # samples aligned before the estimator's last update
+        self._last = (0.0, 0)  # (arrival, samples aligned) of the chunk fed last
 
     def fed(self, arrival: float, aligned: int) -> None:
         """A chunk that arrived at ``arrival`` has been fed; ``aligned`` samples are now aligned in all. Only
         chunks that completed samples are kept, and only until the estimator has taken those."""
+        self._last = (arrival, aligned)
         if aligned > (self._arrivals[-1][1] if self._arrivals else self._taken):
             self._arrivals.append((arrival, aligned))
 
-    def updated(self, arrival: float, aligned: int, waiting: int) -> None:
-        """The estimator took every aligned sample but ``waiting`` with the chunk that arrived at ``arrival``."""
+    def updated(self, waiting: int) -> None:
+        """The estimator took every aligned sample but ``waiting`` with the chunk fed last."""
         now = time.time()
+        arrival, aligned = self._last
         oldest = next((t for t, done in self._arrivals if done > self._taken), arrival)
         self.latency.add(now - arrival)
         self.age.add(now - oldest)
@@ -255,7 +258,7 @@ class LiveTrial:
                 if isinstance(item, RawChunk):
                     self.latency.fed(item.host_time, self.processor.aligned)
                     if self.processor.updates != updates:
-                        self.latency.updated(item.host_time, self.processor.aligned, self.processor.waiting)
+                        self.latency.updated(self.processor.waiting)
             now = time.monotonic()
             if now >= next_progress:
                 next_progress = now + 0.5
