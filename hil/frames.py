@@ -118,6 +118,11 @@ def rotation_vector_matrix(v: Sequence[float]) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * k + 2.0 * math.sin(0.5 * angle) ** 2 * (k @ k)
 
 
+def wrapped(angle: np.ndarray) -> np.ndarray:
+    """Angles (rad) wrapped to [-pi, pi)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
 def level_angles(up: np.ndarray) -> np.ndarray:
     """(pitch, roll), (..., 2), of C_b^n matrices from their last row (the up axis in b): C32 = sin p,
     C31 = -cos p sin r, C33 = cos p cos r (pitch within +-90 deg)."""

@@ -19,7 +19,7 @@ import numpy as np
 
 from hil.estimation.apparent_gravity import reconstruction_basis
 from hil.estimation.strapdown import cross
-from hil.frames import Earth, euler_from_matrix, level_angles
+from hil.frames import Earth, euler_from_matrix, level_angles, wrapped
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -81,14 +81,9 @@ def body_attitude(c_ib0_n0: np.ndarray, c_b_ib0: np.ndarray, turn: EarthTurn) ->
     return turn.c_n0_n @ c_ib0_n0 @ c_b_ib0
 
 
-def _wrapped(angle: np.ndarray) -> np.ndarray:
-    """Angles (rad) wrapped to [-pi, pi)."""
-    return (angle + np.pi) % (2 * np.pi) - np.pi
-
-
 def attitude_error(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """(pitch, roll, yaw) of the estimate minus the reference, rad, wrapped to [-pi, pi); (..., 3)."""
-    return _wrapped(euler_from_matrix(estimate) - euler_from_matrix(reference))[..., [1, 2, 0]]
+    return wrapped(euler_from_matrix(estimate) - euler_from_matrix(reference))[..., [1, 2, 0]]
 
 
 def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.ndarray:
@@ -104,4 +99,4 @@ def theoretical_error(bias_b: np.ndarray, c_b_n: np.ndarray, g: float) -> np.nda
     angle = np.hypot(phi_e, phi_n)
     sinc = np.sinc(angle / np.pi)  # sin(angle) / angle, 1 at 0
     tilted = np.cos(angle) * up + sinc * (phi_e * north - phi_n * east)
-    return _wrapped(level_angles(tilted) - level_angles(up))
+    return wrapped(level_angles(tilted) - level_angles(up))

@@ -21,7 +21,6 @@ samples have all arrived (t its end; the window as :meth:`windows` will cut it).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -29,6 +28,7 @@ import numpy as np
 
 from hil.estimation.calibration_model import Window, window_from_samples
 from hil.estimation.calibration_schedule import Dwell, Plateau, Schedule
+from hil.frames import wrapped
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
 
@@ -112,7 +112,7 @@ class CalibrationSequence:
             return
         self._last = (float(t[-1]), angles[-1])
         dt = np.diff(t)
-        rates = _wrap(np.diff(angles, axis=0)) / np.where(dt > 0, dt, np.inf)[:, None]
+        rates = wrapped(np.diff(angles, axis=0)) / np.where(dt > 0, dt, np.inf)[:, None]
         times, angles = t[1:].tolist(), angles[1:]
         still = np.all(np.abs(rates) < STILL_RATE, axis=1)
         i = 0
@@ -124,7 +124,7 @@ class CalibrationSequence:
                 wanted[step.axis] = step.rate
                 limit = STILL_RATE + RATE_TOLERANCE * abs(step.rate)
             at_rate = still if not isinstance(step, Plateau) else np.all(np.abs(rates - wanted) < limit, axis=1)
-            there = np.all(np.abs(_wrap(angles - np.array(step.angles))) < POSITION_TOLERANCE, axis=1) & still
+            there = np.all(np.abs(wrapped(angles - np.array(step.angles))) < POSITION_TOLERANCE, axis=1) & still
             while i < len(times) and self._index == index and self.failure is None:
                 if dt[i] > 0:
                     self._advance(times[i], bool(there[i]), bool(at_rate[i]), rates[i])
@@ -212,7 +212,7 @@ class CalibrationSequence:
         sel = np.flatnonzero(contiguous & (t - self.period >= found.start - 1e-9) & (t <= found.end + 1e-9))
         if len(sel) == 0:
             raise ValueError(f"calibration window {found.start:.2f}..{found.end:.2f} s holds no samples")
-        turn = _wrap(angles[sel] - angles[sel - 1])  # each interval's encoder turn
+        turn = wrapped(angles[sel] - angles[sel - 1])  # each interval's encoder turn
         rates = np.zeros(3)
         if isinstance(found.step, Plateau):
             axis = found.step.axis
@@ -220,7 +220,3 @@ class CalibrationSequence:
         mid = angles[sel] - 0.5 * turn
         dt = np.full(len(sel), self.period)
         return window_from_samples(dtheta[sel], dv[sel], dt, mid, rates)
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    return (x + math.pi) % (2.0 * math.pi) - math.pi
