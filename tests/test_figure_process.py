@@ -1,8 +1,11 @@
 """The figure process: the child draws what this process would, and a failing child loses nothing."""
 
+import os
+import time
+
 import numpy as np
 
-from hil.outputs.figure_process import FigureProcess, _hand_over
+from hil.outputs.figure_process import NICENESS, FigureProcess, _hand_over
 from hil.outputs.figures import FIGURES, write_figures
 from hil.outputs.series import SERIES_COLUMNS
 
@@ -64,11 +67,6 @@ def test_a_child_given_no_job_ends_when_closed():
 
 
 def test_the_child_runs_nicer_than_this_process():
-    import os
-    import time
-
-    from hil.outputs.figure_process import NICENESS
-
     mine = os.getpriority(os.PRIO_PROCESS, 0)
     with FigureProcess() as figures:
         deadline = time.monotonic() + 10.0

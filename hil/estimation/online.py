@@ -284,11 +284,11 @@ class OnlineEstimator:
             c_ib0_n0 = alignment_matrix(gravity[:, 0], gravity[:, 1], turn)
             for k, error in zip(rows, attitude_error(body_attitude(c_ib0_n0, attitude, turn), reference)):
                 errors[k][method] = error
-        biased = [(k, j) for j, k in enumerate(rows) if solutions[k][1].bias is not None]
+        biased = [j for j, k in enumerate(rows) if solutions[k][1].bias is not None]  # positions in rows
         if biased:
-            bias = np.array([solutions[k][1].bias for k, _ in biased])
-            for (k, _), error in zip(biased, theoretical_error(bias, reference[[j for _, j in biased]], self.earth.g)):
-                errors[k][2] = error
+            bias = np.array([solutions[rows[j]][1].bias for j in biased])
+            for j, error in zip(biased, theoretical_error(bias, reference[biased], self.earth.g)):
+                errors[rows[j]][2] = error
         return errors
 
 
