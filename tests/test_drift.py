@@ -207,3 +207,34 @@ def test_deflection_leaves_the_self_calibrated_bias_and_becomes_table_tilt():
     table = est.table_referenced()
     np.testing.assert_allclose(table.tilt / ARCSEC, [20.0, 15.0], atol=0.05)
     np.testing.assert_allclose(table.bias / UG, BIAS / UG, atol=0.1)
+
+
+def test_the_table_referenced_drift_has_the_error_its_sigma_says_over_seeds():
+    """f_b = C_n^b f^n + b_s + k t + noise with known attitudes (2018 eq. 90 in the table-referenced model): the
+    drift rate fitted beside the constant bias is k, and its error over 200 seeds is its sigma."""
+    from hil.estimation.table_reference import TableReferenceEstimator
+
+    f_n = np.array([0.0, 0.0, 9.79])
+    n, dt = 600, 0.5
+    t_mid = (np.arange(n) + 0.5) * dt
+    c_bn = Rotation.from_rotvec(0.3 * np.sin(np.outer(t_mid, [0.7, 0.9, 0.5]))).as_matrix()  # (N, 3, 3) C_b^n
+    ideal = c_bn.transpose(0, 2, 1) @ f_n + BIAS + np.outer(t_mid, DRIFT * 3600.0)  # 7200, -5400, 10800 ug/h
+    errors = []
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        est = TableReferenceEstimator(f_n)
+        for _ in est.update_segments(t_mid, ideal + rng.normal(scale=50 * UG, size=(n, 3)),
+                                     c_bn.transpose(1, 2, 0).copy(), [n]):
+            pass
+        solved = est.solve()
+        errors.append((solved.drift - DRIFT * 3600.0) / solved.drift_sigma)
+    errors = np.array(errors)
+    assert np.abs(errors.mean(axis=0)).max() < 0.25
+    assert 0.85 < errors.std() < 1.15
+
+
+def test_drift_rates_agree_within_four_combined_sigmas_on_every_axis():
+    from hil.estimation.table_reference import drifts_agree
+
+    assert drifts_agree([10.0, 0.0, 0.0], [2.0, 1.0, 1.0], [2.5, 0.0, 0.0], [1.0, 1.0, 1.0])  # 7.5 < 4 * 2.24
+    assert not drifts_agree([10.0, 0.0, 0.0], [1.5, 1.0, 1.0], [0.0, 0.0, 0.0], [0.5, 1.0, 1.0])  # 10 > 4 * 1.58

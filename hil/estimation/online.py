@@ -150,7 +150,8 @@ class OnlineEstimator:
         table = None
         if batch.angles is not None:
             mean_attitude, attitude = self._table_attitudes(batch.angles)
-            table = self.table.update_segments(batch.dv / dt[:, None], mean_attitude, stops, accept)
+            table = self.table.update_segments(0.5 * (t_start + t_end), batch.dv / dt[:, None], mean_attitude, stops,
+                                               accept)
             references = as_stacked(attitude[..., np.array(stops) - 1])  # (stops, 3, 3)
         instants: list[_Instant] = []  # solved together after the batch
         c_mean = step.c_mean.transpose(2, 0, 1)  # (N, 3, 3), as the measurement matrix takes it

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 from hil.config import ReportLimits
+from hil.estimation.table_reference import drifts_agree
 
 PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
 
@@ -40,6 +41,20 @@ def _at_most(name, value, unit, bound, description="", absolute=False) -> Measur
 
 def _info(name, value, unit, description="") -> Measurement:
     return Measurement(name, value, unit, "", NOT_JUDGED, description)
+
+
+def drift_not_the_accelerometer(result: dict) -> bool | None:
+    """Whether a drift the self-calibration sees (its drift check significant, or the drift model fitted) is
+    missing from the table-referenced fit (:func:`~hil.estimation.table_reference.drifts_agree`): then it is
+    not the accelerometer's but the gyros' errors, integrated into the attitude over the trial (the
+    self-calibration takes the gyros as perfect). None without both drift estimates."""
+    check = result.get("estimate", {}).get("drift_check")
+    table = result.get("table_reference") or {}
+    if not check or table.get("accel_bias_drift_ug_per_h") is None:
+        return None
+    flagged = check["significant"] or result["estimate"].get("bias_model") == "drift"
+    return flagged and not drifts_agree(check["drift_ug_per_h"], check["sigma_ug_per_h"],
+                                        table["accel_bias_drift_ug_per_h"], table["accel_bias_drift_sigma_ug_per_h"])
 
 
 def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
@@ -88,6 +103,13 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         out.append(_info("bias_drift_significant", check["significant"], "",
                          "15-state drift check: some axis drifts beyond 4σ ("
                          + ", ".join(format_value(v) for v in check["drift_ug_per_h"]) + " µg/h)"))
+    gyros = drift_not_the_accelerometer(result)
+    if gyros is not None:
+        table_drift = result["table_reference"]["accel_bias_drift_ug_per_h"]
+        out.append(_info("bias_drift_not_in_table_reference", gyros, "",
+                         "a drift the self-calibration sees that the table-referenced fit ("
+                         + ", ".join(format_value(v) for v in table_drift)
+                         + " µg/h) does not: the gyros' errors turning the attitude, not the accelerometer"))
     if est.get("noise_ug") is not None:
         out.append(_info("accel_noise", est["noise_ug"], "µg", "residual RMS per axis and sample"))
 

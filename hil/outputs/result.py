@@ -12,6 +12,7 @@ import numpy as np
 from hil.estimation.apparent_gravity import DriftCheck
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.outputs.conversions import to_ug, to_ug_per_h
+from hil.outputs.measurements import drift_not_the_accelerometer
 from hil.samples import StreamCounts
 from hil.units import DEG, UG
 
@@ -64,6 +65,8 @@ def build_result(name: str, estimator: OnlineEstimator, streams: StreamCounts, t
             "accel_bias_ug": to_ug(table.bias),
             "accel_bias_sigma_ug": to_ug(table.bias_sigma),
             "tilt_deg": None if table.tilt is None else [float(x) / DEG for x in table.tilt],
+            "accel_bias_drift_ug_per_h": to_ug_per_h(table.drift),
+            "accel_bias_drift_sigma_ug_per_h": to_ug_per_h(table.drift_sigma),
         },
         "alignment_deg": {
             "method1": _angles(_tail_mean(snapshots, "error_method1", duration)),
@@ -92,7 +95,8 @@ def empty_result(name: str, streams: StreamCounts, truth: dict | None = None, bi
         "estimate": {"bias_model": bias_model, "accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False,
                      "gram_rank": 0, "gram_condition": None, "converged_at_s": None, "noise_ug": None,
                      "drift_check": None},
-        "table_reference": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "tilt_deg": None},
+        "table_reference": {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "tilt_deg": None,
+                            "accel_bias_drift_ug_per_h": None, "accel_bias_drift_sigma_ug_per_h": None},
         "alignment_deg": {"method1": None, "method2": None, "theoretical": None},
     }
     if truth is not None:
@@ -154,7 +158,13 @@ def _estimate_lines(result: dict) -> list[str]:
     else:
         lines.append(f"  accelerometer bias NOT observable (Gram rank {est['gram_rank']} of 12): the table must swing")
     check = est.get("drift_check")
-    if check and check["significant"] and est.get("bias_model") != "drift":
+    if drift_not_the_accelerometer(result):
+        lines.append("  WARNING: the bias seems to drift (" + ", ".join(f"{k:.2f}" for k in check["drift_ug_per_h"])
+                     + " ug/h), the table-referenced bias does not (" + ", ".join(
+                         f"{k:.2f}" for k in result["table_reference"]["accel_bias_drift_ug_per_h"]) + " ug/h):")
+        lines.append("    the gyros' errors turn the attitude over the trial, not the accelerometer; the"
+                     " self-calibrated bias may be off by more than its sigma (the model takes the gyros as perfect)")
+    elif check and check["significant"] and est.get("bias_model") != "drift":
         lines.append("  WARNING: the bias drifts (" + ", ".join(f"{k:.2f}" for k in check["drift_ug_per_h"])
                      + " ug/h, beyond 4 sigma): set estimator.bias_model: drift")
     table = result["table_reference"]["accel_bias_ug"]
