@@ -162,7 +162,7 @@ def _estimate_lines(result: dict) -> list[str]:
         reference = result["table_reference"]
         lines.append("  WARNING: the bias seems to drift (" + ", ".join(f"{k:.2f}" for k in check["drift_ug_per_h"])
                      + " ug/h), the table-referenced bias does not drift so (" + ", ".join(
-                         f"{k:.2f} +- {s:.2f}" for k, s in zip(reference["accel_bias_drift_ug_per_h"],
+                         f"{k:.3f} +- {s:.3f}" for k, s in zip(reference["accel_bias_drift_ug_per_h"],
                                                               reference["accel_bias_drift_sigma_ug_per_h"])) + " ug/h):")
         lines.append("    the gyros' errors turn the attitude over the trial, not the accelerometer; the"
                      " self-calibrated bias may be off by more than its sigma (the model takes the gyros as perfect)")
