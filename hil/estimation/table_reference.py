@@ -73,13 +73,8 @@ class TableReferenceEstimator:
         normal = self.normal
         if normal.samples < 2:
             return TableReferencedBias(None, None, None, normal.samples)
-        n = 5 if self._tilt_observable() else 3
-        info, rhs = normal.info[:n, :n], normal.rhs[:n]
-        cov = np.linalg.inv(info)
-        x = cov @ rhs
-        rss = max(normal.zz - float(x @ rhs), 0.0)
-        noise_var = rss / max(3 * normal.samples - n, 1)
-        sigma = np.sqrt(noise_var * np.diag(cov))
+        n = 5 if self._full_rank(normal.scaled(5)[0]) else 3
+        x, sigma = self._fit(np.linalg.inv(normal.info[:n, :n]), normal.rhs[:n])
         return TableReferencedBias(x[:3], sigma[:3], x[3:] if n == 5 else None, normal.samples, *self._drift(n))
 
     def _drift(self, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -87,16 +82,20 @@ class TableReferenceEstimator:
         the data do not tell a drift from a constant bias."""
         keep = np.r_[0:n, 5:8]
         scaled, scale = unit_diagonal(self.normal.info[np.ix_(keep, keep)])
-        eig = symmetric_eigenvalues(scaled)
-        if not eig[0] > self.rank_tolerance * eig[-1]:
+        if not self._full_rank(scaled):
             return None, None
-        rhs = self.normal.rhs[keep]
-        cov = np.linalg.inv(scaled) * np.outer(scale, scale)
-        x = cov @ rhs
-        noise_var = max(self.normal.zz - float(x @ rhs), 0.0) / max(3 * self.normal.samples - len(keep), 1)
-        return x[n:], np.sqrt(noise_var * np.diag(cov)[n:])
+        x, sigma = self._fit(np.linalg.inv(scaled) * np.outer(scale, scale), self.normal.rhs[keep])
+        return x[n:], sigma[n:]
 
-    def _tilt_observable(self) -> bool:
-        scaled, _ = self.normal.scaled(5)
+    def _fit(self, cov: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The least-squares solution of the unknowns whose inverse normal matrix is ``cov`` and whose ``H^T z``
+        is ``rhs``, and its sigmas, with the noise level from the residual sum of squares."""
+        x = cov @ rhs
+        rss = max(self.normal.zz - float(x @ rhs), 0.0)
+        noise_var = rss / max(3 * self.normal.samples - len(rhs), 1)
+        return x, np.sqrt(noise_var * np.diag(cov))
+
+    def _full_rank(self, scaled: np.ndarray) -> bool:
+        """Whether a unit-diagonal normal matrix has no eigenvalue below ``rank_tolerance`` times its largest."""
         eig = symmetric_eigenvalues(scaled)
         return bool(eig[0] > self.rank_tolerance * eig[-1])
