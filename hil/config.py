@@ -18,6 +18,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 from hil.inputs import InputError
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
+MAX_READ_FRAMES = 50  # IMU frames a live read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 class ConfigError(InputError, ValueError):
     """A configuration that cannot be used; the message names the key path and the reason."""
@@ -259,7 +260,7 @@ class ImuConfig(_Model):
 class EstimatorConfig(_Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
-    batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples per estimator call (Config.block_samples)
+    batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples a block spans (Config.block_samples)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
 
 
@@ -331,6 +332,11 @@ class Config(_Model):
         """Samples the estimator takes at once: ``estimator.batch_samples``, else those of :data:`BLOCK_S` (an update
         costs about the same whatever its size: an IMU at 2 kHz is then as cheap to estimate as one at 200 Hz)."""
         return self.estimator.batch_samples or max(1, round(BLOCK_S * self.imu_rate_hz))
+
+    @property
+    def reads_per_block(self) -> int:
+        """Live reads a block is split into: at most :data:`MAX_READ_FRAMES` IMU frames a read."""
+        return math.ceil(self.block_samples / MAX_READ_FRAMES)
 
     @property
     def table_divider(self) -> int:

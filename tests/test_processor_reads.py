@@ -64,3 +64,51 @@ def test_a_read_beyond_the_duration_gives_the_estimator_the_trial_and_no_more():
     assert processor.complete and processor.trial_time == pytest.approx(5.0)
     processor.finish()  # what the aligner still held is beyond the end too
     assert processor.estimator.solution().samples == round(5.0 * RATE) and processor.trial_time == pytest.approx(5.0)
+
+
+def _reads(processor: TrialProcessor, imu: list, table: list, per_read: int, table_first: list[bool]) -> list[RawChunk]:
+    """Both streams' frames in reads of ``per_read`` samples, a read period's table read before its IMU read where
+    ``table_first`` says."""
+    out = []
+    for k, start in enumerate(range(0, len(imu), per_read)):
+        pair = [RawChunk(IMU, k, _frames(processor, IMU, imu[start:start + per_read])),
+                RawChunk(TABLE, k, _frames(processor, TABLE, table[start:start + per_read]))]
+        out += pair[::-1] if table_first[k % len(table_first)] else pair
+    return out
+
+
+def test_at_the_devices_speed_each_read_period_is_one_update_taken_by_the_read_that_aligns_it():
+    """Reads of a block each (the live default): whichever stream's read comes first, the read that aligns the
+    period's samples hands them all to the estimator at once, and none waits for the next read."""
+    processor, imu, table = _trial(None, 1.0)
+    block = processor.cfg.block_samples
+    reads = _reads(processor, imu, table, block, [False, True, True, False, True])
+    for k in range(0, len(reads), 2):
+        processor.feed(reads[k])
+        processor.feed(reads[k + 1])
+        assert processor.waiting == 0 and processor.updates == k // 2 + 1
+    assert processor.estimator.solution().samples == len(imu)
+
+
+def test_a_read_that_completes_only_a_few_samples_leaves_them_for_the_next():
+    processor, imu, table = _trial(None, 1.0)
+    block = processor.cfg.block_samples  # 5 at 100 Hz: a read aligning 2 or more is taken
+    processor.feed(RawChunk(IMU, 0.0, _frames(processor, IMU, imu[:block])))
+    processor.feed(RawChunk(TABLE, 0.0, _frames(processor, TABLE, table[:block - 1])))  # 4 aligned: taken
+    processor.feed(RawChunk(TABLE, 0.1, _frames(processor, TABLE, table[block - 1:block])))  # 1 more: it waits
+    assert (processor.updates, processor.waiting) == (1, 1)
+    processor.feed(RawChunk(IMU, 0.1, _frames(processor, IMU, imu[block:2 * block])))
+    processor.feed(RawChunk(TABLE, 0.1, _frames(processor, TABLE, table[block:2 * block])))
+    assert (processor.updates, processor.waiting) == (2, 0)
+
+
+def test_at_speed_max_the_result_does_not_depend_on_how_the_bytes_were_read():
+    results = []
+    for per_read, order in ((10, [False]), (7, [True, False]), (23, [False, True, True])):
+        processor, imu, table = _trial(None, None)
+        for chunk in _reads(processor, imu, table, per_read, order):
+            processor.feed(chunk)
+        processor.finish()
+        solution = processor.estimator.solution()
+        results.append((solution.samples, *solution.full.bias, *solution.full.bias_sigma, processor.updates))
+    assert results[0] == results[1] == results[2]

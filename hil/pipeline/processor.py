@@ -7,6 +7,7 @@ Samples that need no alignment (a simulation, a CSV of increments) enter after t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -83,6 +84,8 @@ class TrialProcessor:
         self._previous: tuple[float, np.ndarray | None] | None = None  # (t, angles) of the last sample taken
         self._block: list[AlignedBatch] = []  # aligned runs waiting for the estimator
         self._blocked = 0  # ... and their samples
+        # half of what a live read holds (at --speed max never: blocks): a read that completes fewer adds to the next
+        self._take_at = math.inf if time_scale is None else max(1, cfg.block_samples // (2 * cfg.reads_per_block))
         self._t_end = 0.0
         self.updates = 0  # blocks handed to the estimator
         self.estimator: OnlineEstimator | None = None
@@ -236,9 +239,18 @@ class TrialProcessor:
         return out
 
     def _estimate(self, ready: list[AlignedBatch | ImuGap], final: bool = False) -> None:
-        """Hand aligned samples to the estimator in blocks of ``Config.block_samples`` (a gap or the
-        end closes a block early): the block boundaries depend on the samples only, so a replay
-        updates the estimator exactly as the live run did."""
+        """Hand the samples one read has aligned to the estimator.
+
+        At the devices' speed the estimator takes every sample waiting once a read completes at least
+        half of what a live read holds (:attr:`_take_at`): each read period's samples are taken by the
+        read that aligns them, whichever stream's it is (the IMU's, or the table's that brings the
+        angles they wait for), and the few a read leaves waiting for a table frame still on the wire
+        join the next read's. So no sample waits for a block to fill, and the reads, recorded one
+        message each, decide the updates: a replay updates the estimator exactly as the live run did.
+        Otherwise (``--speed max``, where a read holds whatever has arrived, or a silent table) it takes
+        whole blocks of ``Config.block_samples``, whose boundaries depend on the samples alone: a run
+        at ``--speed max`` gives the same result bit for bit however its bytes were read. A gap or the
+        end closes a block early."""
         if self.estimator is None:
             if not ready:
                 return
@@ -249,26 +261,30 @@ class TrialProcessor:
             last = ready[-1]
             self._t_end = float(last.t[-1]) if isinstance(last, AlignedBatch) else last.t_end
         size = self.cfg.block_samples
+        take_all = final or sum(len(item) for item in ready if isinstance(item, AlignedBatch)) >= self._take_at
         for item in ready:
             if isinstance(item, AlignedBatch):
                 self._block.append(item)
                 self._blocked += len(item)
-                if self._blocked >= size:
-                    run = _joined(self._block)
-                    full = self._blocked // size * size
-                    for start in range(0, full, size):
-                        self._update(_part(run, start, start + size))
-                    self._block, self._blocked = [_part(run, full, len(run))], len(run) - full
+                if not take_all:
+                    self._take(self._blocked // size * size, size)
                 continue
-            self._update(_joined(self._block))
-            self._block, self._blocked = [], 0
+            self._take(self._blocked, self._blocked)
             self.bridged_without_table += not self.estimator.bridge(item)
             self.time_offset.restart()
             self._previous = None if item.angles_end is None else (item.t_end, np.asarray(item.angles_end))
-        if final:
-            self._update(_joined(self._block))
-            self._block, self._blocked = [], 0
+        if take_all:
+            self._take(self._blocked, self._blocked)
         self._snapshots_from(before)
+
+    def _take(self, n: int, block: int) -> None:
+        """The estimator takes the first ``n`` samples waiting, ``block`` at a time; the rest wait."""
+        if not n:
+            return
+        run = _joined(self._block)
+        for start in range(0, n, block):
+            self._update(_part(run, start, start + block))
+        self._block, self._blocked = [_part(run, n, len(run))] if n < len(run) else [], len(run) - n
 
     def _until_the_end(self, ready: list[AlignedBatch | ImuGap]) -> list[AlignedBatch | ImuGap]:
         """``ready`` up to the configured duration: one read can carry samples beyond it (they stay in the

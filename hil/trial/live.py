@@ -12,7 +12,6 @@ driver's buffers hold the bytes): nothing is lost, and the live result stays equ
 from __future__ import annotations
 
 import dataclasses
-import math
 import queue
 import threading
 import time
@@ -37,7 +36,6 @@ from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
-MAX_READ_FRAMES = 50  # IMU frames a read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
@@ -119,13 +117,11 @@ class LatencyStats:
 
 def read_period(cfg: Config) -> float:
     """s between the reads of a live trial's byte streams: one estimator block, or the largest whole fraction
-    of it that holds at most :data:`MAX_READ_FRAMES` IMU frames, so that the processing thread wakes once a
+    of it that holds at most :data:`~hil.config.MAX_READ_FRAMES` IMU frames, so that the processing thread wakes once a
     block or a few times (a thread woken from idle pays a fixed cost: 8.4 % of a core at 200 Hz with blocks
     of 50 ms read every 50 ms, against 13.9 % read every 20 ms, paired 30 s runs of
     benchmarks/live_harness.py); at least :data:`~drivers.reader.GATHER_S`."""
-    block_s = cfg.block_samples / cfg.imu_rate_hz
-    reads = math.ceil(cfg.block_samples / MAX_READ_FRAMES)  # reads a block
-    return max(block_s / reads, GATHER_S)
+    return max(cfg.block_samples / cfg.imu_rate_hz / cfg.reads_per_block, GATHER_S)
 
 
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
