@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from emulators.simulation import Simulation
 from hil.estimation.online import OnlineEstimator
 from hil.pipeline.aligner import Aligner, cumulative_cubic, lagrange_weights
-from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample
+from hil.samples import AlignedSample, ImuGap, ImuSample, TableSample, TableSamples
 from hil.units import DEG
 
 RATE = 200.0
@@ -22,6 +22,39 @@ def test_lagrange_weights_reproduce_a_cubic_on_uneven_knots():
     cubic = lambda x: 2 - x + 0.5 * x**2 - 0.3 * x**3  # noqa: E731
     for x in (0.2, 1.0, 2.49, 2.5):
         assert np.dot(lagrange_weights(x, knots), [cubic(k) for k in knots]) == pytest.approx(cubic(x), abs=1e-12)
+
+
+def test_lagrange_weights_of_many_instants_are_those_of_each():
+    rng = np.random.default_rng(3)
+    knots = np.sort(rng.uniform(0.0, 1.0, (50, 4)), axis=1)
+    x = rng.uniform(0.0, 1.0, 50)
+    weights = lagrange_weights(x, knots)
+    assert weights.shape == (50, 4)
+    for k in range(50):
+        np.testing.assert_array_equal(weights[k], lagrange_weights(x[k], knots[k]))
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=1e-12)  # a constant is reproduced
+
+
+@pytest.mark.parametrize("order", ["one read", "in order", "shuffled"])
+def test_table_angles_across_the_wrap_are_unwrapped_by_whole_turns_in_any_order(order):
+    """An outer axis turning through 180 deg, reported wrapped to [-180, 180): the aligner's angles are the
+    continuous ones, the received angle moved by whole turns, whatever order the samples came in."""
+    aligner = Aligner(RATE, RATE)
+    k = np.arange(1, 41)
+    continuous = np.column_stack((np.radians(150.0 + 2.0 * k), np.zeros(40), np.full(40, 0.1)))
+    wrapped = (continuous + math.pi) % (2 * math.pi) - math.pi
+    rows = np.random.default_rng(1).permutation(40) if order == "shuffled" else np.arange(40)
+    first = np.argsort(rows)[0]  # the knot every turn count goes back to
+    samples = [TableSample(int(k[row]), tuple(wrapped[row])) for row in rows]
+    if order == "one read":
+        aligner.add_tables(TableSamples.stack(samples))
+    for sample in samples if order != "one read" else ():
+        aligner.add_table(sample)
+    knots = aligner._table
+    np.testing.assert_array_equal(knots.index, k)
+    np.testing.assert_allclose(knots.angles, continuous - continuous[first] + wrapped[first], atol=1e-12)
+    turns = (knots.angles - wrapped) / (2 * math.pi)
+    np.testing.assert_array_equal(turns, np.round(turns))
 
 
 def test_cumulative_cubic_recovers_the_increments_hidden_by_a_gap():

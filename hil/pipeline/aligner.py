@@ -32,9 +32,8 @@ placed on the IMU's time line through both fits (accuracy set by the host's rece
 
 from __future__ import annotations
 
-import bisect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,17 +44,19 @@ Vec3 = tuple[float, float, float]
 Released = AlignedBatch | ImuGap
 
 
-def lagrange_weights(x, knots) -> list:
-    """Weights w_j with ``p(x) = sum w_j y_j`` for the polynomial through (knots, y); ``x`` (N,) with
-    ``knots`` (N, m) gives weights (N,) each."""
-    columns = knots if np.ndim(knots) == 1 else np.asarray(knots).T
-    weights = []
-    for j, xj in enumerate(columns):
-        w = 1.0
-        for m, xm in enumerate(columns):
-            if m != j:
-                w *= (x - xm) / (xj - xm)
-        weights.append(w)
+def lagrange_weights(x, knots) -> np.ndarray:
+    """Weights w_j with ``p(x) = sum_j w_j y_j`` for the polynomial through (knots, y): (m,) for a number ``x``
+    and knots (m,), (N, m) for ``x`` (N,) and knots (N, m). ``w_j = prod_{i != j} (x - x_i) / (x_j - x_i)``,
+    its factors multiplied in the order of i, for all j at once."""
+    knots = np.asarray(knots, dtype=float)
+    m = knots.shape[-1]
+    diagonal = np.eye(m, dtype=bool)
+    ratio = (np.asarray(x, dtype=float)[..., None, None] - knots[..., None, :]) / (
+        knots[..., :, None] - knots[..., None, :] + diagonal)  # [..., j, i]; 1 on the diagonal, never read
+    ratio[..., diagonal] = 1.0  # w_j has no factor for i = j: times 1.0, exactly
+    weights = np.ones(ratio.shape[:-1])
+    for i in range(m):
+        weights *= ratio[..., i]
     return weights
 
 
@@ -77,26 +78,48 @@ class AlignerCounters:
         return dict(self.__dict__)
 
 
-@dataclass
 class _TableKnots:
-    """Table samples sorted by count, with angles unwrapped against their neighbours."""
+    """Table samples sorted by count, with their angles unwrapped: each is moved by the whole turns that bring
+    it nearest the sample before it (the first one nearest the first), counted from the angles as received."""
 
-    index: list[int] = field(default_factory=list)
-    time: list[float] = field(default_factory=list)
-    angles: list[np.ndarray] = field(default_factory=list)
+    def __init__(self) -> None:
+        self.index = np.zeros(0, dtype=np.int64)
+        self.time = np.zeros(0)
+        self.angles = np.zeros((0, 3))  # unwrapped, rad
+        self._received = np.zeros((0, 3))  # the angles as received
+        self._turns = np.zeros((0, 3))  # whole turns added to them
 
-    def insert(self, index: int, time: float, angles: np.ndarray) -> bool:
-        """Add a sample; False if its count is already present."""
-        i = bisect.bisect_left(self.index, index)
-        if i < len(self.index) and self.index[i] == index:
-            return False
-        if self.angles:
-            ref = self.angles[i - 1] if i > 0 else self.angles[0]
-            angles = ref + (angles - ref + math.pi) % (2.0 * math.pi) - math.pi
-        self.index.insert(i, index)
-        self.time.insert(i, time)
-        self.angles.insert(i, angles)
-        return True
+    def insert(self, index: np.ndarray, time: np.ndarray, angles: np.ndarray) -> int:
+        """Add samples: counts (m,), times (m,) and angles (m, 3); returns how many were already present
+        (dropped). Samples in order after the last are added at once, others one by one."""
+        if not len(index):
+            return 0
+        if (not len(self.index) or index[0] > self.index[-1]) and (np.diff(index) > 0).all():
+            received = np.vstack((self._received[-1:], angles))
+            steps = np.round((received[:-1] - received[1:]) / (2.0 * math.pi))
+            turns = np.cumsum(np.vstack((self._turns[-1:] if len(self.index) else np.zeros((1, 3)), steps)), axis=0)
+            self._add(len(self.index), index, time, angles, turns[-len(index):])
+            return 0
+        duplicates = 0
+        for k, t, a in zip(index.tolist(), time.tolist(), angles, strict=True):
+            i = int(np.searchsorted(self.index, k))
+            if i < len(self.index) and self.index[i] == k:
+                duplicates += 1
+                continue
+            ref = i - 1 if i > 0 else 0
+            turns = (self._turns[ref] + np.round((self._received[ref] - a) / (2.0 * math.pi)) if len(self.index)
+                     else np.zeros(3))
+            self._add(i, np.array([k]), np.array([t]), a[None], turns[None])
+        return duplicates
+
+    def _add(self, i: int, index: np.ndarray, time: np.ndarray, received: np.ndarray, turns: np.ndarray) -> None:
+        """Put samples in before position i."""
+        def put(old: np.ndarray, new: np.ndarray) -> np.ndarray:
+            return np.concatenate((old[:i], new, old[i:]))
+
+        self.index, self.time = put(self.index, index), put(self.time, time)
+        self.angles = put(self.angles, received + 2.0 * math.pi * turns)
+        self._received, self._turns = put(self._received, received), put(self._turns, turns)
 
     def ready(self, t: np.ndarray) -> np.ndarray:
         """Per instant, True when the knots :meth:`at` uses for it have all arrived."""
@@ -104,21 +127,22 @@ class _TableKnots:
         return (i < len(self.time)) & (len(self.time) >= 4)
 
     def last_time(self) -> float:
-        return self.time[-1] if self.time else -math.inf
+        return float(self.time[-1]) if len(self.time) else -math.inf
 
     def forget_before(self, t: float, keep: int = 4) -> None:
         """Drop knots no longer needed for instants at or after ``t``."""
-        i = max(0, bisect.bisect_left(self.time, t) - keep)
+        i = max(0, int(np.searchsorted(self.time, t, side="left")) - keep)
         if i:
-            del self.index[:i], self.time[:i], self.angles[:i]
+            self.index, self.time, self.angles = self.index[i:], self.time[i:], self.angles[i:]
+            self._received, self._turns = self._received[i:], self._turns[i:]
 
     def at(self, t: np.ndarray, max_gap: float) -> np.ndarray:
         """Angles (N, 3) at instants ``t`` (N,) from the cubic on the 4 knots ending at the first knot >= t
         (the first four at the start); NaN across a gap longer than ``max_gap`` or beyond the last knot."""
         out = np.full((len(t), 3), np.nan)
-        if not self.time or not len(t):
+        time = self.time
+        if not len(time) or not len(t):
             return out
-        time = np.asarray(self.time)
         i = np.searchsorted(time, t, side="left")
         inside = i < len(time)
         ic = np.minimum(i, len(time) - 1)
@@ -128,10 +152,10 @@ class _TableKnots:
             return out
         lo = np.maximum(0, i[ok] - 3)[:, None] + np.arange(min(len(time), 4))  # at the start, the first 4
         weights = lagrange_weights(t[ok], time[lo])
-        knots = np.asarray(self.angles)[lo]
+        knots = self.angles[lo]
         value = 0
-        for j, w in enumerate(weights):
-            value = value + w[:, None] * knots[:, j]
+        for j in range(lo.shape[1]):
+            value = value + weights[:, j, None] * knots[:, j]
         out[ok] = value
         return out
 
@@ -218,20 +242,21 @@ class Aligner:
     def add_tables(self, samples: TableSamples) -> list[Released]:
         """Take the table samples of one read; returns what became ready."""
         times = samples.sync_index * self.table_count_period + samples.latch_delay
-        for count, t, angles, delay, host_time in zip(samples.sync_index.tolist(), times.tolist(), samples.angles,
-                                                      samples.latch_delay.tolist(), samples.host_time.tolist(),
-                                                      strict=True):
-            if self.clocks is not None:
-                imu, table = self.clocks
+        mapped = np.ones(len(times), dtype=bool)
+        if self.clocks is not None:
+            imu, table = self.clocks
+            for j, (count, delay, host_time) in enumerate(zip(samples.sync_index.tolist(), samples.latch_delay.tolist(),
+                                                              samples.host_time.tolist(), strict=True)):
                 table.add(count, host_time)
                 if not imu.ready:
-                    self.counters.table_unmapped += 1
+                    mapped[j] = False
                     continue
                 # the table's latch instant on the host clock, then as an IMU count, then on the IMU time line
                 host = table.time(count) + delay
-                t = (host - imu.time(0)) / imu.period * self.imu_period
-            if not self._table.insert(count, t, angles):
-                self.counters.table_duplicates += 1
+                times[j] = (host - imu.time(0)) / imu.period * self.imu_period
+            self.counters.table_unmapped += int(np.count_nonzero(~mapped))
+        self.counters.table_duplicates += self._table.insert(samples.sync_index[mapped], times[mapped],
+                                                             samples.angles[mapped])
         return self._release()
 
     def flush(self) -> list[Released]:
