@@ -3,7 +3,8 @@
 Runs the default emulated trial (emulated devices in their own process) through the harness in
 this process and prints: CPU time of this process over the trial (share of one core), the frames
 dropped and counted corrupt, the chunk-arrival -> estimator-updated latency and age p50/p99/max, the
-resident memory every minute, and the machine's load average before and after (the machine is shared).
+frame age (from a sample's pulse, which the chunk ages leave out: the time its frame waited in the port
+for the read), the resident memory every minute, and the machine's load average before and after (the machine is shared).
 ``--imu-rate`` runs the IMU faster than the table (1000 or 2000 Hz: one pulse train at the IMU rate,
 the table latching every n-th pulse at ``trial.rate_hz``).
 
@@ -14,6 +15,7 @@ the table latching every n-th pulse at ``trial.rate_hz``).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import tempfile
@@ -21,6 +23,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from emulators.process import spawn_emulator
@@ -48,6 +51,25 @@ def thread_cpu() -> dict[str, float]:
     return out
 
 
+class FrameAges:
+    """How old the oldest sample is when the estimator takes it, counted from the moment the emulator wrote its
+    frame (the emulator's clock start, from its stats, places its ticks on this host's monotonic clock): what
+    the chunk ages leave out is the time the frame waited in the port for the read."""
+
+    def __init__(self) -> None:
+        self.updates: list[tuple[float, float]] = []  # (monotonic time, trial time of the oldest sample taken)
+
+    def on_samples(self, t: np.ndarray, *_: np.ndarray) -> None:
+        self.updates.append((time.monotonic(), float(t[0])))
+
+    def percentiles_ms(self, started: float, t0: float, delay: float) -> tuple[float, float, float]:
+        """p50, p99 and max (ms) given the emulator's clock start (monotonic), the estimator's t0 and the
+        IMU's latch delay (s): the sample of sync count k, at trial time k / rate + delay, was written at
+        started + k / rate."""
+        now, t = np.array(self.updates).T
+        return tuple(1e3 * np.percentile(now - (started + t + t0 - delay), [50, 99, 100]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0)
@@ -69,8 +91,11 @@ def main() -> None:
         cfg = load_config(config)
         if args.batch is not None:
             cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
-        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration)
-        trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None)
+        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration,
+                                         stats_file=out / "emulator.json")
+        frames = FrameAges()
+        trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None,
+                          on_samples=frames.on_samples)
         memory: list[tuple[float, float]] = []
         stop = threading.Event()
 
@@ -107,6 +132,10 @@ def main() -> None:
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
         print("chunk arrival -> estimate updated, ms (latency: from the chunk completing a block; age: from the "
               "chunk that completed its oldest sample): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
+        started = json.loads((out / "emulator.json").read_text())["started"]
+        ages = frames.percentiles_ms(started, trial.processor.estimator.t0, cfg.imu.latch_delay_us * 1e-6)
+        print("frame written -> estimate updated, ms (the oldest sample taken, its wait in the port included): "
+              "p50 {:.2f}, p99 {:.2f}, max {:.2f}".format(*ages))
         threads.update(thread_cpu())
         print("CPU by thread, s (to its last second): " + ", ".join(f"{name} {s:.2f}" for name, s in sorted(threads.items())))
         print("resident memory (trial s, MiB): " + ", ".join(f"({t:.0f}, {m:.1f})" for t, m in memory))

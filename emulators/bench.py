@@ -58,6 +58,7 @@ class EmulatorStats:
     table_commands: dict[str, int] = field(default_factory=dict)  # acl commands received, by header
     table_modes_off: int = 0  # ``:Mode ALL,Off`` commands the table accepted
     table_modes: str = ""  # the table's modes at the end (``:Mode? ALL``: inner, middle, outer)
+    started: float | None = None  # time.monotonic() of trial time 0 when paced: trial time t was due at started + t / speed
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -189,11 +190,13 @@ class Bench:
                 pulses = max(pulses, emission.tick)
         return pulses
 
-    def stats(self, pulses: int, elapsed: float, stopped: bool) -> EmulatorStats:
-        """The run so far: ``pulses`` emitted in ``elapsed`` s, and whether it was ``stopped`` early."""
+    def stats(self, pulses: int, elapsed: float, stopped: bool, started: float | None = None) -> EmulatorStats:
+        """The run so far: ``pulses`` emitted in ``elapsed`` s, whether it was ``stopped`` early, and when its
+        paced clock ``started`` (monotonic)."""
         commands = self.server.responder
         return EmulatorStats(pulses, elapsed, stopped, {
             name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50),
                               w.latency.percentile_ms(99), w.lost_unread)
             for name, w in self.writers.items()},
-            dict(commands.received), commands.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text)
+            dict(commands.received), commands.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text,
+            started)

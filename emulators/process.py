@@ -82,12 +82,12 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
             for port in bench.ports.values():
                 port.drain(stop, math.inf if hold else DRAIN_S)
             elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
-            stats = bench.stats(pulses, elapsed, stopped)
+            stats = bench.stats(pulses, elapsed, stopped, clock.due(0.0))
             if hold:
                 if stats_file is not None:
                     _write_json(stats_file, stats.as_dict())  # tells that the pulse train has ended
                 stop.wait()
-                stats = bench.stats(pulses, elapsed, stopped)  # with the commands received meanwhile
+                stats = bench.stats(pulses, elapsed, stopped, clock.due(0.0))  # with the commands received meanwhile
             if stats_file is not None:
                 _write_json(stats_file, stats.as_dict())
             return stats
