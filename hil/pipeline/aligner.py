@@ -78,6 +78,11 @@ class AlignerCounters:
         return dict(self.__dict__)
 
 
+def _whole_turns(reference: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """The whole turns that bring ``angles`` nearest ``reference`` (rad, elementwise)."""
+    return np.round((reference - angles) / (2.0 * math.pi))
+
+
 class _TableKnots:
     """Table samples sorted by count, with their angles unwrapped: each is moved by the whole turns that bring
     it nearest the sample before it (the first one nearest the first), counted from the angles as received."""
@@ -96,7 +101,7 @@ class _TableKnots:
             return 0
         if (not len(self.index) or index[0] > self.index[-1]) and (np.diff(index) > 0).all():
             received = np.vstack((self._received[-1:], angles))
-            steps = np.round((received[:-1] - received[1:]) / (2.0 * math.pi))
+            steps = _whole_turns(received[:-1], received[1:])
             turns = np.cumsum(np.vstack((self._turns[-1:] if len(self.index) else np.zeros((1, 3)), steps)), axis=0)
             self._add(len(self.index), index, time, angles, turns[-len(index):])
             return 0
@@ -107,8 +112,7 @@ class _TableKnots:
                 duplicates += 1
                 continue
             ref = i - 1 if i > 0 else 0
-            turns = (self._turns[ref] + np.round((self._received[ref] - a) / (2.0 * math.pi)) if len(self.index)
-                     else np.zeros(3))
+            turns = self._turns[ref] + _whole_turns(self._received[ref], a) if len(self.index) else np.zeros(3)
             self._add(i, np.array([k]), np.array([t]), a[None], turns[None])
         return duplicates
 
