@@ -90,9 +90,13 @@ class _TableKnots:
     def __init__(self) -> None:
         self.index = np.zeros(0, dtype=np.int64)
         self.time = np.zeros(0)
-        self.angles = np.zeros((0, 3))  # unwrapped, rad
-        self._received = np.zeros((0, 3))  # the angles as received
+        self._received = np.zeros((0, 3))  # the angles as received, rad
         self._turns = np.zeros((0, 3))  # whole turns added to them
+
+    @property
+    def angles(self) -> np.ndarray:
+        """The unwrapped angles (n, 3), rad."""
+        return self._received + 2.0 * math.pi * self._turns
 
     def insert(self, index: np.ndarray, time: np.ndarray, angles: np.ndarray) -> int:
         """Add samples: counts (m,), times (m,) and angles (m, 3); returns how many were already present
@@ -122,7 +126,6 @@ class _TableKnots:
             return np.concatenate((old[:i], new, old[i:]))
 
         self.index, self.time = put(self.index, index), put(self.time, time)
-        self.angles = put(self.angles, received + 2.0 * math.pi * turns)
         self._received, self._turns = put(self._received, received), put(self._turns, turns)
 
     def ready(self, t: np.ndarray) -> np.ndarray:
@@ -137,7 +140,7 @@ class _TableKnots:
         """Drop knots no longer needed for instants at or after ``t``."""
         i = max(0, int(np.searchsorted(self.time, t, side="left")) - keep)
         if i:
-            self.index, self.time, self.angles = self.index[i:], self.time[i:], self.angles[i:]
+            self.index, self.time = self.index[i:], self.time[i:]
             self._received, self._turns = self._received[i:], self._turns[i:]
 
     def at(self, t: np.ndarray, max_gap: float) -> np.ndarray:
