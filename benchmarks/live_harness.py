@@ -3,8 +3,8 @@
 Runs the default emulated trial (emulated devices in their own process) through the harness in
 this process and prints: CPU time of this process over the trial (share of one core), the frames
 dropped and counted corrupt, the chunk-arrival -> estimator-updated latency and age p50/p99/max, the
-frame age (from a sample's pulse, which the chunk ages leave out: the time its frame waited in the port
-for the read), the resident memory every minute, and the machine's load average before and after (the machine is shared).
+frame age (from the moment the emulator wrote the oldest sample's frame: the chunk ages leave out the
+time it waited in the port for the read), the resident memory every minute, and the machine's load average before and after (the machine is shared).
 ``--imu-rate`` runs the IMU faster than the table (1000 or 2000 Hz: one pulse train at the IMU rate,
 the table latching every n-th pulse at ``trial.rate_hz``).
 
