@@ -146,6 +146,10 @@ class CanDbcCodec(Codec[CanImuFrame]):
                          (r.accel[0] * s[3], r.accel[1] * s[4], r.accel[2] * s[5]), decoded.host_time, None,
                          r.status)
 
+    @property
+    def counter_modulus(self) -> int | None:
+        return self.sync_modulus
+
     def from_sample(self, sample: ImuSample) -> CanImuFrame:
         s = self.scales
         counter = sample.sync_index % self.sync_modulus if self.sync_modulus else None

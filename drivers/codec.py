@@ -128,6 +128,11 @@ class Codec(ABC, Generic[R]):
     def from_sample(self, sample: Any, **device_fields: Any) -> R:
         """A record carrying an SI sample (device-only fields such as temperature as keywords)."""
 
+    @property
+    def counter_modulus(self) -> int | None:
+        """What the frames' sync counter counts modulo (None: the frames carry none)."""
+        return None
+
     @abstractmethod
     def csv_header(self) -> list[str]:
         """Column names of :meth:`csv_row`, unit in each name; ``sync_index`` is added in front."""

@@ -176,6 +176,10 @@ class ByteCodec(Codec[R]):
     sequence_step: int = 1  # counter steps between consecutive frames
     rate_hz: float | None = None
 
+    @property
+    def counter_modulus(self) -> int | None:
+        return self.sequence_modulus
+
     @abstractmethod
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         """Total lengths (int64) of the frames whose headers (``header_size`` bytes, all present) start at

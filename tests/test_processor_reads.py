@@ -1,6 +1,7 @@
-"""Reads as the processor meets them: a table stream that lags the IMU's (at the devices' own speed the IMU
-goes on without it after the wait; at --speed max the table is behind, not silent, and every sample keeps its
-angles), and one read that carries samples beyond the trial's duration."""
+"""Reads as the processor meets them: a table stream that falls behind the IMU's once both are paired (at the
+devices' own speed a table silent for longer than the wait is left behind, and the IMU goes on without it; at
+--speed max the table is behind, not silent, and every sample keeps its angles), and one read that carries
+samples beyond the trial's duration."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from hil.pipeline.processor import IMU, TABLE, TABLE_WAIT_S, TrialProcessor, tab
 from hil.samples import ImuSample, TableSample
 
 RATE = 100.0
-LAG_S = 20.0  # the table's bytes arrive this much trial time after the IMU's
+LAG_S = 20.0  # the table's bytes arrive this much trial time after the IMU's ...
+LAG_FROM_S = 5.0  # ... from this time on
 
 
 def _frames(processor: TrialProcessor, stream: str, samples) -> bytes:
@@ -31,16 +33,21 @@ def _trial(duration: float | None, time_scale: float | None) -> tuple[TrialProce
 
 
 def _lagging_trial(time_scale: float | None) -> dict:
+    """At the devices' speed the table is silent from LAG_FROM_S for LAG_S (its frames of that time are lost);
+    at --speed max its frames from LAG_FROM_S on arrive LAG_S late."""
     processor, imu, table = _trial(60.0, time_scale)
     n = len(imu)
-    lag, step = round(LAG_S * RATE), 50  # reads of half a second each
+    lag, step, lag_from = round(LAG_S * RATE), 50, round(LAG_FROM_S * RATE)  # reads of half a second each
     t = 0.0
     for start in range(0, n + lag, step):
         t += step / RATE / (time_scale or 10.0)
         if start < n:
             processor.feed(RawChunk("imu", t, _frames(processor, IMU, imu[start:start + step])))
-        if start >= lag:
-            processor.feed(RawChunk("table", t, _frames(processor, TABLE, table[start - lag:start - lag + step])))
+        late = start - lag if start >= lag_from + lag else None if start >= lag_from else start
+        if time_scale is not None:
+            late = start if start < lag_from or start >= lag_from + lag else None
+        if late is not None and late < n:
+            processor.feed(RawChunk("table", t, _frames(processor, TABLE, table[late:late + step])))
     processor.finish()
     return processor.streams().extra
 
@@ -71,8 +78,9 @@ def _reads(processor: TrialProcessor, imu: list, table: list, per_read: int, tab
     ``table_first`` says."""
     out = []
     for k, start in enumerate(range(0, len(imu), per_read)):
-        pair = [RawChunk(IMU, k, _frames(processor, IMU, imu[start:start + per_read])),
-                RawChunk(TABLE, k, _frames(processor, TABLE, table[start:start + per_read]))]
+        at = (start + per_read) / RATE  # the host's clock at the devices' speed
+        pair = [RawChunk(IMU, at, _frames(processor, IMU, imu[start:start + per_read])),
+                RawChunk(TABLE, at, _frames(processor, TABLE, table[start:start + per_read]))]
         out += pair[::-1] if table_first[k % len(table_first)] else pair
     return out
 
@@ -83,23 +91,31 @@ def test_at_the_devices_speed_each_read_period_is_one_update_taken_by_the_read_t
     processor, imu, table = _trial(None, 1.0)
     block = processor.cfg.block_samples
     reads = _reads(processor, imu, table, block, [False, True, True, False, True])
+    updates = 0
     for k in range(0, len(reads), 2):
         processor.feed(reads[k])
         processor.feed(reads[k + 1])
-        assert processor.waiting == 0 and processor.updates == k // 2 + 1
+        if updates:  # paired (the reads before waited for the pairing, and were taken at once)
+            assert processor.waiting == 0 and processor.updates == updates + 1
+        updates = processor.updates
     assert processor.estimator.solution().samples == len(imu)
 
 
 def test_a_read_that_completes_only_a_few_samples_leaves_them_for_the_next():
     processor, imu, table = _trial(None, 1.0)
     block = processor.cfg.block_samples  # 5 at 100 Hz: a read aligning 2 or more is taken
-    processor.feed(RawChunk(IMU, 0.0, _frames(processor, IMU, imu[:block])))
-    processor.feed(RawChunk(TABLE, 0.0, _frames(processor, TABLE, table[:block - 1])))  # 4 aligned: taken
-    processor.feed(RawChunk(TABLE, 0.1, _frames(processor, TABLE, table[block - 1:block])))  # 1 more: it waits
-    assert (processor.updates, processor.waiting) == (1, 1)
-    processor.feed(RawChunk(IMU, 0.1, _frames(processor, IMU, imu[block:2 * block])))
-    processor.feed(RawChunk(TABLE, 0.1, _frames(processor, TABLE, table[block:2 * block])))
-    assert (processor.updates, processor.waiting) == (2, 0)
+    paired = round(2.0 * RATE)  # the first 2 s pair the streams
+    for chunk in _reads(processor, imu[:paired], table[:paired], block, [False]):
+        processor.feed(chunk)
+    updates, at = processor.updates, paired / RATE
+    assert updates and processor.waiting == 0
+    processor.feed(RawChunk(IMU, at + 0.05, _frames(processor, IMU, imu[paired:paired + block])))
+    processor.feed(RawChunk(TABLE, at + 0.05, _frames(processor, TABLE, table[paired:paired + block - 1])))  # 4: taken
+    processor.feed(RawChunk(TABLE, at + 0.06, _frames(processor, TABLE, table[paired + block - 1:paired + block])))
+    assert (processor.updates, processor.waiting) == (updates + 1, 1)  # 1 more: it waits
+    processor.feed(RawChunk(IMU, at + 0.1, _frames(processor, IMU, imu[paired + block:paired + 2 * block])))
+    processor.feed(RawChunk(TABLE, at + 0.1, _frames(processor, TABLE, table[paired + block:paired + 2 * block])))
+    assert (processor.updates, processor.waiting) == (updates + 2, 0)
 
 
 def test_at_speed_max_the_result_does_not_depend_on_how_the_bytes_were_read():

@@ -146,7 +146,10 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
     out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,
                         "frames with a bad checksum or framing"))  # fmt: skip
     for key, value in streams.items():
-        if key not in ("dropped", "corrupt"):
+        if key == "sync" and value:
+            out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
+                    for k, v in value.items()]
+        elif key not in ("dropped", "corrupt", "sync"):
             out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
     return out
 
@@ -162,6 +165,8 @@ def format_value(value) -> str:
         return "—"
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if isinstance(value, str):
+        return value
     if isinstance(value, int):
         return str(value)
     if not math.isfinite(value):

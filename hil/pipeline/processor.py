@@ -20,6 +20,7 @@ from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
 from hil.pipeline.aligner import Aligner
 from hil.pipeline.compensation import Compensation
+from hil.pipeline.motion_match import TableRotations
 from hil.pipeline.plausibility import (
     RATE_MARGIN,
     GyroTableGate,
@@ -27,11 +28,15 @@ from hil.pipeline.plausibility import (
     RejectionWatch,
     UnitKeys,
 )
+from hil.pipeline.sync_pairing import SyncPairing
 from hil.pipeline.time_offset import TimeOffsetEstimator
-from hil.samples import AlignedBatch, ImuGap, StreamCounts
+from hil.samples import AlignedBatch, ImuGap, ImuSample, ImuSamples, StreamCounts, TableSamples
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
+BITS_PER_BYTE = 10  # 8N1
+TTS1_BYTES = 24
+_PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
 TABLE_WAIT_S = 5.0  # s of the host's clock the IMU may run ahead of a silent table before it goes on without it
 UNPACED_TABLE_WAIT_S = 120.0  # s of trial time, at --speed max (see table_wait)
 
@@ -76,6 +81,7 @@ class TrialProcessor:
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
                                table_wait_s=table_wait(time_scale), free_running=free_running)
+        self.pairing = None if free_running else self._pairing(cfg, time_scale)
         max_rate = RATE_MARGIN * max(cfg.turntable.limits.rate_dps) * DEG
         self.plausibility = ImuPlausibility(cfg.imu_rate_hz, self.earth.g, max_rate)
         self.gate = GyroTableGate(self.earth, self.geometry)
@@ -101,6 +107,19 @@ class TrialProcessor:
         self._batched = 0  # samples fed as aligned batches
         self._batched_angles = 0  # ... of which with table angles
 
+    def _pairing(self, cfg: Config, time_scale: float | None) -> SyncPairing:
+        """The sync pairing of the two streams' counters (docs/harness.md, "Sync pairing")."""
+        codec = self.decoders[IMU].codec
+        rate = cfg.imu_rate_hz
+        frame = codec.encode(codec.from_sample(_PROBE))
+        imu_bytes = len(frame) if isinstance(frame, bytes) else 0  # a CAN frame's bus time is negligible
+        wire = (imu_bytes * BITS_PER_BYTE / cfg.imu.baudrate, TTS1_BYTES * BITS_PER_BYTE / cfg.turntable.baudrate)
+
+        def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
+            return TableRotations(self.geometry, self.earth, rate, cfg.table_counts_per_frame, counts, angles)
+
+        return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
+
     def feed(self, item: RawChunk | StreamEvent) -> None:
         """Process one chunk or event from any stream."""
         if self.complete:
@@ -112,10 +131,12 @@ class TrialProcessor:
             return
         if isinstance(item, StreamEvent):
             decoder.event(item)
+            if self.pairing is not None:
+                self.pairing.event(item.stream, item.event)
             return
         samples = decoder.feed(item)
         if item.stream == TABLE:
-            self._estimate(self.aligner.add_tables(samples))
+            self._align(*(self.pairing.add_table(samples) if self.pairing is not None else (samples, None)))
             return
         if self.compensation is not None:
             samples = self.compensation.samples(samples)
@@ -123,7 +144,13 @@ class TrialProcessor:
         if not good.all():
             self._rejected(self.plausibility, len(good) - int(good.sum()))
             samples = samples.take(good)
-        self._estimate(self.aligner.add_imus(samples))
+        self._align(*(self.pairing.add_imu(samples) if self.pairing is not None else (None, samples)))
+
+    def _align(self, table: TableSamples | None, imu: ImuSamples | None) -> None:
+        """Paired samples to the aligner (the table's first: the IMU's find their angles), its runs onwards."""
+        ready = self.aligner.add_tables(table) if table is not None else []
+        ready += self.aligner.add_imus(imu) if imu is not None else []
+        self._estimate(ready)
 
     def feed_batch(self, batch: AlignedBatch) -> None:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
@@ -156,8 +183,10 @@ class TrialProcessor:
 
     @property
     def stalled(self) -> str | None:
-        """Why every IMU sample has been rejected for the last ``STALL_S`` (naming the likely config key),
-        or None while samples reach the estimator."""
+        """Why every IMU sample has been rejected for the last ``STALL_S`` (naming the likely config key), or
+        why the streams cannot be paired, or None while samples reach the estimator."""
+        if self.pairing is not None and self.pairing.failure:
+            return self.pairing.failure
         if not self.watch.stalled or self._stalled_by is None:
             return None
         return (f"every IMU sample for {self.watch.run / self.cfg.imu_rate_hz:.1f} s was rejected: "
@@ -168,7 +197,10 @@ class TrialProcessor:
         self._stalled_by = by
 
     def finish(self) -> None:
-        """End of data: release what the aligner still holds."""
+        """End of data: release what the aligner still holds (the samples still waiting for a pairing are
+        unpaired)."""
+        if self.pairing is not None:
+            self.pairing.flush()
         self._estimate(self.aligner.flush(), final=True)
 
     @property
@@ -206,6 +238,7 @@ class TrialProcessor:
             "imu_inconsistent_with_table": self.gate.rejected,
             "imu_force_outliers": 0 if self.estimator is None else self.estimator.outliers,
             "table_missing": table.missing,
+            "imu_unpaired": 0 if self.pairing is None else self.pairing.report.unpaired,
             **{f"aligner_{k}": v for k, v in self.aligner.counters.as_dict().items()},
             "bridged_without_table": self.bridged_without_table,
             "chunks_after_end": self.after_end,
@@ -221,6 +254,7 @@ class TrialProcessor:
         if not self._batched:
             offset = self.time_offset.estimate() if self.estimator is not None else None
             counts.extra["sync_offset_ms"] = None if offset is None else offset * 1e3
+            counts.extra["sync"] = None if self.pairing is None else self.pairing.report.as_dict()
         return counts
 
     def health(self) -> dict[str, dict[str, float]]:

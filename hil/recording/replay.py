@@ -43,3 +43,11 @@ def open_recording(source: str | Path) -> tuple[RecordingReader, Config]:
     except BaseException:
         recording.close()
         raise
+
+
+def recorded_pace(recording: Recording | RecordingReader) -> tuple[float | None, float | None]:
+    """The recorded trial's duration (s, None: none) and its devices' speed (None: ``--speed max``), which a
+    replay's processor takes as the live one did (the receive times mean what they meant live)."""
+    duration = recording.metadata.get("duration_s")
+    scale = recording.metadata.get("time_scale", "1.0")
+    return float(duration) if duration else None, float(scale) if scale else None

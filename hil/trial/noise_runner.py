@@ -60,11 +60,11 @@ def simulated(cfg: Config) -> NoiseRecord:
 def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
     """The samples the estimator took in a replay of the recording, and the recorded config."""
     from hil.pipeline.processor import TrialProcessor
-    from hil.recording.replay import open_recording
+    from hil.recording.replay import open_recording, recorded_pace
 
     recording, cfg = open_recording(path)
     runs: list[tuple[np.ndarray, ...]] = []
-    processor = TrialProcessor(cfg, on_samples=lambda *arrays: runs.append(arrays))
+    processor = TrialProcessor(cfg, None, recorded_pace(recording)[1], on_samples=lambda *arrays: runs.append(arrays))
     with recording:
         for item in recording:
             processor.feed(item)

@@ -12,6 +12,7 @@ from hil.config import Config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
 from hil.recording.recorder import Recording, RecordingReader
+from hil.recording.replay import recorded_pace
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
@@ -46,11 +47,8 @@ def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer
                      ) -> TrialProcessor:
     """The finished processor of a recording's items fed in their order (and logged to ``viewer``); a
     :class:`~hil.recording.recorder.RecordingReader` is read item by item as they are fed."""
-    duration = recording.metadata.get("duration_s")
-    scale = recording.metadata.get("time_scale", "1.0")
     feed = ViewerFeed(viewer)
-    processor = TrialProcessor(cfg, float(duration) if duration else None, float(scale) if scale else None,
-                               feed.on_snapshot, feed.on_table)
+    processor = TrialProcessor(cfg, *recorded_pace(recording), feed.on_snapshot, feed.on_table)
     for item in recording:
         processor.feed(item)
     processor.finish()
