@@ -90,6 +90,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         from hil.trial.offline import run_simulation
 
         cfg, out = _trial_config(args)
+        cfg.emulated_only(args.config, "hil simulate")
         outcome = run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args), simulation)
         return _finish(args, *outcome, figures)
 
@@ -227,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
                                         "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
-    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, kind: swing|noise, "
+    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, kind: swing|noise|calibration, "
                                    "sweep: {dotted.key: [values]}}")
     p.add_argument("--scheduler", metavar="ADDR", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
                                        "127.0.0.1)")

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
+from hil.config_types import ZERO3, Model, Vec2, Vec3, Vec6
 from hil.inputs import InputError
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
@@ -24,40 +25,14 @@ class ConfigError(InputError, ValueError):
     """A configuration that cannot be used; the message names the key path and the reason."""
 
 
-def _vector(n: int):
-    def check(value: Any) -> Any:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            raise ValueError(f"expected {n} numbers, got a single number")
-        if not isinstance(value, (list, tuple)):
-            raise ValueError(f"expected a list of {n} numbers, got {type(value).__name__}")
-        if len(value) != n:
-            raise ValueError(f"expected {n} numbers, got {len(value)}")
-        for v in value:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"expected {n} finite numbers, got {v!r}")
-        return tuple(float(v) for v in value)
-
-    return BeforeValidator(check)
-
-
-Vec3 = Annotated[tuple[float, float, float], _vector(3)]
-Vec2 = Annotated[tuple[float, float], _vector(2)]
-Vec6 = Annotated[tuple[float, float, float, float, float, float], _vector(6)]
-ZERO3 = (0.0, 0.0, 0.0)
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")  # an inf survives JSON
-
-
-class TrialConfig(_Model):
+class TrialConfig(Model):
     name: str = "trial"
     duration_s: float | None = Field(None, gt=0)  # required for emulated trials; data files set their own
     rate_hz: float = Field(200.0, gt=0, le=10000)
     seed: int = 0
 
 
-class SiteConfig(_Model):
+class SiteConfig(Model):
     latitude_deg: float = Field(ge=-90, le=90)
     longitude_deg: float = Field(0.0, ge=-180, le=360)
     height_m: float = Field(0.0, ge=-1000, le=20000)
@@ -67,7 +42,7 @@ class SiteConfig(_Model):
     gravity_anomaly_mgal: float = Field(0.0, ge=-1000, le=1000)  # true minus normal gravity magnitude
 
 
-class AxisMotion(_Model):
+class AxisMotion(Model):
     """One gimbal's commanded motion: swing ``amplitude*sin(2*pi*t/period + phase) + center``, or a rate."""
 
     amplitude_deg: float = 0.0
@@ -83,7 +58,7 @@ class AxisMotion(_Model):
         return self
 
 
-class Position(_Model):
+class Position(Model):
     """A dwell position of the ``positions`` motion."""
 
     outer_deg: float = 0.0
@@ -92,13 +67,13 @@ class Position(_Model):
     dwell_s: float = Field(gt=0)
 
 
-class Axes(_Model):
+class Axes(Model):
     outer: AxisMotion = AxisMotion()
     middle: AxisMotion = AxisMotion()
     inner: AxisMotion = AxisMotion()
 
 
-class MotionConfig(_Model):
+class MotionConfig(Model):
     kind: Literal["swing", "static", "positions", "rate"] = "swing"
     axes: Axes = Axes()
     positions: list[Position] = []
@@ -112,7 +87,7 @@ class MotionConfig(_Model):
         return self
 
 
-class LimitsConfig(_Model):
+class LimitsConfig(Model):
     """Turntable limits per axis, ordered (outer, middle, inner)."""
 
     position_min_deg: Vec3 = (-180.0, -90.0, -180.0)
@@ -121,7 +96,7 @@ class LimitsConfig(_Model):
     accel_dps2: Vec3 = (100.0, 100.0, 100.0)
 
 
-class DeviceTiming(_Model):
+class DeviceTiming(Model):
     """How a device latches on the sync pulse and keeps its own time (emulated devices)."""
 
     latch_jitter_us: float = Field(0.0, ge=0)  # 1-sigma jitter of the latch instant about pulse + delay
@@ -129,7 +104,7 @@ class DeviceTiming(_Model):
     free_running: bool = False  # no sync input: the device latches on its own (drifting) clock
 
 
-class FaultConfig(_Model):
+class FaultConfig(Model):
     """Faults injected into one emulated device's output; all off by default. Rates are per frame."""
 
     drop_rate: float = Field(0.0, ge=0, le=1)  # probability that a drop burst starts at a frame
@@ -143,7 +118,7 @@ class FaultConfig(_Model):
     unplug_s: float = Field(0.0, ge=0)  # how long the device stays unplugged
 
 
-class TurntableConfig(_Model):
+class TurntableConfig(Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
     command_port: str | None = None
@@ -166,7 +141,7 @@ class TurntableConfig(_Model):
         return self
 
 
-class ImuErrors(_Model):
+class ImuErrors(Model):
     """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
 
     accel_bias_ug: Vec3 = ZERO3
@@ -188,7 +163,7 @@ class ImuErrors(_Model):
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
 
 
-class CanSignals(_Model):
+class CanSignals(Model):
     """Which DBC signals carry which quantity, as ``Message.Signal`` (x, y, z order).
 
     Each signal's DBC unit says what it is: an increment (rad, deg, m/s) or a rate (rad/s, deg/s,
@@ -201,7 +176,7 @@ class CanSignals(_Model):
     status: str | None = "Status"  # fault flags present in every message above (OR-ed), or None
 
 
-class CanConfig(_Model):
+class CanConfig(Model):
     """The IMU's python-can bus. The default, ``udp_multicast`` on python-can's IPv4 group (hop limit 0:
     never off this host), can be opened by another process; ``virtual`` only within one process."""
 
@@ -217,7 +192,7 @@ class CanConfig(_Model):
         return {"interface": self.interface, "channel": self.channel, "bitrate": self.bitrate}
 
 
-class Kvh1750Format(_Model):
+class Kvh1750Format(Model):
     """How the KVH 1750 itself is configured to output (its own settings, mirrored here)."""
 
     gyro_unit: Literal["rad", "deg"] = "rad"
@@ -225,7 +200,7 @@ class Kvh1750Format(_Model):
     accel_unit: Literal["g", "m/s^2"] = "g"
 
 
-class ImuConfig(_Model):
+class ImuConfig(Model):
     source: Literal["emulator", "serial", "can"] = "emulator"
     protocol: Literal["kvh1750", "xsens-mtdata2", "can-dbc"] = "kvh1750"
     port: str | None = None
@@ -257,14 +232,14 @@ class ImuConfig(_Model):
         return self
 
 
-class EstimatorConfig(_Model):
+class EstimatorConfig(Model):
     solve_rate_hz: float = Field(1.0, gt=0)  # how often the solution is formed (display rate)
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
     batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples a block spans (Config.block_samples)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
 
 
-class ReportLimits(_Model):
+class ReportLimits(Model):
     """Pass/fail limits of the trial report; a limit left out is not judged."""
 
     bias_sigma_ug_max: float | None = Field(None, gt=0)  # final 1-sigma of every bias axis
@@ -275,9 +250,13 @@ class ReportLimits(_Model):
     corrupt_max: int | None = Field(None, ge=0)  # corrupt frames in the streams
     calibration_residual_ug_max: float | None = Field(None, gt=0)  # |residual| at every calibration position
     calibration_error_sigma_max: float | None = Field(None, gt=0)  # |estimate - truth| / sigma, every term (emulated)
+    missing_max: float | None = Field(0.001, ge=0, le=1)  # fractions of the IMU samples filled or bridged, ...
+    gated_max: float | None = Field(0.001, ge=0, le=1)  # ... removed by the gyro/table gate, ...
+    without_angles_max: float | None = Field(0.001, ge=0, le=1)  # ... aligned without table angles
+    sync_offset_ms_max: float | None = Field(None, gt=0)  # |streams.sync_offset_ms|; default half an IMU period
 
 
-class CalibrationConfig(_Model):
+class CalibrationConfig(Model):
     """The multi-position calibration: dwell positions, rate plateaus and the terms to fit."""
 
     positions: Literal[18, 6] | list[Vec3] = 18  # the paper's 18 (or its 6 up/down) or (outer, middle, inner) deg
@@ -298,13 +277,13 @@ class CalibrationConfig(_Model):
         return self
 
 
-class OutputConfig(_Model):
+class OutputConfig(Model):
     dir: str | None = None
     figures: bool = True
     limits: ReportLimits = ReportLimits()
 
 
-class Config(_Model):
+class Config(Model):
     trial: TrialConfig
     site: SiteConfig
     turntable: TurntableConfig = TurntableConfig()
@@ -326,6 +305,20 @@ class Config(_Model):
     def imu_rate_hz(self) -> float:
         """The rate of the sync pulse train (and of the IMU's samples)."""
         return self.imu.rate_hz or self.trial.rate_hz
+
+    def emulated_only(self, source: str, command: str) -> None:
+        """Raise :class:`ConfigError` when a device is read from a port (``command`` would simulate it)."""
+        for key, value in (("imu.source", self.imu.source), ("turntable.source", self.turntable.source)):
+            if value != "emulator":
+                raise ConfigError(f"{source}: {key}: {value}: {command} emulates the devices; a config that reads "
+                                  f"devices runs with hil run, hil calibrate or hil noise")
+
+    @property
+    def limits(self) -> ReportLimits:
+        """``output.limits`` as judged: ``sync_offset_ms_max`` defaults to half an IMU period."""
+        limits = self.output.limits
+        default = {"sync_offset_ms_max": 500.0 / self.imu_rate_hz} if limits.sync_offset_ms_max is None else {}
+        return limits.model_copy(update=default)
 
     @property
     def block_samples(self) -> int:
@@ -386,5 +379,7 @@ def load_config(path: str | Path) -> Config:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+        raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
     return parse_config(data, str(path))

@@ -203,3 +203,11 @@ def test_the_shipped_example_sweeps_amplitude_and_duration_of_the_papers_swing()
     assert len(campaign.points) == 4 and len(campaign.tasks) == 4 * campaign.spec.runs
     assert {tuple(p) for p in campaign.points} == {("turntable.motion.axes.inner.amplitude_deg", "trial.duration_s")}
     assert campaign.tasks[0].config["imu"]["errors"]["accel_noise_ug"] == [50, 50, 50]
+
+
+def test_a_base_that_reads_devices_is_refused_in_one_line_before_any_run(tmp_path):
+    proc = _campaign_cli(str(_spec(tmp_path, {"imu.source": ["serial"], "imu.port": ["/dev/ttyUSB0"]})), "--out", "o",
+                         cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+    assert "imu.source: serial: hil campaign emulates the devices" in proc.stderr
+    assert not (tmp_path / "o").exists()

@@ -3,6 +3,7 @@ import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -200,3 +201,20 @@ def test_unusable_capture_or_recording_is_one_line_and_exit_2(bad_inputs, capsys
     assert captured.err.startswith("hil: error: ") and captured.err.count("\n") == 1
     assert named in captured.err and reason in captured.err
     assert captured.out == ""
+
+
+def test_simulate_refuses_a_config_that_reads_devices_in_one_line(tmp_path, capsys):
+    lab = Path(__file__).resolve().parents[1] / "configs" / "lab_swing.yaml"
+    assert main(["simulate", str(lab), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "lab_swing.yaml: imu.source: serial: hil simulate emulates the devices" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_campaign_help_lists_every_kind(capsys):
+    from hil.campaign.kinds import KINDS
+
+    with pytest.raises(SystemExit):
+        main(["campaign", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "kind: " + "|".join(KINDS) in text

@@ -1,3 +1,4 @@
+import re
 from importlib.resources import files
 from pathlib import Path
 
@@ -101,3 +102,12 @@ def test_an_imu_rate_that_is_not_a_multiple_of_the_table_rate_is_rejected(imu_ra
 def test_the_estimator_takes_50_ms_of_samples_at_once_unless_batch_samples_says(imu_rate, batch, block):
     data = {**MINIMAL, "imu": {"rate_hz": imu_rate}, "estimator": {"batch_samples": batch}}
     assert parse_config(data).block_samples == block
+
+
+def test_a_yaml_syntax_error_is_one_line_with_file_line_and_column(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("trial: {name: x, duration_s: 10\nsite: {latitude_deg: 32}\n")  # the brace is never closed
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    message = str(caught.value)
+    assert "\n" not in message and re.match(rf"{re.escape(str(path))}:2:5: not valid YAML: ", message), message

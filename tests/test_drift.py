@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from emulators.simulation import Simulation
-from hil.estimation.apparent_gravity import N_DRIFT, ApparentGravityEstimator
+from hil.estimation.apparent_gravity import DRIFT_FLOOR, N_DRIFT, ApparentGravityEstimator
 from hil.estimation.convergence import BIAS_TOLERANCE, convergence_time
 from hil.estimation.online import OnlineEstimator
 from hil.estimation.online import convergence_time as online_convergence_time
@@ -130,6 +130,15 @@ def test_constant_model_flags_an_unmodelled_drift(drifting_trial):
 def test_drift_check_is_quiet_without_drift():
     final = run(make_config(duration=800, rate=50, errors=PAPER_ERRORS, seed=5), "constant").solution()
     assert not final.drift_check.significant
+
+
+def test_a_noise_free_trial_is_not_called_drifting_on_the_arithmetic_floor():
+    """Without noise the drift's sigma is the arithmetic's (~1e-9 ug/h): the drift it finds is of the same
+    order and must not be called significant."""
+    final = run(make_config(duration=300, rate=50, errors={"accel_bias_ug": [60, 150, 260]}), "constant").solution()
+    assert np.all(final.drift_check.sigma < DRIFT_FLOOR) and not final.drift_check.significant
+    drifting = {"accel_bias_ug": [60, 150, 260], "accel_drift_ug_per_h": [0, 0, 0.5]}
+    assert run(make_config(duration=300, rate=50, errors=drifting), "constant").solution().drift_check.significant
 
 
 def test_static_trial_reports_drift_unobservable():

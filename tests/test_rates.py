@@ -28,7 +28,7 @@ def test_an_imu_faster_than_the_table_is_aligned_and_estimated(tmp_path, imu_rat
     streams = result["streams"]
     assert result["trial"]["samples"] == streams["imu_frames"] == streams["aligned"] == samples
     assert streams["table_frames"] == round(duration * TABLE_RATE) and streams["dropped"] == 0
-    assert streams["imu_inconsistent_with_table"] == streams["imu_implausible"] == 0
+    assert streams["imu_gated"] == streams["imu_implausible"] == 0
     assert abs(streams["sync_offset_ms"]) < 0.01
     assert json.loads((out / "emulator.json").read_text())["pulses"] == samples
     est = result["estimate"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import html
 import json
 import math
 import re
@@ -226,3 +227,42 @@ def test_a_calibration_trial_summarises_its_calibration(tmp_path):
     assert "3.07 sigma" in text and "unobservable: turntable.zero_offset_arcsec.2" in text
     assert str(tmp_path / "calibration.json") in text
     assert "accelerometer bias" not in text  # the swing estimator's lines mean nothing for a static schedule
+
+
+def _streams(**counts) -> dict:
+    """The aligned streams of 10 000 IMU samples with the given counts."""
+    base = {"aligner_aligned": 10_000, "aligner_imu_filled": 0, "aligner_imu_bridged": 0, "imu_gated": 0,
+            "aligner_without_angles": 0, "sync_offset_ms": 0.01}
+    return {"streams": {**base, **counts}}
+
+
+@pytest.mark.parametrize(("counts", "failing"), [
+    ({}, set()),
+    ({"aligner_imu_filled": 6, "aligner_imu_bridged": 6}, {"imu_missing_fraction"}),  # 12 of 10 006
+    ({"imu_gated": 11}, {"imu_gated_fraction"}),
+    ({"aligner_without_angles": 11}, {"imu_without_angles_fraction"}),
+    ({"sync_offset_ms": -2.6}, {"sync_offset"}),  # half a period at 200 Hz is 2.5 ms
+])
+def test_the_judged_data_fail_each_over_its_default_limit_naming_it(counts, failing):
+    limits = make_config(rate=200.0).limits
+    assert limits.sync_offset_ms_max == pytest.approx(2.5)
+    results = {m.name: m for m in measurements(_streams(**counts), limits)}
+    judged = {"imu_missing_fraction", "imu_gated_fraction", "imu_without_angles_fraction", "sync_offset"}
+    assert judged <= set(results)
+    assert {name for name in judged if results[name].outcome == FAIL} == failing
+    assert all(results[name].outcome == PASS for name in judged - failing)
+
+
+def test_a_sync_offset_without_motion_is_not_judged_and_a_simulation_judges_no_stream():
+    results = {m.name: m for m in measurements(_streams(sync_offset_ms=None), make_config().limits)}
+    assert results["sync_offset"].outcome == NOT_JUDGED and "no motion" in results["sync_offset"].description
+    simulated = {"streams": {"imu_frames": 10, "aligned": 10}}
+    assert not {m.name for m in measurements(simulated, make_config().limits)} & {"imu_gated_fraction", "sync_offset"}
+
+
+@pytest.mark.parametrize("ended", ["completed", "early: no data from any device for 10 s", "interrupted: SIGTERM"])
+def test_the_report_says_first_how_the_trial_ended(tmp_path, ended):
+    (tmp_path / "result.json").write_text(json.dumps({"trial": {"name": "t"}, "ended": ended}))
+    page = write_report(tmp_path, ReportLimits()).read_text()
+    body = page[page.index("<body"):]
+    assert re.search(r"<p class=\"ended [a-z]+\">Trial ([^<]+)\.</p>", body).group(1) == html.escape(ended)

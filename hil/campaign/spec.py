@@ -132,6 +132,7 @@ def _check_point(config: dict, label: str, source: str, kind: str) -> None:
 
     try:
         cfg = parse_config(config, source)
+        cfg.emulated_only(source, "hil campaign")
         if kind == "calibration":
             checked_schedule(cfg)
             ServoSimulation.from_config(cfg)

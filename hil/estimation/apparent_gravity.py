@@ -34,11 +34,13 @@ import numpy as np
 
 from hil.estimation.normal_equations import NormalEquations, require_finite, symmetric_eigenvalues, unit_diagonal
 from hil.frames import EARTH_RATE
+from hil.units import HOUR, UG
 
 N_GRAVITY = 9  # A11..A33
 N_FULL = 12  # plus bias x, y, z
 N_DRIFT = 15  # plus bias drift rate x, y, z
 DRIFT_SIGNIFICANCE = 4.0  # a drift beyond this many sigma on some axis is significant
+DRIFT_FLOOR = 1e-3 * UG / HOUR  # m/s^3: a sigma below 0.001 ug/h is the arithmetic's, not the data's (noise-free input)
 _TINY = np.finfo(float).tiny
 _IDENTITY = np.eye(N_DRIFT)  # read-only: copied or sliced, never written
 _IDENTITY.setflags(write=False)
@@ -121,14 +123,15 @@ class DriftCheck:
 
     drift: np.ndarray  # (3,) m/s^3
     sigma: np.ndarray  # (3,) m/s^3, 1-sigma
-    significant: bool  # some axis beyond DRIFT_SIGNIFICANCE sigma
+    significant: bool  # some axis beyond DRIFT_SIGNIFICANCE sigma (a sigma under DRIFT_FLOOR counts as DRIFT_FLOOR)
 
     @classmethod
     def from_solution(cls, solution: Solution) -> DriftCheck | None:
         """The check from a 15-state solution; None while the drift is not observable."""
         if solution.drift is None:
             return None
-        significant = bool((np.abs(solution.drift) > DRIFT_SIGNIFICANCE * solution.drift_sigma).any())
+        sigma = np.maximum(solution.drift_sigma, DRIFT_FLOOR)
+        significant = bool((np.abs(solution.drift) > DRIFT_SIGNIFICANCE * sigma).any())
         return cls(solution.drift, solution.drift_sigma, significant)
 
 

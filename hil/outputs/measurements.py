@@ -145,12 +145,35 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
     out.append(_at_most("frames_dropped", streams.get("dropped"), "frames", limits.dropped_max, "frames lost"))
     out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,
                         "frames with a bad checksum or framing"))  # fmt: skip
+    out += _judged_data(streams, limits)
     for key, value in streams.items():
         if key == "sync" and value:
             out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
                     for k, v in value.items()]
         elif key not in ("dropped", "corrupt", "sync"):
             out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
+    return out
+
+
+def _judged_data(streams: dict, limits: ReportLimits) -> list[Measurement]:
+    """The aligned streams' own judgement (a simulation's are not aligned): the fractions of the IMU samples
+    filled or bridged, gated and without angles, and the sync offset between the streams."""
+    if "aligner_aligned" not in streams:
+        return []
+    aligned, bridged = streams["aligner_aligned"], streams["aligner_imu_bridged"]
+    slots = max(aligned + bridged, 1)
+    out = [_at_most("imu_missing_fraction", (streams["aligner_imu_filled"] + bridged) / slots, "", limits.missing_max,
+                    "IMU samples filled or bridged (their frames lost), of all"),
+           _at_most("imu_gated_fraction", streams["imu_gated"] / slots, "", limits.gated_max,
+                    "IMU samples the gyro/table gate removed, of all"),
+           _at_most("imu_without_angles_fraction", streams["aligner_without_angles"] / slots, "",
+                    limits.without_angles_max, "IMU samples aligned without table angles, of all")]
+    offset = streams.get("sync_offset_ms")
+    what = "lag of the table's angles behind the IMU, from the gyros against the table's rate"
+    if offset is None:
+        out.append(Measurement("sync_offset", None, "ms", "", NOT_JUDGED, f"{what}: no motion to measure it by"))
+    else:
+        out.append(_at_most("sync_offset", offset, "ms", limits.sync_offset_ms_max, what, absolute=True))
     return out
 
 

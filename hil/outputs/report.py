@@ -69,7 +69,7 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None,
     if limits is None:
         config = out_dir / "config.yaml"
         if config.exists():
-            limits = load_config(config).output.limits
+            limits = load_config(config).limits
         else:
             limits = ReportLimits()
             notes.append("config.yaml not found beside result.json: no limits, nothing judged.")
@@ -144,6 +144,7 @@ body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2e
        color: #1b1b1b; padding: 0 1em; }
 h1 { margin-bottom: 0.2em; } h2 { margin-top: 1.6em; border-bottom: 1px solid #ddd; }
 .meta { color: #555; }
+.ended { font-weight: bold; } .ended.early { color: #a40000; }
 .verdict { display: inline-block; padding: 0.3em 1em; font-size: 1.6em; font-weight: bold; border-radius: 6px;
            color: white; margin: 0.5em 0; }
 .verdict.PASS { background: #2e7d32; } .verdict.FAIL { background: #c62828; }
@@ -178,7 +179,9 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
     summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
                + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
     name = e(str(trial.get("name", "trial")))
-    body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
+    ended = result.get("ended", "completed")
+    body = f"""<p class="ended {'completed' if ended == 'completed' else 'early'}">Trial {e(ended)}.</p>
+<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
 <div class="verdict {verdict}">{verdict}</div>

@@ -73,6 +73,7 @@ class AlignerCounters:
     imu_gaps: int = 0  # gaps of the IMU count (filled or bridged)
     without_angles: int = 0  # samples released without table angles (table gap or table silent)
     table_unmapped: int = 0  # free-running: table samples before the IMU's clock was known
+    after_table_end: int = 0  # at the end, samples after the table's last angles: not released
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
@@ -267,7 +268,12 @@ class Aligner:
         return self._release()
 
     def flush(self) -> list[Released]:
-        """End of the trial: release everything still waiting (angles where the table allows)."""
+        """End of the trial: release everything still waiting (angles where the table allows) but the samples
+        after the table's last angles (the table's last frames were still on their way): they are counted."""
+        if self.with_table and len(self._table.time) and len(self._count):
+            keep = int(np.searchsorted(self.imu_time(self._count), self._table.last_time(), side="right"))
+            self.counters.after_table_end += len(self._count) - keep
+            self._count, self._dtheta, self._dv = self._count[:keep], self._dtheta[:keep], self._dv[:keep]
         self._release(final=True)
         return self._take()
 

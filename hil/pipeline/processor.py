@@ -136,7 +136,7 @@ class TrialProcessor:
             return
         samples = decoder.feed(item)
         if item.stream == TABLE:
-            self._align(*(self.pairing.add_table(samples) if self.pairing is not None else (samples, None)))
+            self._estimate(self._aligned(*(self.pairing.add_table(samples) if self.pairing else (samples, None))))
             return
         if self.compensation is not None:
             samples = self.compensation.samples(samples)
@@ -144,13 +144,12 @@ class TrialProcessor:
         if not good.all():
             self._rejected(self.plausibility, len(good) - int(good.sum()))
             samples = samples.take(good)
-        self._align(*(self.pairing.add_imu(samples) if self.pairing is not None else (None, samples)))
+        self._estimate(self._aligned(*(self.pairing.add_imu(samples) if self.pairing else (None, samples))))
 
-    def _align(self, table: TableSamples | None, imu: ImuSamples | None) -> None:
-        """Paired samples to the aligner (the table's first: the IMU's find their angles), its runs onwards."""
+    def _aligned(self, table: TableSamples | None, imu: ImuSamples | None) -> list[AlignedBatch | ImuGap]:
+        """Paired samples to the aligner (the table's first: the IMU's find their angles); its runs."""
         ready = self.aligner.add_tables(table) if table is not None else []
-        ready += self.aligner.add_imus(imu) if imu is not None else []
-        self._estimate(ready)
+        return ready + (self.aligner.add_imus(imu) if imu is not None else [])
 
     def feed_batch(self, batch: AlignedBatch) -> None:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimator."""
@@ -199,9 +198,8 @@ class TrialProcessor:
     def finish(self) -> None:
         """End of data: release what the aligner still holds (the samples still waiting for a pairing are
         unpaired)."""
-        if self.pairing is not None:
-            self.pairing.flush()
-        self._estimate(self.aligner.flush(), final=True)
+        ready = self._aligned(*self.pairing.flush()) if self.pairing is not None else []
+        self._estimate(ready + self.aligner.flush(), final=True)
 
     @property
     def complete(self) -> bool:
@@ -235,7 +233,7 @@ class TrialProcessor:
             "skipped_bytes": imu.skipped_bytes + table.skipped_bytes,
             "imu_missing": imu.missing,
             "imu_implausible": self.plausibility.rejected,
-            "imu_inconsistent_with_table": self.gate.rejected,
+            "imu_gated": self.gate.rejected,
             "imu_force_outliers": 0 if self.estimator is None else self.estimator.outliers,
             "table_missing": table.missing,
             "imu_unpaired": 0 if self.pairing is None else self.pairing.report.unpaired,
@@ -245,7 +243,7 @@ class TrialProcessor:
             "chunks_unknown_stream": self.unknown_chunks,
         }
         return StreamCounts(imu.frames, table.frames, self.aligner.counters.aligned, imu.missing + table.missing,
-                            imu.corrupt + table.corrupt + self.plausibility.rejected + self.gate.rejected, extra)
+                            imu.corrupt + table.corrupt + self.plausibility.rejected, extra)
 
     def streams(self) -> StreamCounts:
         """result.json's ``streams`` (call after :meth:`finish`): the counts and, for streams that were

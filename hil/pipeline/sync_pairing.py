@@ -153,9 +153,18 @@ class SyncPairing:
         if kind == "reconnected" and s.offset is not None:
             self._break(s, "reconnected after an outage")
 
-    def flush(self) -> None:
-        """End of data: IMU samples still waiting for a pairing are unpaired."""
+    def flush(self) -> tuple[TableSamples | None, ImuSamples | None]:
+        """End of data: the (table, IMU) samples of late reads of paired streams, which no later read can judge
+        now, are paired as they were; IMU samples still waiting for a pairing are unpaired."""
+        out = []
+        for s in (self.table, self.imu):
+            if s.offset is not None and s.held:
+                released, s.held = _shifted(_joined(s.held), s.offset), []
+                out.append(released)
+            else:
+                out.append(None)
         self._drop(self.imu, len(self.imu.held))
+        return out[0], out[1]
 
     # -- one read ----------------------------------------------------------------------------------
 

@@ -73,7 +73,7 @@ class TrialOutcome:
     def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
         """Write every output and print the summary (the figures drawn by ``draw``); returns PASS or FAIL
         against ``output.limits``."""
-        outcome = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.output.limits,
+        outcome = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
                                       self.config_text, figures=figures and self.cfg.output.figures, draw=draw)
         print(summary_text(self.result, self.out))
         print(f"  report: {outcome} against output.limits ({self.out / 'report.html'})")

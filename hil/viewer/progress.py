@@ -1,26 +1,45 @@
-"""Console progress of a live trial (rich): time, live bias +- sigma, observability, stream health."""
+"""Console progress of a live trial (rich): stream health first, then the time, the live bias +- sigma and
+observability, the freshness of the estimate, as many of them as the terminal's width holds. When stderr is not
+a terminal (a log file, CI) a plain line is printed every ``PLAIN_S`` instead of a live display."""
 
 from __future__ import annotations
 
 import time
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import Progress, TextColumn
 
 from hil.estimation.online import Snapshot
 from hil.units import UG
 
+PLAIN_S = 5.0  # s between the plain lines when stderr is not a terminal
+SEPARATOR = " | "
+
+
+def fitted(parts: list[str], width: int) -> str:
+    """The parts, in order, joined by ``SEPARATOR``: as many of the first as fit in ``width`` (the first one
+    always, cut to the width)."""
+    line = parts[0][:width]
+    for part in parts[1:]:
+        if len(line) + len(SEPARATOR) + len(part) > width:
+            break
+        line += SEPARATOR + part
+    return line
+
 
 class ConsoleProgress:
-    """A progress bar over the trial's duration with a status line; use as a context manager."""
+    """The trial's status line on stderr; use as a context manager."""
 
     def __init__(self, duration: float | None, quiet: bool = False, console: Console | None = None) -> None:
         self.duration = duration
-        self._progress = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[time]}"),
-                                  TimeElapsedColumn(), console=console or Console(stderr=True), transient=False,
-                                  disable=quiet)
-        self._task = self._progress.add_task("waiting for data", total=duration or 1.0, time="")
+        self.console = console or Console(stderr=True)
+        self.quiet = quiet
+        self.live = self.console.is_terminal and not quiet
+        self._progress = Progress(TextColumn("{task.description}"), console=self.console, transient=False,
+                                  disable=not self.live)
+        self._task = self._progress.add_task("waiting for data", total=duration or 1.0)
         self._last: tuple[float, dict[str, float]] | None = None
+        self._next_plain = 0.0
 
     def __enter__(self) -> ConsoleProgress:
         self._progress.start()
@@ -39,17 +58,27 @@ class ConsoleProgress:
             then, before = self._last
             rates = {name: (frames[name] - before[name]) / max(now - then, 1e-9) for name in frames}
         self._last = (now, frames)
+        line = fitted(self.parts(trial_time, snap, health, rates), self.console.width)
+        if self.live:
+            self._progress.update(self._task, completed=trial_time, description=line)
+        elif not self.quiet and now >= self._next_plain:
+            self._next_plain = now + PLAIN_S
+            self.console.print(line, soft_wrap=True, highlight=False, markup=False)
+
+    def parts(self, trial_time: float, snap: Snapshot | None, health: dict[str, dict[str, float]],
+              rates: dict[str, float]) -> list[str]:
+        """The status line's parts, most important first."""
+        streams = []
+        for name in ("imu", "table"):
+            faults = "".join(f" {key[0]}{health[name][key]:.0f}" for key in ("corrupt", "missing") if health[name][key])
+            streams.append(f"{name} {rates[name]:.0f}Hz{faults}")
         if snap is None:
-            text = "acquiring"
+            estimate = "acquiring"
         elif snap.full.bias is None:
-            text = f"rank {snap.full.observability.rank}/12: bias not observable yet"
+            estimate = f"rank {snap.full.observability.rank}/12: bias not observable yet"
         else:
             bias = " ".join(f"{b / UG:+.1f}+-{s / UG:.1f}" for b, s in zip(snap.full.bias, snap.full.bias_sigma))
-            text = f"bias ug {bias} | rank {snap.full.observability.rank}"
-        streams = " ".join(
-            f"{name} {rates[name]:.0f}Hz c{health[name]['corrupt']:.0f} m{health[name]['missing']:.0f}"
-            for name in ("imu", "table"))
+            estimate = f"bias ug {bias} rank {snap.full.observability.rank}"
         p99 = health["aligner"].get("age_p99_ms")
-        latency = f" p99 {p99:.1f}ms" if p99 is not None else ""
-        self._progress.update(self._task, completed=trial_time, description=f"{text} | {streams}{latency}",
-                              time=f"{trial_time:.0f}/{self.duration or 0:.0f} s")
+        return [" ".join(streams), f"{trial_time:.0f}/{self.duration or 0:.0f} s", estimate,
+                *([f"age p99 {p99:.1f} ms"] if p99 is not None else [])]
