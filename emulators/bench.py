@@ -19,7 +19,7 @@ import numpy as np
 from drivers.acl import AclCommand
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
-from emulators.clocks import DeviceClock
+from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.ports import CanPort, PtyPort
 from emulators.servo import Servo
@@ -94,14 +94,12 @@ def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -
 
 def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, DeviceStream]]:
     """The table's servo and the frame streams (``imu``, ``turntable_data``) of a run of ``duration`` s:
-    what the emulated devices send, before any port or fault."""
+    what the emulated devices send, before any port or fault (frames of a powered-off device marked so)."""
     rate = cfg.imu_rate_hz
     sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
         update={"duration_s": duration})}))
     imu_cfg = cfg.imu
-    imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
-    table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
-                              cfg.turntable.timing, cfg.table_counts_per_frame)
+    imu_clock, table_clock = device_clocks(cfg)
     seed = cfg.trial.seed
     imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors,
                            device_time=imu_cfg.protocol == "xsens-mtdata2")
