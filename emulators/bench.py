@@ -114,7 +114,9 @@ class Bench:
     """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
 
     def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
-                 wait_readers: bool) -> None:
+                 wait_readers: bool, link_dir: Path | None = None) -> None:
+        """``link_dir``: publish the serial ports as links ``imu`` and ``turntable_data`` there; without
+        it only a device configured to unplug gets a link, in a private directory."""
         rate = cfg.imu_rate_hz
         imu_cfg = cfg.imu
         seed = cfg.trial.seed
@@ -125,12 +127,17 @@ class Bench:
         self.writers: dict[str, DeviceWriter] = {}
         self.server: AclServer | None = None
         unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
-        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if any(unplugging) else None
+        private = any(unplugging) and link_dir is None
+        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
 
         def pty(name: str, unplugs: bool) -> PtyPort:
+            if link_dir is not None:
+                return PtyPort(link_dir / name)
             return PtyPort(Path(self._links.name) / name if unplugs else None)
 
         try:
+            if link_dir is not None:
+                link_dir.mkdir(parents=True, exist_ok=True)
             if imu_cfg.protocol == "can-dbc":
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:
