@@ -19,7 +19,7 @@ import numpy as np
 from drivers.acl import AclCommand
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
-from emulators.clocks import DeviceClock
+from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.ports import CanPort, PtyPort
 from emulators.servo import Servo
@@ -94,14 +94,12 @@ def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -
 
 def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, DeviceStream]]:
     """The table's servo and the frame streams (``imu``, ``turntable_data``) of a run of ``duration`` s:
-    what the emulated devices send, before any port or fault."""
+    what the emulated devices send, before any port or fault (frames of a powered-off device marked so)."""
     rate = cfg.imu_rate_hz
     sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
         update={"duration_s": duration})}))
     imu_cfg = cfg.imu
-    imu_clock = DeviceClock(rate, imu_cfg.latch_delay_us * 1e-6, imu_cfg.timing)
-    table_clock = DeviceClock(cfg.table_counter_rate_hz, cfg.turntable.latch_delay_us * 1e-6,
-                              cfg.turntable.timing, cfg.table_counts_per_frame)
+    imu_clock, table_clock = device_clocks(cfg)
     seed = cfg.trial.seed
     imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors,
                            device_time=imu_cfg.protocol == "xsens-mtdata2")
@@ -116,7 +114,9 @@ class Bench:
     """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
 
     def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
-                 wait_readers: bool) -> None:
+                 wait_readers: bool, link_dir: Path | None = None) -> None:
+        """``link_dir``: publish the serial ports as links ``imu`` and ``turntable_data`` there; without
+        it only a device configured to unplug gets a link, in a private directory."""
         rate = cfg.imu_rate_hz
         imu_cfg = cfg.imu
         seed = cfg.trial.seed
@@ -127,12 +127,17 @@ class Bench:
         self.writers: dict[str, DeviceWriter] = {}
         self.server: AclServer | None = None
         unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
-        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if any(unplugging) else None
+        private = any(unplugging) and link_dir is None
+        self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
 
         def pty(name: str, unplugs: bool) -> PtyPort:
+            if link_dir is not None:
+                return PtyPort(link_dir / name)
             return PtyPort(Path(self._links.name) / name if unplugs else None)
 
         try:
+            if link_dir is not None:
+                link_dir.mkdir(parents=True, exist_ok=True)
             if imu_cfg.protocol == "can-dbc":
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:

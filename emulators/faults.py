@@ -6,7 +6,8 @@ sent twice, or held back and sent after the next one. Frame damage depends on th
 stream flips and cuts bytes; on CAN a message hit by a bit error is lost (the controllers' CRC
 discards it) and a cut message has a short data field. Extra write latency (``jitter_ms``) and the
 unplug window are applied by the device writer, which asks :meth:`FaultInjector.delay` and
-:meth:`FaultInjector.unplugged`.
+:meth:`FaultInjector.unplugged`; a power cycle's silence is the device clock's
+(:meth:`emulators.clocks.DeviceClock.powered`), which the writer counts as ``power_cycled``.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ import numpy as np
 
 from hil.config import FaultConfig
 
-KINDS = ("dropped", "corrupted", "truncated", "duplicated", "reordered", "delayed", "unplugged", "unplugs")
+KINDS = ("dropped", "corrupted", "truncated", "duplicated", "reordered", "delayed", "unplugged", "unplugs",
+         "power_cycled")
 
 
 class Damage(Protocol):

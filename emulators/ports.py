@@ -30,7 +30,8 @@ class PtyPort:
     :meth:`unplug` closes the master, as pulling a USB adapter removes its device (readers get an
     error, the link dangles), and :meth:`replug` opens a new pty and points the link at it, so a
     reader that reopens the link finds the device again, never another program's pty that took the
-    old number.
+    old number. The link is replaced in one step, so a later emulator publishing the same link takes
+    it over; :meth:`close` removes it only while it still points at this port's pty.
     """
 
     def __init__(self, link: Path | None = None) -> None:
@@ -48,7 +49,7 @@ class PtyPort:
         attrs[4] = attrs[5] = PROBE_SPEED
         termios.tcsetattr(self.master, termios.TCSANOW, attrs)
         if self.link is not None:
-            tmp = self.link.with_name(self.link.name + ".new")
+            tmp = self.link.with_name(f"{self.link.name}.{os.getpid()}.new")
             tmp.unlink(missing_ok=True)
             tmp.symlink_to(self.tty)
             os.replace(tmp, self.link)
@@ -121,10 +122,16 @@ class PtyPort:
         self._open()
 
     def close(self) -> None:
-        """Unplug for good: the link goes too."""
+        """Unplug for good: the link goes too, unless another emulator has taken it over."""
         self.unplug()
-        if self.link is not None:
+        if self.link is not None and self._owns_link():
             self.link.unlink(missing_ok=True)
+
+    def _owns_link(self) -> bool:
+        try:
+            return os.readlink(self.link) == self.tty
+        except OSError:
+            return False
 
 
 class CanPort:

@@ -1,18 +1,21 @@
 """The emulator as a process (``hil emulate``): run the emulated devices until stopped, signalled or done.
 
-Run it in its own process (``python -m emulators CONFIG [--ports-file PATH] [--stats-file PATH]
-[--speed X|max] [--duration S]``, or :func:`spawn_emulator`, which waits for the ports with
-:func:`wait_for_ports`); clients find the ports in the JSON ports file or on stdout::
+Run it in its own process (``python -m emulators CONFIG [--ports-file PATH] [--link-dir DIR]
+[--stats-file PATH] [--speed X|max] [--duration S]``, or :func:`spawn_emulator`, which waits for the
+ports with :func:`wait_for_ports`); clients find the ports in the JSON ports file or on stdout::
 
     {"imu": "/dev/pts/N" | {"interface": "udp_multicast", "channel": "239.0.0.1"},
      "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT"}
 
-A device configured to unplug (``faults.unplug_at_s``) is published as a stable symbolic link to its
-pty, ``/tmp/hil-emulate-XXXX/imu`` or ``.../turntable_data`` (as udev's by-id names), which the replug
-points at the new pty. The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on
+With ``--link-dir DIR`` the serial ports are published as stable symbolic links to their ptys,
+``DIR/imu`` and ``DIR/turntable_data`` (as udev's by-id names), and named so; a later emulator on the
+same DIR points them at its own ptys. Without it, a device configured to unplug
+(``faults.unplug_at_s``) is published so in a private ``/tmp/hil-emulate-XXXX``. A replug points the
+link at the new pty. The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on
 the python-can bus of ``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP
-port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as JSON at exit, and
-to ``--stats-file``. The devices themselves are :class:`emulators.bench.Bench`.
+port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as one line a device
+at exit (:mod:`emulators.command`), and to ``--stats-file`` as JSON. The devices themselves are
+:class:`emulators.bench.Bench`.
 """
 
 from __future__ import annotations
@@ -48,7 +51,8 @@ def _write_json(path: Path, data: dict) -> None:
 
 def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
                  duration: float | None = None, stop_event: threading.Event | None = None,
-                 wait_readers: bool = False, stats_file: Path | None = None, hold: bool = False) -> EmulatorStats:
+                 wait_readers: bool = False, stats_file: Path | None = None, hold: bool = False,
+                 link_dir: Path | None = None) -> EmulatorStats:
     """Emulate the IMU and the turntable until the duration, a signal or ``stop_event``.
 
     ``speed`` is the multiple of real time (None: as fast as the readers take the bytes); ``duration``
@@ -56,9 +60,11 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     opened each pty (as a table enables its sync output when the host is ready), and resumes after an
     unplug once a client has reopened the port; otherwise at once, and a port nobody reads loses its
     frames (counted). From the main thread, SIGTERM, SIGINT and SIGHUP set the stop event. The
-    statistics go to ``stats_file`` when the pulse train has ended; with ``hold`` the devices then stay
-    powered (the table answers ``acl``, the data ports are silent) until stopped, as a table stays on
-    its base after a trial, and the file is rewritten with the commands received meanwhile. Ports,
+    statistics go to ``stats_file`` at the end, stopped or not; with ``hold`` the devices stay powered
+    after the pulse train (the table answers ``acl``, the data ports are silent) until stopped, as a
+    table stays on its base after a trial: the file is written when the train has ended and rewritten
+    at exit with the commands received meanwhile. With
+    ``link_dir`` the serial ports are published as links there (:class:`emulators.bench.Bench`). Ports,
     command socket and ports file are released on return.
     """
     duration = cfg.trial.duration_s if duration is None else duration
@@ -68,26 +74,11 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     bench: Bench | None = None
     with _SignalsStop(stop):
         try:
-            bench = Bench(cfg, duration, speed, stop, wait_readers)
+            bench = Bench(cfg, duration, speed, stop, wait_readers, link_dir)
             print(json.dumps(bench.names()), flush=True)
             if ports_file is not None:
                 _write_json(ports_file, bench.names())
-            if wait_readers and not wait_for_readers(bench.ptys(), stop):
-                return bench.stats(0, 0.0, True)
-            clock = SyncClock(speed)
-            pulses = bench.pulse_loop(clock, stop)
-            # held devices wait for their reader however slow: the stats file then means "all was read"
-            for writer in bench.writers.values():
-                writer.finish(None if hold else DRAIN_S)
-            for port in bench.ports.values():
-                port.drain(stop, math.inf if hold else DRAIN_S)
-            elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
-            stats = bench.stats(pulses, elapsed, stopped, clock.due(0.0))
-            if hold:
-                if stats_file is not None:
-                    _write_json(stats_file, stats.as_dict())  # tells that the pulse train has ended
-                stop.wait()
-                stats = bench.stats(pulses, elapsed, stopped, clock.due(0.0))  # with the commands received meanwhile
+            stats = _pulse_train(bench, speed, stop, wait_readers, hold, stats_file)
             if stats_file is not None:
                 _write_json(stats_file, stats.as_dict())
             return stats
@@ -96,6 +87,27 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
                 bench.close()
             if ports_file is not None:
                 ports_file.unlink(missing_ok=True)
+
+
+def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, wait_readers: bool, hold: bool,
+                 stats_file: Path | None) -> EmulatorStats:
+    """The pulse train of :func:`run_emulator` until done or stopped, the bytes written left to the readers,
+    and with ``hold`` the devices kept up until stopped; the statistics."""
+    if wait_readers and not wait_for_readers(bench.ptys(), stop):
+        return bench.stats(0, 0.0, True)
+    clock = SyncClock(speed)
+    pulses = bench.pulse_loop(clock, stop)
+    # held devices wait for their reader however slow: the stats file then means "all was read"
+    for writer in bench.writers.values():
+        writer.finish(None if hold else DRAIN_S)
+    for port in bench.ports.values():
+        port.drain(stop, math.inf if hold else DRAIN_S)
+    elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
+    if hold:
+        if stats_file is not None:  # tells that the pulse train has ended
+            _write_json(stats_file, bench.stats(pulses, elapsed, stopped, clock.due(0.0)).as_dict())
+        stop.wait()
+    return bench.stats(pulses, elapsed, stopped, clock.due(0.0))  # held: with the commands received meanwhile
 
 
 class _SignalsStop:

@@ -55,7 +55,7 @@ def emulated_reads(cfg: Config, duration: float, read_s: float = 0.1, host_t0: f
         servo.advance(t)
         emission = streams[name].pop(servo)
         servo.commit(emission.latest)
-        if name != "turntable_data" or servo.sync_output:
+        if emission.powered and (name != "turntable_data" or servo.sync_output):
             buffers[name] += emission.payload
     for name in sorted(reads, key=end):  # the last reads
         yield from read(name)

@@ -2,8 +2,9 @@
 
 Each device ticks on its :class:`emulators.clocks.DeviceClock` (the shared sync pulses, or its own
 clock when free-running); tick k of the IMU reports the increments over its latch interval, tick k of
-the table the gimbal angles at its latch instant; both carry their clock's counter (k, or n k for a
-table latching every n-th pulse). Frames are encoded by the drivers' codecs, so the emulator speaks
+the table the gimbal angles at its latch instant; both carry their clock's counter (its start plus k,
+or plus n k for a table latching every n-th pulse; from 0 again after a power cycle, whose ticks are
+not sent). Frames are encoded by the drivers' codecs, so the emulator speaks
 exactly what the drivers read. The table's motion is the servo's (:mod:`emulators.servo`): a
 :class:`DeviceStream` computes its frames a chunk ahead and recomputes the chunk when the servo's
 plan changes, from a snapshot of its random state, so a command changes the frames from the next
@@ -29,12 +30,14 @@ from hil.samples import ImuSample, TableSample
 
 @dataclass(frozen=True)
 class Emission:
-    """One device frame: its tick, the trial time it is written, the latest instant it depends on."""
+    """One device frame: the pulse it ticks on, the trial time it is written, the latest instant it depends
+    on, and whether the device is powered to send it."""
 
     tick: int
     t: float
     latest: float
     payload: Any
+    powered: bool = True
 
 
 class FrameSource:
@@ -65,16 +68,17 @@ class ImuSource(FrameSource):
         dtheta, dv = truth.increments(s["last"], latch)
         dtheta, dv = s["errors"].apply(latch, dtheta, dv)
         s["last"] = float(latch[-1])
-        dev = self.clock.device_time(latch).tolist() if self.device_time else [None] * len(k)
-        ticks = self.clock.tick_times(k)
+        clock = self.clock
+        dev = clock.device_time(latch).tolist() if self.device_time else [None] * len(k)
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    ImuSample(int(i), tuple(a), tuple(b), device_time=d, status=self.status))))
-                for i, t, end, a, b, d in zip(k, ticks, latch, dtheta.tolist(), dv.tolist(), dev)]
+                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=self.status))), bool(on))
+                for i, c, t, end, a, b, d, on in zip(clock.pulses(k), clock.counters(k), clock.tick_times(k), latch,
+                                                      dtheta.tolist(), dv.tolist(), dev, clock.powered(k))]
 
 
 class TableSource(FrameSource):
     """``tts1`` frames: the encoder angles and the servo's status at each latch instant, the clock's counter
-    as their sync counter and emission tick.
+    as their sync counter.
 
     ``zero_offset`` (outer, middle, inner) rad is ``turntable.zero_offset_arcsec``, the true gimbal angle
     minus the encoder reading: the frames report ``true - zero_offset``.
@@ -90,10 +94,11 @@ class TableSource(FrameSource):
         latch = self.clock.latch_times(k, self.state["rng"])
         angles = truth.angles(latch) - self.zero_offset
         status = servo.motion.status(latch, servo.limits) | self.flags
-        ticks, codec, delay = self.clock.tick_times(k), self.codec, self.clock.latch_delay
-        return [Emission(int(c), float(t), float(end), codec.encode(codec.from_sample(
-                    TableSample(int(c), tuple(a), latch_delay=delay, status=int(st)))))
-                for c, t, end, a, st in zip(self.clock.counters(k), ticks, latch, angles.tolist(), status)]
+        clock, codec = self.clock, self.codec
+        return [Emission(int(p), float(t), float(end), codec.encode(codec.from_sample(
+                    TableSample(int(c), tuple(a), latch_delay=clock.latch_delay, status=int(st)))), bool(on))
+                for p, c, t, end, a, st, on in zip(clock.pulses(k), clock.counters(k), clock.tick_times(k), latch,
+                                                   angles.tolist(), status, clock.powered(k))]
 
 
 def encoder_reading(true_angles: np.ndarray, zero_offset: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
 """The paced writer: puts one emulated device's frames on its port (:mod:`emulators.ports`).
 
 From its own thread, per frame: the faults (:mod:`emulators.faults`: damage, delay, the unplug
-window), then wire-time pacing at the line's baud rate, then the write; the pulse-to-write latency
-goes into a :class:`drivers.latency.LatencyHistogram`.
+window; a frame of a powered-off device is not sent), then wire-time pacing at the line's baud rate,
+then the write; the pulse-to-write latency goes into a :class:`drivers.latency.LatencyHistogram`.
 """
 
 from __future__ import annotations
@@ -60,6 +60,9 @@ class DeviceWriter:
             if emission is None:
                 self._send(self.faults.flush(), due)
                 return
+            if not emission.powered:
+                self.faults.counts["power_cycled"] += 1
+                continue
             if not self._plugged(emission.t):
                 continue
             if not self._send(self.faults.frames(emission.payload), due):

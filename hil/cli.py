@@ -137,23 +137,14 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    from emulators.process import parse_speed, run_emulator
+    from emulators.command import emulate
     from hil.config import load_config
-
-    run_emulator(load_config(args.config), args.ports_file, parse_speed(args.speed), args.duration,
-                 wait_readers=args.wait_readers)
-    return 0
-
-
-def _speed(text: str) -> str:
-    """``--speed``: X times real time or ``max``, checked as it is parsed (a bad one is a usage error)."""
-    from emulators.process import parse_speed
+    from hil.inputs import InputError
 
     try:
-        parse_speed(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
+        return emulate(load_config(args.config), args)
+    except OSError as exc:  # e.g. a --link-dir that cannot be written
+        raise InputError(str(exc)) from None
 
 
 def _config_argument(p: argparse.ArgumentParser, default: str = DEFAULT_CONFIG) -> None:
@@ -162,7 +153,10 @@ def _config_argument(p: argparse.ArgumentParser, default: str = DEFAULT_CONFIG) 
 
 
 def _live_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--speed", default="1", type=_speed, help="emulated trials: X times real time, or 'max' (default 1)")
+    from emulators.command import speed_option
+
+    p.add_argument("--speed", default="1", type=speed_option,
+                   help="emulated trials: X times real time, or 'max' (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -179,6 +173,8 @@ def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
+
     parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
                                      epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -238,14 +234,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="go on with OUT/runs.parquet: skip the runs done there")
     p.set_defaults(func=cmd_campaign)
 
-    p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports")
+    p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports; "
+                                       "their statistics on stderr at the end and on a signal")
     _config_argument(p)
-    p.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
-    p.add_argument("--speed", default="1", type=_speed, help="X times real time, or 'max' (default 1)")
-    p.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
-    p.add_argument("--wait-readers", action="store_true",
-                   help="hold the pulse train until every port has a reader (default: stream at once, as hardware "
-                        "does; frames nobody reads are lost and counted)")
+    add_emulate_options(p)
     p.set_defaults(func=cmd_emulate)
 
     p = sub.add_parser("report", help="rebuild a trial's report.html from its outputs")

@@ -102,6 +102,7 @@ class DeviceTiming(Model):
     latch_jitter_us: float = Field(0.0, ge=0)  # 1-sigma jitter of the latch instant about pulse + delay
     clock_drift_ppm: float = 0.0  # rate error of the device's own clock (its timestamps)
     free_running: bool = False  # no sync input: the device latches on its own (drifting) clock
+    counter_start: int | None = Field(None, ge=0)  # counter at trial time 0; None: from trial.seed (emulators.clocks)
 
 
 class FaultConfig(Model):
@@ -116,6 +117,8 @@ class FaultConfig(Model):
     jitter_ms: float = Field(0.0, ge=0)  # extra write latency, uniform in [0, jitter_ms]
     unplug_at_s: float | None = Field(None, ge=0)  # trial time of an unplug (pty closed / CAN silent)
     unplug_s: float = Field(0.0, ge=0)  # how long the device stays unplugged
+    power_cycle_at_s: float | None = Field(None, ge=0)  # trial time the device loses power (port stays open)
+    power_cycle_s: float = Field(0.0, ge=0)  # how long it is silent; then its counter restarts from 0
 
 
 class TurntableConfig(Model):
