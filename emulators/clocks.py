@@ -22,8 +22,6 @@ from drivers.registry import imu_codec
 from hil.config import Config, DeviceTiming, FaultConfig
 from hil.units import PPM
 
-# True: a counter_start left out is drawn from trial.seed; False: it is 0, so both counters start together
-SEEDED_COUNTER_STARTS = False
 DRAW_RANGE = 1 << 20  # drawn table starts (and IMU ones without a counter modulus) lie below it: float times stay exact
 COUNTER_STREAM = 2  # the draw's SeedSequence([seed, 2]), apart from the devices' own streams [seed, 0 | 1, ...]
 
@@ -115,16 +113,16 @@ def imu_counter_modulus(cfg: Config) -> int:
     """How many values the IMU frames' counter takes (KVH 1750 128, Xsens 65536, CAN the DBC sync
     signal's); :data:`DRAW_RANGE` for frames without one."""
     codec = imu_codec(cfg.imu, cfg.imu_rate_hz)
-    return getattr(codec, "sequence_modulus", None) or getattr(codec, "sync_modulus", None) or DRAW_RANGE
+    return codec.counter_modulus or DRAW_RANGE
 
 
 def counter_starts(cfg: Config) -> tuple[int, int]:
-    """The IMU's and the table's counter at trial time 0: ``timing.counter_start``, or when left out,
-    with :data:`SEEDED_COUNTER_STARTS`, drawn from ``trial.seed`` (the IMU's uniformly over its counter's
-    values, the table's over [0, :data:`DRAW_RANGE`) and never equal to the IMU's), without it 0."""
+    """The IMU's and the table's counter at trial time 0: ``timing.counter_start``, or when left out, drawn
+    from ``trial.seed`` (the IMU's uniformly over its counter's values, the table's over [0, :data:`DRAW_RANGE`)
+    and never equal to the IMU's): devices count from their own starts, as in a lab."""
     given = cfg.imu.timing.counter_start, cfg.turntable.timing.counter_start
-    if not SEEDED_COUNTER_STARTS or None not in given:
-        return given[0] or 0, given[1] or 0
+    if None not in given:
+        return given
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([cfg.trial.seed, COUNTER_STREAM])))
     imu = int(rng.integers(imu_counter_modulus(cfg)))
     table = int(rng.integers(DRAW_RANGE - 1))

@@ -98,3 +98,11 @@ def true_attitude_ib0(truth, t: np.ndarray) -> Rotation:
     """C_b^ib0(t) = C_n^b(0) C_n^n0(t) C_b^n(t): the body at t in the body frame frozen at t = 0."""
     c0 = scipy_attitude(truth.geometry, truth.angles(np.zeros(1)))
     return c0.inv() * earth_turn(truth.earth, t) * scipy_attitude(truth.geometry, truth.angles(t))
+
+
+def from_zero(device: dict | None) -> dict:
+    """An emulated device's config block whose counter starts at 0 (unless it says otherwise): for tests of the
+    frames themselves, which the emulator otherwise counts from a start drawn from the seed."""
+    device = dict(device or {})
+    device["timing"] = {"counter_start": 0, **device.get("timing", {})}
+    return device

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
+from conftest import from_zero
 
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec
@@ -24,10 +25,10 @@ LATCH_US = 50
 CONFIG = {
     "trial": {"name": "emulated", "duration_s": 3.0, "rate_hz": RATE, "seed": 3},
     "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
-    "turntable": {"latch_delay_us": LATCH_US, "motion": {"kind": "swing", "axes": {
+    "turntable": from_zero({"latch_delay_us": LATCH_US, "motion": {"kind": "swing", "axes": {
         "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
         "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
-        "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 179.9999}}}},
+        "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 179.9999}}}}),
 }
 
 
@@ -69,7 +70,7 @@ def read_raw(path: str, buf: bytearray) -> None:
 
 
 def run(tmp_path: Path, errors: dict | None = None, speed: str = "max") -> tuple[dict[str, bytes], object]:
-    cfg = dict(CONFIG, imu={"errors": errors or {}})
+    cfg = dict(CONFIG, imu=from_zero({"errors": errors or {}}))
     config = tmp_path / "emulated.yaml"
     config.write_text(yaml.safe_dump(cfg))
     proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed)

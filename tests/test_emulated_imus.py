@@ -16,6 +16,7 @@ import cantools
 import numpy as np
 import pytest
 import yaml
+from conftest import from_zero
 from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture
@@ -36,7 +37,7 @@ SWING = {"outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
 def trial(imu: dict, duration: float = 1.0) -> dict:
     return {"trial": {"name": "imus", "duration_s": duration, "rate_hz": RATE, "seed": 4},
             "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
-            "turntable": {"motion": {"kind": "swing", "axes": SWING}}, "imu": imu}
+            "turntable": from_zero({"motion": {"kind": "swing", "axes": SWING}}), "imu": from_zero(imu)}
 
 
 def xsens_items(frame: bytes) -> dict[int, bytes]:

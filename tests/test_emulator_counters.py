@@ -10,7 +10,6 @@ import pytest
 import yaml
 from test_emulated_devices import read_raw
 
-import emulators.clocks
 from drivers.can_dbc import CanDbcCodec
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec
@@ -79,15 +78,7 @@ def test_the_counter_start_changes_the_counter_only():
         assert (ra.gyro, ra.accel) == (rb.gyro, rb.accel) and rb.sequence == (ra.sequence + 77) % 128
 
 
-def test_left_out_the_starts_are_zero_while_the_draw_is_switched_off():
-    assert not emulators.clocks.SEEDED_COUNTER_STARTS
-    assert counter_starts(config()) == (0, 0)
-    assert counter_starts(config({"timing": {"counter_start": 9}})) == (9, 0)
-    assert imu_counters(config(), 0.02) == [1, 2, 3, 4]
-
-
-def test_drawn_starts_are_distinct_per_device_reproducible_and_follow_the_seed(monkeypatch):
-    monkeypatch.setattr(emulators.clocks, "SEEDED_COUNTER_STARTS", True)
+def test_drawn_starts_are_distinct_per_device_reproducible_and_follow_the_seed():
     starts = {seed: counter_starts(config(seed=seed)) for seed in range(20)}
     assert all(0 <= imu < 128 and 0 <= table < 1 << 20 and imu != table for imu, table in starts.values())
     assert len(set(starts.values())) == 20 and starts[7] == counter_starts(config(seed=7))
@@ -119,7 +110,7 @@ def test_a_power_cycle_silences_the_device_then_its_counter_restarts_from_zero()
 
 def test_a_power_cycle_on_the_ports_is_silence_counted_as_power_cycled():
     cfg = config({"timing": {"counter_start": 10}, "faults": POWER_CYCLE},
-                 {"faults": {"power_cycle_at_s": 0.2, "power_cycle_s": 0.0}})
+                 {"timing": {"counter_start": 0}, "faults": {"power_cycle_at_s": 0.2, "power_cycle_s": 0.0}})
     with EmulatorThread(cfg, duration=1.0) as emu:
         out = {k: bytearray() for k in ("imu", "turntable_data")}
         readers = [threading.Thread(target=read_raw, args=(emu.ports[k], buf)) for k, buf in out.items()]

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 import yaml
-from conftest import Decoding
+from conftest import Decoding, from_zero
 from test_emulated_devices import read_raw
 
 from drivers.framing import SequenceUnwrapper
@@ -36,8 +36,8 @@ SWING = {"outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
 def trial(duration=DURATION, imu=None, turntable=None, seed=5) -> dict:
     return {"trial": {"name": "faults", "duration_s": duration, "rate_hz": RATE, "seed": seed},
             "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
-            "turntable": {"latch_delay_us": 50, "motion": {"kind": "swing", "axes": SWING}, **(turntable or {})},
-            "imu": imu or {}}
+            "turntable": from_zero({"latch_delay_us": 50, "motion": {"kind": "swing", "axes": SWING}, **(turntable or {})}),
+            "imu": from_zero(imu)}
 
 
 def capture(cfg: dict, speed: float | None = None):

@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import from_zero
 from test_emulated_devices import read_raw
 
 from drivers.acl import MODES, MOTION_MODES, AclCommand
@@ -42,8 +43,9 @@ def static_config(duration=4.0, **turntable):
     return parse_config({
         "trial": {"name": "servo", "duration_s": duration, "rate_hz": RATE, "seed": 2},
         "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
-        "turntable": {"latch_delay_us": 50, "limits": LIMITS, "motion": {"kind": "static", "axes": axes},
-                      **turntable},
+        "turntable": from_zero({"latch_delay_us": 50, "limits": LIMITS, "motion": {"kind": "static", "axes": axes},
+                                **turntable}),
+        "imu": from_zero({}),
     })
 
 
