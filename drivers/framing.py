@@ -124,7 +124,8 @@ class SequenceUnwrapper:
         limit = self.JUMP_LIMIT * n
         far = has & (step > limit) & (modulus > 4 * limit) & ~(timed & (np.abs(host_counts - step) < limit))
         if self._suspect is not None and has[0] and seq[0] == (self._suspect + n) % modulus:
-            far[0] = False  # the far jump before was a counter reset: this frame confirms it
+            far[0] = False  # the far jump before was a counter reset: this frame confirms it, and the index goes
+            step[0] = n * max(1, round(host_counts[0] / n)) if timed[0] else n  # on by the time that passed
         odd = np.flatnonzero(late | far)
         stop = int(odd[0]) if len(odd) else len(seq)
         if stop:

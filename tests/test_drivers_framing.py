@@ -213,8 +213,17 @@ def test_wide_counter_ignores_a_far_jump_the_next_frame_does_not_confirm():
         index, missing = unwrapper.next(seq, 0.0)
         if unwrapper.count(counters, index, missing):
             delivered.append(index)
-    assert delivered == [100, 101, 102, 103, 5001, 5002]
-    assert counters.corrupt == 2 and counters.missing == 5001 - 103 - 1
+    # the reset moves the index on by one frame: without host times nothing says how many were lost
+    assert delivered == [100, 101, 102, 103, 104, 105]
+    assert counters.corrupt == 2 and counters.missing == 0
+
+
+def test_a_confirmed_counter_reset_moves_the_index_on_by_the_time_that_passed():
+    unwrapper, counters = SequenceUnwrapper(1 << 32, rate_hz=200.0), Counters()
+    for seq, t in ((7_000_000, 0.0), (7_000_001, 0.005), (0, 1.0), (1, 1.005)):  # silent 1 s, then from zero
+        unwrapper.count(counters, *unwrapper.next(seq, t))
+    assert unwrapper.next(2, 1.010) == (7_000_001 + 200 + 1, 0)  # 1 s of frames after the last one, and on
+    assert counters.corrupt == 1 and counters.missing == 200 - 1
 
 
 def test_a_backlog_read_after_a_host_stall_is_not_taken_for_counter_wraps():

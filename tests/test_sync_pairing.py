@@ -111,7 +111,7 @@ def test_a_static_table_is_paired_by_receive_time_and_says_how_well():
     assert report.accuracy_ms >= 3.0
 
 
-@pytest.mark.parametrize(("jump", "cause"), [(152_000 - OFFSET, "later"), (3 * 128, "later"), (-5 * 128, "before")])
+@pytest.mark.parametrize(("jump", "cause"), [(152_000 - OFFSET, "later"), (3 * 128, "later"), (-5 * 128, "earlier")])
 def test_a_counter_that_jumps_is_noticed_dropped_and_paired_again(jump, cause):
     """An IMU power cycle (its counter from zero) and wraps lost or added in a stall: the receive times break
     the pairing, and the motion finds the new offset."""
@@ -137,7 +137,7 @@ def test_receive_times_that_cannot_tell_the_wraps_apart_end_the_pairing_with_one
     pairing = SyncPairing(2000.0, 10, 128, 1.0, (0.0, 0.0), _rotations)
     rng = np.random.default_rng(3)
     for k in range(40):
-        h = k * 0.02 + 0.05 * rng.random()  # reads jittering by 50 ms: more than half the 64 ms counter period
+        h = k * 0.02 + 0.1 * rng.random()  # reads 50 ms late at the median: more than half the 64 ms counter period
         p = np.arange(k * 40, k * 40 + 40)
         table = _table(p[::10])
         pairing.add_table(TableSamples(table.sync_index, table.angles, np.full(4, h), np.zeros(4), np.zeros(4, int)))

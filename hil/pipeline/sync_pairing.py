@@ -36,11 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hil.pipeline.motion_match import Match, TableRotations, best_offset
+from hil.pipeline.motion_match import MIN_INTERVALS, Match, TableRotations, best_offset
+from hil.pipeline.pairing_streams import MIN_READS, Samples, StreamPairing, joined, kept, part, shifted
 from hil.samples import ImuSamples, TableSamples
 
 WINDOW_S = 10.0  # host seconds of reads behind a stream's receive-time baseline
-MIN_READS = 8  # reads of a stream before its offset is taken from receive times
 SUSPECT_READS = 4  # late reads in a row that break a pairing
 HOLD_S = 5.0  # samples wait this long (of their own time) for a pairing; older ones are dropped as unpaired
 HISTORY_S = 4.0  # paired samples kept for the motion checks
@@ -52,8 +52,6 @@ SEARCH_S = 0.02  # at least this much of either side of the coarse offset is sea
 UNPACED_SEARCH_S = 1.0
 RETRY_S = 0.2  # of new table data before a waiting IMU is searched by motion again
 MOTION, RECEIVE_TIME = "motion", "receive_time"
-
-Samples = ImuSamples | TableSamples
 
 
 @dataclass
@@ -69,34 +67,6 @@ class SyncReport:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
-
-
-@dataclass
-class _Stream:
-    """One stream's pairing state."""
-
-    name: str
-    wire: float  # pulses from a frame's pulse to its last byte on the line
-    offset: int | None = None  # pulse = counter + offset once paired
-    held: list[Samples] = field(default_factory=list)  # waiting for a pairing (or for a late read's verdict)
-    segment: list[tuple[float, float]] = field(default_factory=list)  # (h, e) of the reads since the break
-    window: deque = field(default_factory=deque)  # (h, e - offset) of the paired reads: the baseline's
-    late: int = 0  # late reads in a row (their samples are in ``held``)
-    cause: str | None = None  # why the pairing broke, until re-paired
-    offset_before: int | None = None  # the offset before the break
-    tried: int | None = None  # newest table pulse at the last motion search for this stream
-
-    def baseline(self, reads: int = MIN_READS) -> float | None:
-        """The least lateness of the paired reads (pulses), once there are ``reads`` of them."""
-        return min(v for _, v in self.window) if len(self.window) >= max(reads, 1) else None
-
-    def waited(self, rate: float) -> float:
-        """Seconds of the device's time the held samples span."""
-        return (int(self.held[-1].sync_index[-1]) - int(self.held[0].sync_index[0])) / rate if self.held else 0.0
-
-    def spread(self) -> float:
-        values = np.array([v for _, v in self.window])
-        return float(np.quantile(values, 0.9) - values.min()) if len(values) >= MIN_READS else 0.0
 
 
 class SyncPairing:
@@ -116,8 +86,8 @@ class SyncPairing:
         self.table_step = table_step
         self.imu_modulus = imu_modulus
         self.rotations = rotations
-        self.imu = _Stream("imu", wire_s[0] * rate_hz)
-        self.table = _Stream("table", wire_s[1] * rate_hz, offset=0)  # the table's count is the pulse line
+        self.imu = StreamPairing("imu", wire_s[0] * rate_hz)
+        self.table = StreamPairing("table", wire_s[1] * rate_hz, offset=0)  # the table's count is the pulse line
         self.report = SyncReport()
         self.failure: str | None = None  # why the streams cannot be paired (ends a live trial)
         self._h_ref: float | None = None
@@ -159,7 +129,7 @@ class SyncPairing:
         out = []
         for s in (self.table, self.imu):
             if s.offset is not None and s.held:
-                released, s.held = _shifted(_joined(s.held), s.offset), []
+                released, s.held = shifted(joined(s.held), s.offset), []
                 out.append(released)
             else:
                 out.append(None)
@@ -168,7 +138,14 @@ class SyncPairing:
 
     # -- one read ----------------------------------------------------------------------------------
 
-    def _read(self, s: _Stream, samples: Samples) -> Samples | None:
+    def _read(self, s: StreamPairing, samples: Samples) -> Samples | None:
+        """One read of ``s``: what of it (and of earlier reads) is now paired, on the pulse line."""
+        released = self._judged(s, samples)
+        early, s.before_break = s.before_break, None
+        parts = [part for part in (early, released) if part is not None and len(part)]
+        return joined(parts) if parts else None
+
+    def _judged(self, s: StreamPairing, samples: Samples) -> Samples | None:
         if not len(samples):
             return None
         h = float(samples.host_time[-1])
@@ -182,74 +159,101 @@ class SyncPairing:
             return self._settle(s)
         late = e - s.offset
         baseline = s.baseline() if self.host_rate is not None else None
-        if baseline is not None:
-            tolerance = self.tolerance()
-            if late < baseline - tolerance:
-                s.held.append(samples)
-                s.segment.append((h, e))
-                self._break(s, "a frame arrived before its pulse (counter jumped ahead)")
-                return self._settle(s)
-            if late > baseline + tolerance:
-                s.held.append(samples)
-                s.segment.append((h, e))
-                s.late += 1
-                if s.late >= SUSPECT_READS:
-                    self._break(s, "frames arrived later than their pulses for "
-                                   f"{SUSPECT_READS} reads (counter reset, replug or wraps lost)")
-                    return self._settle(s)
+        if baseline is not None and abs(late - baseline) > self.tolerance():
+            s.held.append(samples)
+            s.segment.append((h, e))
+            s.late += 1
+            if s.late < SUSPECT_READS:
                 return None
-        released = _joined([*s.held, samples])
+            self._break(s, f"frames arrived {'later' if late > baseline else 'earlier'} than their pulses allow for "
+                           f"{SUSPECT_READS} reads (counter reset, replug or wraps lost)")
+            return self._settle(s)
+        released = joined([*s.held, samples])
         s.held, s.segment, s.late = [], [], 0
         s.window.append((h, late))
         while s.window and s.window[0][0] < h - WINDOW_S:
             s.window.popleft()
-        return _shifted(released, s.offset)
+        return shifted(released, s.offset)
 
-    def _lateness(self, s: _Stream, h: float, counter: int) -> float:
+    def _lateness(self, s: StreamPairing, h: float, counter: int) -> float:
         """Pulses from the newest frame's pulse (less the stream's offset) to its arrival: ``e``."""
         if self.host_rate is None:
             return 0.0
         return self.host_rate * (h - self._h_ref) - s.wire - counter
 
-    def jitter(self) -> float:
-        """Pulses the reads' lateness scatters by (90th percentile over the least, the worse stream's)."""
-        return max(self.imu.spread(), self.table.spread())
+    def jitter(self, quantile: float = 0.9) -> float:
+        """Pulses the reads' lateness scatters by (its ``quantile`` over its least, the worse stream's)."""
+        return max(self.imu.spread(quantile), self.table.spread(quantile))
 
     def tolerance(self) -> float:
         """Pulses of lateness the watch allows: ``JITTER_FACTOR`` times the jitter, at least ``MIN_TOLERANCE_S``."""
         return max(2.0, MIN_TOLERANCE_S * self.host_rate, JITTER_FACTOR * self.jitter())
 
-    def _break(self, s: _Stream, cause: str) -> None:
-        """The stream's pairing broke: its held reads start the new segment."""
+    def _break(self, s: StreamPairing, cause: str) -> None:
+        """The stream's pairing broke where its counter last jumped within the held reads (else before them):
+        the samples before that are paired as they were (:attr:`StreamPairing.before_break`), the rest start the new
+        segment with the reads that brought them."""
+        step = 1 if s is self.imu else self.table_step
+        held = joined(s.held) if s.held else None
+        jumps = np.flatnonzero(np.diff(held.sync_index) != step) if held is not None else []
+        late = np.array([e for _, e in s.segment])
+        steps = np.abs(np.diff(late))  # a counter that went on by the frames it sent, but not by the time that passed
+        ends = np.cumsum([len(part) for part in s.held])  # a read's samples end there in ``held``
+        cut = int(jumps[-1]) + 1 if len(jumps) else 0
+        if not cut and len(steps) and steps.max() > self.tolerance():
+            cut = int(ends[int(np.argmax(steps))])
+        if cut:
+            s.before_break = shifted(part(held, np.arange(cut)), s.offset)
+            s.segment = [read for read, end in zip(s.segment, ends, strict=True) if end > cut]
+            s.held = [part(held, np.arange(cut, len(held)))]
         s.cause = cause
         s.offset_before = s.offset
         s.offset = None
         s.late = 0
+        if s is self.imu:  # the motion checks compare the streams from here on
+            self._imu_history = (self._imu_history[0][:0], self._imu_history[1][:0])
+        else:
+            self._table_history = (self._table_history[0][:0], self._table_history[1][:0])
+            self._checked = 0  # the IMU is checked against the table's new segment as soon as it can be
 
     # -- settling a pairing ------------------------------------------------------------------------
 
-    def _settle(self, s: _Stream) -> Samples | None:
+    def _settle(self, s: StreamPairing) -> Samples | None:
         """Pair a waiting stream once its data allow; returns its held samples, paired, or None."""
         coarse = self._coarse(s)
         if coarse is None:
             return None
         if s is self.table:
-            return self._paired(s, coarse, RECEIVE_TIME)
+            return self._paired(s, self._receive_time_offset(s, coarse), RECEIVE_TIME)
         pulses, _ = self._table_history
         if not len(pulses) or (s.tried is not None and pulses[-1] - s.tried < RETRY_S * self.rate):
             return None
         s.tried = int(pulses[-1])
-        search = math.ceil(max(2 * self.tolerance(), SEARCH_S * self.host_rate) if self.host_rate is not None
-                           else UNPACED_SEARCH_S * self.rate)
-        match = self._match(_joined(s.held), np.arange(coarse - search, coarse + search + 1))
+        search = math.ceil(max(2 * self.tolerance(), SEARCH_S * self.host_rate, self._backlog(s))
+                           if self.host_rate is not None else UNPACED_SEARCH_S * self.rate)
+        match = self._match(joined(s.held), np.arange(coarse - search, coarse + search + 1))
         if match.offset is not None:
             return self._paired(s, match.offset, MOTION)
         table_span = (pulses[-1] - pulses[0]) / self.rate
         if (not match.moving and table_span >= STILL_S) or s.waited(self.rate) >= HOLD_S:
-            return self._paired(s, coarse, RECEIVE_TIME)
+            return self._paired(s, self._receive_time_offset(s, coarse), RECEIVE_TIME)
         return None
 
-    def _coarse(self, s: _Stream) -> int | None:
+    def _backlog(self, s: StreamPairing) -> float:
+        """Pulses by which the segment's reads were late at worst against their least: after a stall of the
+        host its first reads bring old frames, and the least lateness may not yet be a prompt read's."""
+        late = [e for _, e in s.segment]
+        return max(late) - min(late) + self.tolerance()
+
+    def _receive_time_offset(self, s: StreamPairing, coarse: int) -> int:
+        """The offset by receive time alone: the one before the break where the receive times cannot tell them
+        apart (a host that was late broke it, not the device)."""
+        if s.offset_before is not None and self.host_rate is not None and abs(coarse - s.offset_before) <= \
+                self.tolerance():
+            return s.offset_before
+        return coarse
+
+    def _coarse(self, s: StreamPairing) -> int | None:
         """The offset the receive times give (None until they can)."""
         if self.host_rate is None:
             if s.offset_before is not None:
@@ -264,7 +268,7 @@ class SyncPairing:
             baseline = other.baseline(1) if other.offset is not None else None
         if baseline is None:
             return None
-        jitter = self.jitter()
+        jitter = self.jitter(0.5)  # the least lateness is found while half the reads are prompt
         if s is self.imu and self.imu_modulus and jitter >= self.imu_modulus / 2:
             jitter_ms, half_ms = (1e3 * x / self.host_rate for x in (jitter, self.imu_modulus / 2))
             self.failure = (f"the receive times scatter by {jitter_ms:.0f} ms, more than half the IMU counter's "
@@ -278,13 +282,14 @@ class SyncPairing:
         pulses, angles = self._table_history
         return best_offset(imu.sync_index, imu.dtheta, self.rotations(pulses, angles), candidates)
 
-    def _paired(self, s: _Stream, offset: int, by: str) -> Samples | None:
+    def _paired(self, s: StreamPairing, offset: int, by: str) -> Samples | None:
         """Settle ``s`` at ``offset``: its held samples go out on the pulse line."""
         first = self.report.paired_by is None and s is self.imu
         changed = s.cause is not None and offset != s.offset_before
         s.offset = offset
-        s.window = deque((h, e - offset) for h, e in s.segment) if self.host_rate is not None else deque()
-        released = _shifted(_joined(s.held), offset)
+        if not s.window and self.host_rate is not None:  # the first pairing; a re-pairing keeps the baseline
+            s.window = deque((h, e - offset) for h, e in s.segment)
+        released = shifted(joined(s.held), offset)
         s.held, s.segment, s.tried = [], [], None
         if first:
             keep = released.sync_index > self._table_first - self.table_step  # no angles more than a table frame before
@@ -316,11 +321,13 @@ class SyncPairing:
         newest = int(released.sync_index[-1])
         if newest - self._checked < CHECK_S * self.rate or not len(self._table_history[0]):
             return
-        self._checked = newest
         search = math.ceil(self.tolerance()) + 2 if self.host_rate is not None else 3
         pulses, dtheta = self._imu_history
         match = self._match(ImuSamples(pulses, dtheta, dtheta, np.zeros(len(pulses)), np.zeros(len(pulses))),
                             np.arange(-search, search + 1))
+        if match.moving and match.intervals < MIN_INTERVALS:
+            return  # too little data since a break: again at the next read
+        self._checked = newest
         if match.offset is None:
             return
         at = self._trial_time(newest)
@@ -343,14 +350,14 @@ class SyncPairing:
         return (pulse - self._first_pulse) / self.rate
 
     def _remember_imu(self, samples: ImuSamples) -> None:
-        self._imu_history = _kept(self._imu_history, samples.sync_index, samples.dtheta, HISTORY_S * self.rate)
+        self._imu_history = kept(self._imu_history, samples.sync_index, samples.dtheta, HISTORY_S * self.rate)
 
     def _remember_table(self, samples: TableSamples) -> None:
         if self._table_first is None:
             self._table_first = int(samples.sync_index[0])
-        self._table_history = _kept(self._table_history, samples.sync_index, samples.angles, HISTORY_S * self.rate)
+        self._table_history = kept(self._table_history, samples.sync_index, samples.angles, HISTORY_S * self.rate)
 
-    def _trim_held(self, s: _Stream) -> None:
+    def _trim_held(self, s: StreamPairing) -> None:
         """At most ``HOLD_S`` of a waiting stream's samples are held; older IMU samples are unpaired."""
         newest = int(s.held[-1].sync_index[-1])
         while len(s.held) > 1 and newest - int(s.held[0].sync_index[-1]) > HOLD_S * self.rate:
@@ -358,36 +365,10 @@ class SyncPairing:
             if s is self.imu:
                 self._drop_count(len(dropped))
 
-    def _drop(self, s: _Stream, reads: int) -> None:
+    def _drop(self, s: StreamPairing, reads: int) -> None:
         for dropped in s.held[:reads]:
             self._drop_count(len(dropped))
         s.held = s.held[reads:]
 
     def _drop_count(self, n: int) -> None:
         self.report.unpaired += n
-
-
-def _joined(parts: list[Samples]) -> Samples:
-    """One read's worth of samples from several, in order."""
-    if len(parts) == 1:
-        return parts[0]
-    kind = type(parts[0])
-    return kind(*(np.concatenate([getattr(p, name) for p in parts]) for name in kind.__dataclass_fields__))
-
-
-def _shifted(samples: Samples, offset: int) -> Samples:
-    """The samples with ``sync_index`` moved onto the pulse line."""
-    kind = type(samples)
-    fields = {name: getattr(samples, name) for name in kind.__dataclass_fields__}
-    fields["sync_index"] = samples.sync_index + offset
-    return kind(**fields)
-
-
-def _kept(history: tuple[np.ndarray, np.ndarray], pulses: np.ndarray, values: np.ndarray, span: float
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """History plus new samples, the last ``span`` pulses of it (trimmed when twice that is held)."""
-    p, v = np.concatenate((history[0], pulses)), np.concatenate((history[1], values))
-    if len(p) and p[-1] - p[0] > 2 * span:
-        first = int(np.searchsorted(p, p[-1] - span))
-        p, v = p[first:], v[first:]
-    return p, v

@@ -1,0 +1,113 @@
+"""The harness attached to devices that are already streaming (the lab form): ``hil emulate`` in its own process
+from the start, its counters at their own values, and ``hil run`` pointed at its ports seconds later, after
+several wraps of the IMU's counter. Each completes with little unpaired, nothing rejected by the gyro/table
+gate, and the bias within 5 sigma of the emulator's truth."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from lab_form import Emulator, emulated, lab_config, result, within_sigmas
+
+from hil.cli import main
+
+TRIAL_S = 12.0
+
+
+def _attach(tmp_path, cfg: dict, late_s: float, duration: float = TRIAL_S) -> dict:
+    with Emulator(tmp_path, cfg) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path)
+        time.sleep(max(0.0, late_s - (time.monotonic() - emulator.started)))
+        out = tmp_path / "run"
+        assert main(["run", str(lab), "--duration", str(duration), "--out", str(out), "--viewer", "none",
+                     "--quiet", "--no-figures"]) == 0
+    return result(out)
+
+
+def _judged(doc: dict, rate_hz: float) -> None:
+    streams = doc["streams"]
+    sync = streams["sync"]
+    assert doc["ended"] == "completed"
+    assert sync["paired_by"] == "motion" and sync["repairs"] == []
+    assert sync["unpaired"] <= rate_hz  # no more than 1 s of samples
+    assert streams["imu_gated"] == 0
+    assert within_sigmas(doc), doc["estimate"]
+
+
+@pytest.mark.parametrize(("protocol", "rate_hz", "start", "late_s"), [
+    ("kvh1750", 200.0, 5, 2.5),  # 7-bit counter: 0.64 s a wrap at 200 Hz, 64 ms at 2 kHz
+    ("kvh1750", 1000.0, 100, 1.5),
+    ("kvh1750", 2000.0, 17, 1.5),
+    ("xsens-mtdata2", 200.0, 65_536 - 100, 2.0),  # attached past the 16-bit wrap
+    ("xsens-mtdata2", 1000.0, 65_536 - 500, 2.0),
+    ("can-dbc", 200.0, None, 2.0),
+])
+def test_attached_late_after_counter_wraps_the_trial_pairs_and_completes(tmp_path, protocol, rate_hz, start, late_s,
+                                                                         request):
+    if protocol == "can-dbc":
+        request.getfixturevalue("udp_multicast_alone")
+    timing = {"counter_start": start} if start is not None else {}
+    cfg = emulated(rate_hz, protocol, baudrate=921600, timing=timing)
+    cfg["turntable"]["timing"] = {"counter_start": 777_777}
+    _judged(_attach(tmp_path, cfg, late_s), rate_hz)
+
+
+def test_a_static_table_is_paired_by_receive_time_and_says_so(tmp_path):
+    cfg = emulated(200.0, kind="static", timing={"counter_start": 3})
+    doc = _attach(tmp_path, cfg, 2.0, duration=6.0)
+    sync = doc["streams"]["sync"]
+    assert doc["ended"] == "completed" and sync["paired_by"] == "receive_time"
+    assert sync["confirmed_at_s"] is None and sync["accuracy_ms"] > 0  # the host's jitter: larger on a loaded one
+    assert doc["streams"]["imu_frames"] == doc["streams"]["aligned"] and doc["streams"]["aligner_without_angles"] == 0
+
+
+@pytest.mark.parametrize("device", ["imu", "turntable"])
+def test_a_power_cycle_mid_trial_is_noticed_re_paired_and_the_trial_goes_on(tmp_path, device):
+    """The device is silent for 1 s, then counts from zero: the pairing breaks on the receive times, the
+    stream is paired anew, and the trial completes with the re-pairing counted and the bias kept."""
+    cfg = emulated(200.0, timing={"counter_start": 40})
+    cfg[device]["faults"] = {"power_cycle_at_s": 6.0, "power_cycle_s": 1.0}
+    with Emulator(tmp_path, cfg) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, limits={"missing_max": 0.2, "without_angles_max": 0.2})
+        time.sleep(max(0.0, 1.5 - (time.monotonic() - emulator.started)))
+        out = tmp_path / "run"
+        code = main(["run", str(lab), "--duration", "14", "--out", str(out), "--viewer", "none", "--quiet",
+                     "--no-figures"])
+    doc = result(out)
+    sync = doc["streams"]["sync"]
+    assert code == 0 and doc["ended"] == "completed", doc["ended"]
+    # the table is re-paired on its receive times, and the IMU's motion check may then move the IMU by a pulse
+    assert 1 <= len(sync["repairs"]) <= 2 and sync["repairs"][0]["cause"].startswith({"imu": "imu", "turntable": "table"}[device])
+    assert 3.0 < sync["repairs"][0]["at_s"] < 8.0  # the power cycle, 1.5 s after the harness started
+    assert doc["streams"]["imu_gated"] <= 0.001 * doc["streams"]["aligned"] and within_sigmas(doc)
+    again = tmp_path / "again"
+    assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0
+    assert result(again) == doc
+
+
+def test_a_harness_stopped_for_half_a_second_notices_the_lost_wraps_and_completes(tmp_path):
+    """A 2 kHz KVH wraps its counter every 64 ms: while the harness is stopped (SIGSTOP) for 0.5 s the ports
+    overflow and frames are lost; whatever the unwrapped counter then says, the stream is paired again."""
+    import signal
+    import subprocess
+    import sys
+
+    cfg = emulated(2000.0, baudrate=921600, timing={"counter_start": 17})
+    with Emulator(tmp_path, cfg) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, limits={"missing_max": 0.2})
+        out = tmp_path / "run"
+        harness = subprocess.Popen([sys.executable, "-m", "hil.cli", "run", str(lab), "--duration", "12", "--out",
+                                    str(out), "--viewer", "none", "--quiet", "--no-figures"],
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        time.sleep(5.0)
+        harness.send_signal(signal.SIGSTOP)
+        time.sleep(0.5)
+        harness.send_signal(signal.SIGCONT)
+        assert harness.wait(60) == 0, harness.stderr.read().decode()
+    doc = result(out)
+    streams = doc["streams"]
+    assert doc["ended"] == "completed"
+    assert streams["imu_missing"] + streams["sync"]["unpaired"] > 0  # the stall lost frames
+    # while the receive times are refined to the pulse the gate may take a few samples (within gated_max: exit 0)
+    assert streams["imu_gated"] <= 0.001 * streams["aligned"] and within_sigmas(doc)
