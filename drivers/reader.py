@@ -1,8 +1,10 @@
 """Device readers: read a transport on a thread and hand every raw chunk to the raw listeners.
 
 A reader only reads: framing and decoding are the consumer's (:mod:`drivers.decoder`). It survives
-unplug/replug: when the transport fails it is closed and reopened with exponential back-off until it
-returns or the reader is stopped; the listeners hear of each outage and reconnection as events.
+unplug/replug and a restarted device: when the transport fails (an I/O error, or end-of-file on a
+serial port) it is closed and reopened by its URL as configured (a symbolic link resolved anew on each
+open) with exponential back-off until it returns or the reader is stopped; the listeners hear of each
+outage and reconnection as events.
 
 On a byte stream a read returns every byte that has arrived, so a reader given ``gather_s`` reads once
 per tick of a ``gather_s`` grid on the host's monotonic clock after a read that returned data (as a USB
@@ -91,10 +93,10 @@ class DeviceReader:
             listener.on_event(note)
 
     def _reconnect(self, error: TransportError) -> None:
+        self.transport.close()  # released before the outage is announced
         self.outages += 1
         self.last_error = str(error)
         self._event("outage", str(error))
-        self.transport.close()
         delay, longest = self.backoff_s
         while not self._stop.wait(delay):
             try:
