@@ -301,6 +301,7 @@ class CalibrationConfig(_Model):
 class OutputConfig(_Model):
     dir: str | None = None
     figures: bool = True
+    outage_limit_s: float = Field(10.0, gt=0)  # live: no data from any device for this long ends the trial
     limits: ReportLimits = ReportLimits()
 
 
