@@ -45,7 +45,7 @@ class DeviceReader:
         self.backoff_s = backoff_s
         self.gather_s = gather_s if transport.byte_stream else 0.0
         self.outages = 0  # times the transport failed after it had been open
-        self.last_error: str | None = None
+        self.down: str | None = None  # why the port is down (its failure, then the last reopen's); None while open
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -95,15 +95,16 @@ class DeviceReader:
     def _reconnect(self, error: TransportError) -> None:
         self.transport.close()  # released before the outage is announced
         self.outages += 1
-        self.last_error = str(error)
-        self._event("outage", str(error))
+        self.down = str(error)
+        self._event("outage", self.down)
         delay, longest = self.backoff_s
         while not self._stop.wait(delay):
             try:
                 self.transport.open()
             except TransportError as exc:
-                self.last_error = str(exc)
+                self.down = str(exc)
                 delay = min(2.0 * delay, longest)
             else:
+                self.down = None
                 self._event("reconnected")
                 return

@@ -198,6 +198,9 @@ def test_a_live_trial_rides_out_an_outage_shorter_than_its_limit(tmp_path):
         trial._check_alive(102.9, started=90.0)  # an outage of 2.9 s: the trial goes on
         with pytest.raises(TrialAborted, match=r"^no data from any device for 3 s \(output.outage_limit_s\)$"):
             trial._check_alive(103.1, started=90.0)
+        trial.readers[0].down = "imu: /dev/pts/7 is now another program's pseudo-terminal; not reopening"
+        with pytest.raises(TrialAborted, match=r"\(output.outage_limit_s\): imu: /dev/pts/7 is now another program's"):
+            trial._check_alive(103.1, started=90.0)  # why a port stays down
     finally:
         trial.recorder.close()
     assert load_config("configs/emulated_swing.yaml").output.outage_limit_s == 10.0  # the default

@@ -149,10 +149,11 @@ class LiveTrial:
     trial early. ``stop_requested`` (optional) is polled every step: a signal name ends the trial as
     interrupted. A trial whose IMU samples are all rejected for ``STALL_S`` ends early with the
     processor's diagnosis. ``on_end`` (optional) is called the moment acquisition ends, however it ends,
-    before the backlog is processed: where the table is turned off. ``on_samples`` goes to the processor (:class:`TrialProcessor`); ``finished``
-    (optional) is polled every step: True ends the trial as completed (a trial whose length is set by
-    what the harness commands). ``queue_items`` bounds the processing queue: a small one holds the
-    emulated devices close behind the processing (the table then answers a command without lag).
+    before the backlog is processed: where the table is turned off. ``on_samples`` goes to the processor
+    (:class:`TrialProcessor`); ``finished`` (optional) is polled every step: True ends the trial as
+    completed (a trial whose length is set by what the harness commands). ``queue_items`` bounds the
+    processing queue: a small one holds the emulated devices close behind the processing (the table then
+    answers a command without lag).
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
@@ -284,4 +285,6 @@ class LiveTrial:
             raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
         limit = self.cfg.output.outage_limit_s
         if last and now - last > limit:
-            raise TrialAborted(f"no data from any device for {limit:g} s (output.outage_limit_s)")
+            why = "; ".join(reader.down for reader in self.readers if reader.down)
+            message = f"no data from any device for {limit:g} s (output.outage_limit_s)"
+            raise TrialAborted(f"{message}: {why}" if why else message)
