@@ -23,8 +23,8 @@ from hil.samples import ImuSamples, TableSamples
 
 @dataclass
 class StreamDecoder:
-    """One stream's framer and codec, with its outage count: outages after which the device sent data
-    again (a port closing at the end of a trial, or a reconnection to nothing, is not one).
+    """One stream's framer and codec, with its outage count: the stream's ``outage`` events, as the
+    recording holds them, whether or not the device came back.
 
     ``time_scale`` is how much faster than real time the device runs (an emulator at ``--speed X``):
     the framer's counter unwrapping, which sizes outages longer than a counter period from the host
@@ -36,7 +36,6 @@ class StreamDecoder:
     time_scale: float | None = 1.0
     framer: Framer = field(init=False)
     outages: int = 0
-    _reconnects: int = 0  # reconnections not yet followed by data
 
     def __post_init__(self) -> None:
         self.framer = self.codec.framer(self.time_scale)
@@ -47,18 +46,11 @@ class StreamDecoder:
 
     def frames(self, chunk: RawChunk) -> list[Decoded]:
         """The complete frames of a chunk, still in device units (for captures)."""
-        self._resumed(chunk)
         return self.framer.feed_chunk(chunk)
-
-    def _resumed(self, chunk: RawChunk) -> None:
-        if chunk.data:
-            self.outages += self._reconnects  # the device is back: the outages before count
-            self._reconnects = 0
 
     def feed(self, chunk: RawChunk) -> ImuSamples | TableSamples:
         """The samples (SI) of a chunk's complete frames; frames that give no sample are counted corrupt."""
         if isinstance(self.framer, ByteFramer):
-            self._resumed(chunk)
             frames = self.framer.feed_batch(chunk.data, chunk.host_time)
             samples = self.codec.samples(frames)
             self.framer.counters.corrupt += len(frames) - len(samples)
@@ -66,6 +58,6 @@ class StreamDecoder:
         return self.codec.to_samples(self.frames(chunk))
 
     def event(self, event: StreamEvent) -> None:
-        if event.event == "reconnected":
-            self._reconnects += 1
+        """A reader's event: an outage is counted; the framer forgets its partial frame."""
+        self.outages += event.event == "outage"
         self.framer.reset()

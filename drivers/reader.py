@@ -1,8 +1,10 @@
 """Device readers: read a transport on a thread and hand every raw chunk to the raw listeners.
 
 A reader only reads: framing and decoding are the consumer's (:mod:`drivers.decoder`). It survives
-unplug/replug: when the transport fails it is closed and reopened with exponential back-off until it
-returns or the reader is stopped; the listeners hear of each outage and reconnection as events.
+unplug/replug and a restarted device: when the transport fails (an I/O error, or end-of-file on a
+serial port) it is closed and reopened by its URL as configured (a symbolic link resolved anew on each
+open) with exponential back-off until it returns or the reader is stopped; the listeners hear of each
+outage and reconnection as events.
 
 On a byte stream a read returns every byte that has arrived, so a reader given ``gather_s`` reads once
 per tick of a ``gather_s`` grid on the host's monotonic clock after a read that returned data (as a USB
@@ -43,7 +45,7 @@ class DeviceReader:
         self.backoff_s = backoff_s
         self.gather_s = gather_s if transport.byte_stream else 0.0
         self.outages = 0  # times the transport failed after it had been open
-        self.last_error: str | None = None
+        self.down: str | None = None  # why the port is down (its failure, then the last reopen's); None while open
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -91,17 +93,18 @@ class DeviceReader:
             listener.on_event(note)
 
     def _reconnect(self, error: TransportError) -> None:
+        self.transport.close()  # released before the outage is announced
         self.outages += 1
-        self.last_error = str(error)
-        self._event("outage", str(error))
-        self.transport.close()
+        self.down = str(error)
+        self._event("outage", self.down)
         delay, longest = self.backoff_s
         while not self._stop.wait(delay):
             try:
                 self.transport.open()
             except TransportError as exc:
-                self.last_error = str(exc)
+                self.down = str(exc)
                 delay = min(2.0 * delay, longest)
             else:
+                self.down = None
                 self._event("reconnected")
                 return

@@ -7,10 +7,10 @@ port), so that both speak to lab serial servers (ser2net) alike and fail with th
 
 from __future__ import annotations
 
-import os
 import re
 import socket
 import sys
+import termios
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -21,6 +21,7 @@ import can
 import serial
 
 from drivers.codec import RawChunk
+from drivers.pty_guard import PtyGuard
 from drivers.tap import message_to_chunk
 from hil.config import InputError
 
@@ -59,7 +60,8 @@ def open_serial(url: str, name: str, **settings: Any) -> serial.SerialBase:
         port = serial.serial_for_url(serial_url(url), **settings)
         if url.startswith("rfc2217://"):
             port.read(port.in_waiting)  # what came before the purge was answered
-    except (serial.SerialException, OSError, ValueError) as exc:
+    except (serial.SerialException, OSError, ValueError, termios.error) as exc:
+        # termios.error: a pty that hangs up while pyserial sets it up (its flush fails with EIO)
         raise TransportError(f"{name}: cannot open {url}: {_open_failure(exc)}") from exc
     return port
 
@@ -106,10 +108,11 @@ class SerialTransport(Transport):
     def __init__(self, url: str, baudrate: int, stream: str) -> None:
         self.url, self.baudrate, self.stream = url, baudrate, stream
         self.port: serial.SerialBase | None = None
-        self._pty: tuple[int, int] | None = None  # (device, creation time) of a /dev/pts node first opened
+        self._pty = PtyGuard(url)  # never reopened onto another program's pty (drivers.pty_guard)
 
     def open(self) -> None:
-        self._check_same_pty()
+        if not self._pty.admits():
+            raise TransportError(f"{self.stream}: {self.url} is now another program's pseudo-terminal; not reopening")
         # exclusive: an advisory lock, so a second reader (a stale session of another process
         # reconnecting to a reused pty number) cannot share the port and split its bytes
         port = open_serial(self.url, self.stream, baudrate=self.baudrate, timeout=POLL_S, exclusive=True)
@@ -118,22 +121,6 @@ class SerialTransport(Transport):
         except (AttributeError, NotImplementedError, OSError, ValueError):
             pass  # not a local UART (pty, socket, rfc2217): nothing to tune
         self.port = port
-
-    def _check_same_pty(self) -> None:
-        """A pseudo-terminal's number is handed to the next program that asks once it is closed: never
-        reopen ``/dev/pts/N`` when it is a different pty from the one first opened (a real port's node,
-        recreated on replug, and a link re-pointed at a new pty are reopened as usual)."""
-        if not self.url.startswith("/dev/pts/"):
-            return
-        try:
-            info = os.stat(self.url)
-        except OSError:
-            return  # gone: the open fails and says so
-        identity = (info.st_rdev, info.st_ctime_ns)
-        if self._pty is None:
-            self._pty = identity
-        elif identity != self._pty:
-            raise TransportError(f"{self.stream}: {self.url} is now another program's pseudo-terminal; not reopening")
 
     def read(self) -> RawChunk | None:
         if self.port is None:

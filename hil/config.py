@@ -283,6 +283,7 @@ class CalibrationConfig(Model):
 class OutputConfig(Model):
     dir: str | None = None
     figures: bool = True
+    outage_limit_s: float = Field(10.0, gt=0)  # live: no data from any device for this long ends the trial
     limits: ReportLimits = ReportLimits()
 
 

@@ -107,7 +107,7 @@ def test_session_survives_unplug_and_replug_and_counts_the_gap(link):
     assert indices == list(range(40)) + list(range(70, 100))
     assert reader.outages == 1
     assert (sink.counters.gaps, sink.counters.missing) == (1, 30)
-    assert "imu" in reader.last_error
+    assert reader.down is None and sink.events[0].detail.startswith("imu: read from")
 
 
 class FakeTable:

@@ -14,7 +14,7 @@ from hil.cli import main
 from hil.config import load_config
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
-from hil.trial.live import LatencyStats, read_period
+from hil.trial.live import LatencyStats, LiveTrial, TrialAborted, read_period
 from hil.trial.offline import replay_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -190,3 +190,22 @@ def test_the_read_period_is_one_block_within_its_bounds(imu_rate, batch, period)
     cfg = cfg.model_copy(update={"imu": cfg.imu.model_copy(update={"rate_hz": imu_rate}),
                                  "estimator": cfg.estimator.model_copy(update={"batch_samples": batch})})
     assert read_period(cfg) == pytest.approx(period)
+
+
+def test_a_live_trial_rides_out_an_outage_shorter_than_its_limit(tmp_path):
+    """``output.outage_limit_s`` is how long every device may be silent (the readers reconnecting) before
+    the trial ends early."""
+    cfg = load_config("configs/lab_swing.yaml")
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"outage_limit_s": 3.0})})
+    trial = LiveTrial(cfg, "", tmp_path, None, ports={"imu": "/dev/imu", "turntable_data": "/dev/table"})
+    try:
+        trial.fanout.last_arrival = 100.0  # the last data, monotonic s
+        trial._check_alive(102.9, started=90.0)  # an outage of 2.9 s: the trial goes on
+        with pytest.raises(TrialAborted, match=r"^no data from any device for 3 s \(output.outage_limit_s\)$"):
+            trial._check_alive(103.1, started=90.0)
+        trial.readers[0].down = "imu: /dev/pts/7 is now another program's pseudo-terminal; not reopening"
+        with pytest.raises(TrialAborted, match=r"\(output.outage_limit_s\): imu: /dev/pts/7 is now another program's"):
+            trial._check_alive(103.1, started=90.0)  # why a port stays down
+    finally:
+        trial.recorder.close()
+    assert load_config("configs/emulated_swing.yaml").output.outage_limit_s == 10.0  # the default

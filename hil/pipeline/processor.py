@@ -121,16 +121,18 @@ class TrialProcessor:
         return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
 
     def feed(self, item: RawChunk | StreamEvent) -> None:
-        """Process one chunk or event from any stream."""
+        """Process one chunk or event from any stream. A stream's events reach its decoder even after the
+        end, so that its outage count is the recording's."""
+        decoder = self.decoders.get(item.stream)
+        if isinstance(item, StreamEvent) and decoder is not None:
+            decoder.event(item)
         if self.complete:
             self.after_end += 1
             return
-        decoder = self.decoders.get(item.stream)
         if decoder is None:
             self.unknown_chunks += 1
             return
         if isinstance(item, StreamEvent):
-            decoder.event(item)
             if self.pairing is not None:
                 self.pairing.event(item.stream, item.event)
             return

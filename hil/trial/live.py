@@ -37,7 +37,6 @@ from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
-WATCHDOG_S = 10.0  # no data from any device for this long ends the trial
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
 START_TIMEOUT_S = 15.0  # the first data must arrive within this
 SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks arrive within this
@@ -145,14 +144,16 @@ class LiveTrial:
     ``END_TOLERANCE_S`` (its last frames may have been dropped). ``time_scale`` is the emulator's
     speed. ``on_progress`` gets the processor about twice a second. With a ``motion_check`` (the
     harness commands the table) the trial ends when the table does not move as commanded or its data
-    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off. ``stop_requested`` (optional)
-    is polled every step: a signal name ends the trial as interrupted. A trial whose IMU samples are
-    all rejected for ``STALL_S`` ends early with the processor's diagnosis. ``on_end`` (optional) is
-    called the moment acquisition ends, however it ends, before the backlog is processed: where the
-    table is turned off. ``on_samples`` goes to the processor (:class:`TrialProcessor`); ``finished``
-    (optional) is polled every step: True ends the trial as completed (a trial whose length is set by
-    what the harness commands). ``queue_items`` bounds the processing queue: a small one holds the
-    emulated devices close behind the processing (the table then answers a command without lag).
+    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off. An outage of every device
+    shorter than ``output.outage_limit_s`` is ridden out (the readers reconnect), a longer one ends the
+    trial early. ``stop_requested`` (optional) is polled every step: a signal name ends the trial as
+    interrupted. A trial whose IMU samples are all rejected for ``STALL_S`` ends early with the
+    processor's diagnosis. ``on_end`` (optional) is called the moment acquisition ends, however it ends,
+    before the backlog is processed: where the table is turned off. ``on_samples`` goes to the processor
+    (:class:`TrialProcessor`); ``finished`` (optional) is polled every step: True ends the trial as
+    completed (a trial whose length is set by what the harness commands). ``queue_items`` bounds the
+    processing queue: a small one holds the emulated devices close behind the processing (the table then
+    answers a command without lag).
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
@@ -282,5 +283,8 @@ class LiveTrial:
         table_last = self.fanout.last_by_stream.get(TABLE)
         if self.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
             raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
-        if last and now - last > WATCHDOG_S:
-            raise TrialAborted(f"no data from any device for {WATCHDOG_S:.0f} s")
+        limit = self.cfg.output.outage_limit_s
+        if last and now - last > limit:
+            why = "; ".join(reader.down for reader in self.readers if reader.down)
+            message = f"no data from any device for {limit:g} s (output.outage_limit_s)"
+            raise TrialAborted(f"{message}: {why}" if why else message)
