@@ -6,10 +6,12 @@ dropped and counted corrupt, the chunk-arrival -> estimator-updated latency and 
 frame age (from the moment the emulator wrote the oldest sample's frame: the chunk ages leave out the
 time it waited in the port for the read), the resident memory every minute, and the machine's load average before and after (the machine is shared).
 ``--imu-rate`` runs the IMU faster than the table (1000 or 2000 Hz: one pulse train at the IMU rate,
-the table latching every n-th pulse at ``trial.rate_hz``).
+the table latching every n-th pulse at ``trial.rate_hz``). ``--lab`` is the lab form, the figure that counts:
+the emulator streams from its start as powered hardware does (its counters from their own starts), and the
+harness attaches ``--late`` seconds later and pairs the counters from the data.
 
     .venv/bin/python benchmarks/live_harness.py [--duration 600] [--config configs/emulated_swing.yaml]
-        [--imu-rate HZ] [--batch N]
+        [--imu-rate HZ] [--batch N] [--lab [--late S]]
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from emulators.process import spawn_emulator
+from emulators.clocks import counter_starts
+from emulators.process import spawn_emulator, stop_emulator
 from hil.config import load_config
 from hil.trial.live import LiveTrial
 
@@ -62,12 +65,12 @@ class FrameAges:
     def on_samples(self, t: np.ndarray, *_: np.ndarray) -> None:
         self.updates.append((time.monotonic(), float(t[0])))
 
-    def percentiles_ms(self, started: float, t0: float, delay: float) -> tuple[float, float, float]:
-        """p50, p99 and max (ms) given the emulator's clock start (monotonic), the estimator's t0 and the
-        IMU's latch delay (s): the sample of sync count k, at trial time k / rate + delay, was written at
-        started + k / rate."""
+    def percentiles_ms(self, started: float, t0: float, delay: float, table_start: float) -> tuple[float, float, float]:
+        """p50, p99 and max (ms) given the emulator's clock start (monotonic), the estimator's t0, the IMU's latch
+        delay and the table counter's start (s of pulses): the sample of pulse p (the table's count), at trial
+        time p / rate + delay, was written at started + p / rate - table_start."""
         now, t = np.array(self.updates).T
-        return tuple(1e3 * np.percentile(now - (started + t + t0 - delay), [50, 99, 100]))
+        return tuple(1e3 * np.percentile(now - (started + t + t0 - delay - table_start), [50, 99, 100]))
 
 
 def main() -> None:
@@ -76,6 +79,8 @@ def main() -> None:
     parser.add_argument("--config", default="configs/emulated_swing.yaml")
     parser.add_argument("--imu-rate", type=float, help="imu.rate_hz (default: the config's); the table keeps its rate")
     parser.add_argument("--batch", type=int, help="estimator.batch_samples (default: the config's)")
+    parser.add_argument("--lab", action="store_true", help="the emulator streams from its start; the harness attaches late")
+    parser.add_argument("--late", type=float, default=2.0, help="--lab: s from the emulator's start to the harness's")
     args = parser.parse_args()
     text = Path(args.config).read_text()
     load_before = os.getloadavg()
@@ -91,8 +96,10 @@ def main() -> None:
         cfg = load_config(config)
         if args.batch is not None:
             cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
-        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration,
-                                         stats_file=out / "emulator.json")
+        late = args.late if args.lab else 0.0
+        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration + late + 5.0,
+                                         stats_file=out / "emulator.json", wait_readers=not args.lab)
+        time.sleep(late)
         frames = FrameAges()
         trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None,
                           on_samples=frames.on_samples)
@@ -116,7 +123,7 @@ def main() -> None:
         trial.run()
         cpu1, wall1 = resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
         stop.set()
-        emulator.wait()
+        stop_emulator(emulator) if args.lab else emulator.wait()  # lab: the devices stream on, as hardware does
         memory.append((trial.processor.trial_time, rss_mib()))
         cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
         wall = wall1 - wall0
@@ -127,13 +134,18 @@ def main() -> None:
               f"estimator.batch_samples {cfg.block_samples}; load average (1, 5, 15 min) before "
               + " ".join(f"{x:.2f}" for x in load_before) + ", after " + " ".join(f"{x:.2f}" for x in load_after))
         print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
-              f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt")
+              f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt, "
+              f"{counts.extra['imu_unpaired']} unpaired, {counts.extra['imu_gated']} gated")
+        print("sync pairing: " + json.dumps(trial.processor.pairing.report.as_dict()) + (
+            f" (attached {late:g} s after the devices started)" if args.lab else ""))
         print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
         print("chunk arrival -> estimate updated, ms (latency: from the chunk completing a block; age: from the "
               "chunk that completed its oldest sample): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
-        started = json.loads((out / "emulator.json").read_text())["started"]
-        ages = frames.percentiles_ms(started, trial.processor.estimator.t0, cfg.imu.latch_delay_us * 1e-6)
+        stats = json.loads((out / "emulator.json").read_text())
+        table_start = counter_starts(cfg)[1] / cfg.imu_rate_hz
+        ages = frames.percentiles_ms(stats["started"], trial.processor.estimator.t0, cfg.imu.latch_delay_us * 1e-6,
+                                     table_start)
         print("frame written -> estimate updated, ms (the oldest sample taken, its wait in the port included): "
               "p50 {:.2f}, p99 {:.2f}, max {:.2f}".format(*ages))
         threads.update(thread_cpu())
