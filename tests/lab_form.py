@@ -35,14 +35,15 @@ def emulated(rate_hz: float = 200.0, protocol: str = "kvh1750", duration_s: floa
 class Emulator:
     """``python -m emulators CONFIG --ports-file P`` (what ``hil emulate`` runs), streaming from the start."""
 
-    def __init__(self, tmp: Path, cfg: dict, *args: str, name: str = "emulate") -> None:
+    def __init__(self, tmp: Path, cfg: dict, *args: str, name: str = "emulate", duration: float | None = None) -> None:
         self.config = tmp / f"{name}.yaml"
         self.config.write_text(yaml.safe_dump(cfg))
         self.ports_file = tmp / f"{name}-ports.json"
         self.stats_file = tmp / f"{name}-stats.json"
         self.proc = subprocess.Popen([sys.executable, "-m", "emulators", str(self.config), "--ports-file",
                                       str(self.ports_file), "--speed", "1", "--stats-file", str(self.stats_file),
-                                      *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                      *(["--duration", str(duration)] if duration else []), *args],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         self.ports = wait_for_ports(self.ports_file, lambda: self.proc.poll() is None, 20.0)
         assert self.ports is not None, self.proc.stderr.read().decode()
         self.started = time.monotonic()
@@ -59,10 +60,14 @@ class Emulator:
         self.stop()
 
 
-def lab_config(cfg: dict, ports: dict, tmp: Path, name: str = "lab", **output: object) -> Path:
-    """The same trial in the lab form: serial (or CAN) ports of the running emulator, no emulated truth."""
+def lab_config(cfg: dict, ports: dict, tmp: Path, name: str = "lab", commanded: bool = False, **output: object) -> Path:
+    """The same trial in the lab form: serial (or CAN) ports of the running emulator, no emulated truth; with
+    ``commanded`` the harness drives the table over its command port."""
     lab = copy.deepcopy(cfg)
     lab["turntable"].update(source="serial", data_port=ports["turntable_data"])
+    lab["turntable"].pop("command_port", None)
+    if commanded:
+        lab["turntable"]["command_port"] = ports["turntable_cmd"]
     imu = lab["imu"]
     imu.pop("errors", None)
     imu.pop("timing", None)

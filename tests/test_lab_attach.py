@@ -5,7 +5,9 @@ gate, and the bias within 5 sigma of the emulator's truth."""
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 
 import pytest
 from lab_form import Emulator, emulated, lab_config, result, within_sigmas
@@ -111,3 +113,33 @@ def test_a_harness_stopped_for_half_a_second_notices_the_lost_wraps_and_complete
     assert streams["imu_missing"] + streams["sync"]["unpaired"] > 0  # the stall lost frames
     # while the receive times are refined to the pulse the gate may take a few samples (within gated_max: exit 0)
     assert streams["imu_gated"] <= 0.001 * streams["aligned"] and within_sigmas(doc)
+
+
+def test_a_trial_that_commands_the_table_of_a_running_emulator_completes_and_leaves_it_off(tmp_path):
+    cfg = emulated(200.0)
+    with Emulator(tmp_path, cfg) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
+        time.sleep(1.0)
+        out = tmp_path / "run"
+        assert main(["run", str(lab), "--duration", "10", "--out", str(out), "--viewer", "none", "--quiet",
+                     "--no-figures"]) == 0
+        emulator.stop()
+        stats = json.loads(emulator.stats_file.read_text())
+    doc = result(out)
+    assert doc["ended"] == "completed" and doc["streams"]["sync"]["paired_by"] == "motion" and within_sigmas(doc)
+    assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "O,O,O"
+
+
+def test_a_calibration_of_a_running_emulator_completes(tmp_path):
+    import yaml
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_short.yaml").read_text())
+    cfg["calibration"].update(positions=6, plateau_s=3)
+    with Emulator(tmp_path, cfg, duration=300.0) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
+        time.sleep(1.0)
+        out = tmp_path / "cal"
+        assert main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    assert len(doc["positions"]) == 6 and result(out)["streams"]["sync"]["repairs"] == []
+    assert abs(doc["accel"]["bias_ug"][2] - 260.0) < 10.0  # the emulator's truth, to its noise
