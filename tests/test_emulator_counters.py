@@ -3,12 +3,11 @@ power cycle. Expectations are worked out by hand from the configs."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import pytest
 import yaml
-from test_emulated_devices import read_raw
+from test_faults import capture
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.kvh1750 import Kvh1750Codec
@@ -16,7 +15,6 @@ from drivers.tts1 import Tts1Codec
 from drivers.xsens import XsensCodec
 from emulators.bench import device_streams
 from emulators.clocks import counter_starts, imu_counter_modulus
-from emulators.in_process import EmulatorThread
 from hil.config import ConfigError, parse_config
 
 SWING = Path(__file__).resolve().parents[1] / "configs" / "emulated_swing.yaml"
@@ -111,14 +109,7 @@ def test_a_power_cycle_silences_the_device_then_its_counter_restarts_from_zero()
 def test_a_power_cycle_on_the_ports_is_silence_counted_as_power_cycled():
     cfg = config({"timing": {"counter_start": 10}, "faults": POWER_CYCLE},
                  {"timing": {"counter_start": 0}, "faults": {"power_cycle_at_s": 0.2, "power_cycle_s": 0.0}})
-    with EmulatorThread(cfg, duration=1.0) as emu:
-        out = {k: bytearray() for k in ("imu", "turntable_data")}
-        readers = [threading.Thread(target=read_raw, args=(emu.ports[k], buf)) for k, buf in out.items()]
-        for r in readers:
-            r.start()
-        stats = emu.join()
-        for r in readers:
-            r.join(10)
+    stats, out = capture(cfg, duration=1.0)
     kvh, tts1 = Kvh1750Codec(200.0), Tts1Codec()
     imu = [kvh.decode(bytes(out["imu"][i:i + 36])).sequence for i in range(0, len(out["imu"]), 36)]
     table = [tts1.decode(bytes(out["turntable_data"][i:i + 24])).sync_counter

@@ -23,7 +23,7 @@ from emulators.clocks import DeviceClock
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.in_process import EmulatorThread
 from emulators.process import spawn_emulator
-from hil.config import DeviceTiming, FaultConfig, parse_config
+from hil.config import Config, DeviceTiming, FaultConfig, parse_config
 
 RATE = 200.0
 DURATION = 2.0
@@ -40,9 +40,9 @@ def trial(duration=DURATION, imu=None, turntable=None, seed=5) -> dict:
             "imu": from_zero(imu)}
 
 
-def capture(cfg: dict, speed: float | None = None):
+def capture(cfg: dict | Config, speed: float | None = None, duration: float | None = None):
     """Run the emulator to its end; its stats and the bytes each pty delivered."""
-    with EmulatorThread(parse_config(cfg), speed) as emu:
+    with EmulatorThread(cfg if isinstance(cfg, Config) else parse_config(cfg), speed, duration) as emu:
         out = {k: bytearray() for k in ("imu", "turntable_data")}
         readers = [threading.Thread(target=read_raw, args=(emu.ports[k], buf)) for k, buf in out.items()]
         for r in readers:
