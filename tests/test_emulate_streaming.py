@@ -65,14 +65,14 @@ def test_python_can_logger_in_another_process_captures_the_default_emulated_can_
                                "--bus-kwargs", "hop_limit=0", "-f", str(log)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        time.sleep(1.0)  # the logger joins the group
+        time.sleep(3.0)  # the logger imports python-can and joins the group (a SIGINT before that is lost)
         proc, ports, stats_file = _emulate(tmp_path, cfg)
         assert ports["imu"] == {"interface": "udp_multicast", "channel": "239.74.163.2"}
         time.sleep(2.0)
         stats = _stop(proc, stats_file)
     finally:
         logger.send_signal(signal.SIGINT)
-        logger.wait(10)
+        logger.wait(30)
     messages = list(can.LogReader(str(log)))
     samples = stats["devices"]["imu"]["frames"]  # one sample is a message per DBC message id
     per_sample = len({m.arbitration_id for m in messages})

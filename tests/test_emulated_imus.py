@@ -139,7 +139,7 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
                                "--bus-kwargs", "hop_limit=0", "-f", str(log)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        time.sleep(1.0)  # the logger joins the group
+        time.sleep(3.0)  # the logger imports python-can and joins the group (a SIGINT before that is lost)
         proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed="2")
         assert ports["imu"] == {"interface": "udp_multicast", "channel": group}
         read_raw(ports["turntable_data"], bytearray())
@@ -147,7 +147,7 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
         time.sleep(0.3)
     finally:
         logger.send_signal(signal.SIGINT)
-        logger.wait(10)
+        logger.wait(30)
     check_log(log, cfg, complete=False)
 
 
