@@ -106,3 +106,11 @@ def from_zero(device: dict | None) -> dict:
     device = dict(device or {})
     device["timing"] = {"counter_start": 0, **device.get("timing", {})}
     return device
+
+
+def interruptible() -> None:
+    """``preexec_fn`` of a child stopped with SIGINT: the signal's default action, whatever the test process
+    inherited (a worker that ignores SIGINT passes the ignoring on, and Python then installs no handler)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

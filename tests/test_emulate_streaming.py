@@ -13,6 +13,7 @@ import can
 import pytest
 import serial
 import yaml
+from conftest import interruptible
 from test_emulated_shutdown import CONFIG
 
 KVH_HEADER = b"\xfe\x81\xff\x55"
@@ -63,7 +64,7 @@ def test_python_can_logger_in_another_process_captures_the_default_emulated_can_
     log = tmp_path / "imu.asc"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "udp_multicast", "-c", "239.74.163.2",
                                "--bus-kwargs", "hop_limit=0", "-f", str(log)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=interruptible)
     try:
         time.sleep(3.0)  # the logger imports python-can and joins the group (a SIGINT before that is lost)
         proc, ports, stats_file = _emulate(tmp_path, cfg)

@@ -16,7 +16,7 @@ import cantools
 import numpy as np
 import pytest
 import yaml
-from conftest import from_zero
+from conftest import from_zero, interruptible
 from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture
@@ -137,7 +137,7 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
     log = tmp_path / "imu.blf"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "udp_multicast", "-c", group,
                                "--bus-kwargs", "hop_limit=0", "-f", str(log)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=interruptible)
     try:
         time.sleep(3.0)  # the logger imports python-can and joins the group (a SIGINT before that is lost)
         proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed="2")

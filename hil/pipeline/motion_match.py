@@ -97,7 +97,7 @@ def best_offset(u: np.ndarray, dtheta: np.ndarray, table: TableRotations, candid
     if not moving or len(candidates) < 3:
         return Match(None, moving)
     score, used = residuals(u, dtheta, table, candidates)
-    score[used < MIN_INTERVALS] = np.inf  # too little overlap to compare: not a candidate
+    score[used < MIN_INTERVALS // 2] = np.inf  # too little overlap to compare at all (the best needs them all)
     best = int(np.argmin(score))
     n = int(used[best])
     if n < MIN_INTERVALS or best in (0, len(candidates) - 1):
