@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import inspect
 import math
 import struct
 import zlib
@@ -20,7 +19,7 @@ from can.io.blf import BLFParseError
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.decoder import StreamDecoder
-from drivers.registry import codec_class
+from drivers.registry import codec_class, with_rate
 from drivers.tap import message_to_chunk
 from hil.config import CanConfig, InputError
 
@@ -84,8 +83,7 @@ def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
     kind = getattr(cls, "kind", None)
     if kind not in ("imu", "table"):
         raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")
-    takes_rate = "rate_hz" in inspect.signature(cls).parameters
-    return cls(rate_hz=rate_hz, **options) if takes_rate else cls(**options)
+    return with_rate(cls, rate_hz, **options)
 
 
 def _can_codec(dbc: str | Path, rate_hz: float, signals: dict[str, Any]) -> CanDbcCodec:
