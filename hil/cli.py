@@ -129,9 +129,11 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    from drivers.capture import decode_capture
+    from drivers.capture import decode_capture, detect_capture
 
-    print(json.dumps(decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)))
+    protocol = detect_capture(args.file) if args.protocol == "auto" else args.protocol
+    counters = decode_capture(protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    print(json.dumps({"protocol": protocol, **counters}))
     return 0
 
 
@@ -251,8 +253,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml)")
     p.set_defaults(func=cmd_report)
 
-    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters as JSON on the last line")
-    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc")
+    p = sub.add_parser("decode", help="decode a raw capture to CSV; the protocol and counters as JSON on the last line")
+    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc, or auto (named from a byte dump's first "
+                                    "64 kB; not for CAN logs)")
     p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
     p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
     p.add_argument("--dbc", help="DBC file for can-dbc")

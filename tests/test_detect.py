@@ -1,11 +1,15 @@
-"""The protocol detector names what a few kB of bytes decode as, and nothing for garbage."""
+"""The protocol detector names what a few kB of bytes decode as, and nothing for garbage; ``hil decode auto``."""
 
 from __future__ import annotations
+
+import csv
+import json
 
 import numpy as np
 import pytest
 
 from drivers.detect import MIN_RUN, detect
+from hil.cli import main
 from test_drivers_framing import CODECS
 
 KINDS = {"kvh1750": "imu", "xsens-mtdata2": "imu", "tts1": "table"}
@@ -50,3 +54,14 @@ def test_frames_too_few_in_a_row_do_not_count(protocol):
 def test_the_protocol_with_the_most_frames_wins():
     data = stream("tts1", 30) + garbage(200) + stream("kvh1750", 60)
     assert detect(data).protocol == "kvh1750"
+
+
+@pytest.mark.parametrize("protocol", sorted(CODECS))
+def test_decode_auto_names_and_decodes_each_capture(tmp_path, capsys, protocol):
+    capture = tmp_path / "capture.bin"
+    capture.write_bytes(garbage(300) + stream(protocol, 500))
+    assert main(["decode", "auto", str(capture), "--out", str(tmp_path / "out.csv")]) == 0
+    counters = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert counters["protocol"] == protocol and counters["frames"] == 500 and counters["skipped_bytes"] >= 300
+    rows = list(csv.reader(open(tmp_path / "out.csv")))
+    assert len(rows) == 501
