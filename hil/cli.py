@@ -11,7 +11,8 @@ DEFAULT_CONFIG = "configs/emulated_swing.yaml"
 CALIBRATION_CONFIG = "configs/calibration.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
-  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
+  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected,
+     bytes that decode as no frame: output.stream_timeout_s)
      or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept;
      a campaign with failed runs or ended by a signal (outputs of the runs done; --resume goes on)
   2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
