@@ -33,7 +33,7 @@ def byte_codecs() -> dict[str, ByteCodec]:
     codecs = {}
     for name in protocol_names():
         cls = codec_class(name)
-        if isinstance(cls, type) and issubclass(cls, ByteCodec):
+        if issubclass(cls, ByteCodec):
             try:
                 codecs[name] = with_rate(cls, NOMINAL_RATE_HZ)
             except (TypeError, ValueError):  # a plug-in that needs options

@@ -302,7 +302,7 @@ class OutputConfig(_Model):
     dir: str | None = None
     figures: bool = True
     limits: ReportLimits = ReportLimits()
-    stream_timeout_s: float = Field(5.0, gt=0)  # live: a stream's bytes arriving this long without a frame end the trial
+    stream_timeout_s: float = Field(5.0, gt=0)  # live: a stream's bytes without a frame this long end the trial
 
 
 class Config(_Model):

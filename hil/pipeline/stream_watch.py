@@ -46,7 +46,7 @@ class _Undecoded:
     frames: int = 0  # the stream's frame count when last fed
     since: float | None = None  # host time of the first chunk without a frame
     received: int = 0  # bytes (CAN: messages) since its last frame
-    tail: bytearray = field(default_factory=bytearray)  # the last of those bytes
+    tail: bytearray = field(default_factory=bytearray)  # the last DETECT_BYTES of those bytes
 
     def clear(self) -> None:
         self.since, self.received = None, 0
