@@ -132,9 +132,10 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_decode(args: argparse.Namespace) -> int:
     from drivers.capture import decode_capture, detect_capture
 
-    protocol = detect_capture(args.file) if args.protocol == "auto" else args.protocol
+    auto = args.protocol == "auto"
+    protocol = detect_capture(args.file) if auto else args.protocol
     counters = decode_capture(protocol, args.file, out_csv=args.out, dbc=args.dbc)
-    print(json.dumps({"protocol": protocol, **counters}))
+    print(json.dumps({"protocol": protocol, **counters} if auto else counters))
     return 0
 
 
@@ -254,7 +255,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml)")
     p.set_defaults(func=cmd_report)
 
-    p = sub.add_parser("decode", help="decode a raw capture to CSV; the protocol and counters as JSON on the last line")
+    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "
+                                      "last line")
     p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc, or auto (named from a byte dump's first "
                                     "64 kB; not for CAN logs)")
     p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
