@@ -1,11 +1,10 @@
 """Decode a raw capture (a byte dump, or a python-can log for CAN) into a CSV of device-unit fields
-(``hil decode``)."""
+(``hil decode``); name the protocol of a byte dump (``hil decode auto``)."""
 
 from __future__ import annotations
 
 import contextlib
 import csv
-import inspect
 import math
 import struct
 import zlib
@@ -20,7 +19,8 @@ from can.io.blf import BLFParseError
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.decoder import StreamDecoder
-from drivers.registry import codec_class
+from drivers.detect import DETECT_BYTES, byte_codecs, detect
+from drivers.registry import codec_class, with_rate
 from drivers.tap import message_to_chunk
 from hil.config import CanConfig, InputError
 
@@ -45,13 +45,9 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so). Raises :class:`CaptureError`
     when the capture, the protocol, the DBC or the CSV cannot be used.
     """
-    path = Path(path)
     if dbc and protocol != "can-dbc":
         raise CaptureError(f"--dbc {dbc}: only for protocol can-dbc, not {protocol}")
-    if not path.is_file():
-        raise CaptureError(f"{path}: {'a directory, not a capture' if path.is_dir() else 'no such file'}")
-    if path.stat().st_size == 0:
-        raise CaptureError(f"{path}: empty file, nothing to decode")
+    path = _capture_file(path)
     if protocol == "can-dbc":
         codec = _can_codec(dbc or DEFAULT_DBC, rate_hz, codec_options)
         if path.suffix.lower() not in CAN_LOG_SUFFIXES:
@@ -75,6 +71,34 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     return decoder.counters.as_dict()
 
 
+def detect_capture(path: str | Path) -> str:
+    """The protocol a byte capture's first :data:`~drivers.detect.DETECT_BYTES` decode as (``hil decode auto``);
+    raises :class:`CaptureError` when none does. A CAN log is not detected: its DBC cannot be guessed."""
+    path = _capture_file(path)
+    try:
+        with path.open("rb") as f:
+            head = f.read(DETECT_BYTES)
+    except OSError as exc:
+        raise CaptureError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    found = detect(head)
+    if found is not None:
+        return found.protocol
+    if path.suffix.lower() in CAN_LOG_SUFFIXES:
+        raise CaptureError(f"{path}: auto detects byte-stream protocols only; a CAN log needs can-dbc (and --dbc)")
+    raise CaptureError(f"{path}: no run of {', '.join(byte_codecs())} frames in its first {len(head)} bytes; "
+                       "name the protocol")
+
+
+def _capture_file(path: str | Path) -> Path:
+    """``path``, a file with something in it."""
+    path = Path(path)
+    if not path.is_file():
+        raise CaptureError(f"{path}: {'a directory, not a capture' if path.is_dir() else 'no such file'}")
+    if path.stat().st_size == 0:
+        raise CaptureError(f"{path}: empty file, nothing to decode")
+    return path
+
+
 def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
     """The codec of a byte-stream protocol that has data frames."""
     try:
@@ -84,8 +108,7 @@ def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
     kind = getattr(cls, "kind", None)
     if kind not in ("imu", "table"):
         raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")
-    takes_rate = "rate_hz" in inspect.signature(cls).parameters
-    return cls(rate_hz=rate_hz, **options) if takes_rate else cls(**options)
+    return with_rate(cls, rate_hz, **options)
 
 
 def _can_codec(dbc: str | Path, rate_hz: float, signals: dict[str, Any]) -> CanDbcCodec:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -268,16 +268,7 @@ class ByteFramer(Framer):
         raw = self._buf + data
         buf = np.frombuffer(raw, np.uint8)
         end = len(buf)
-        starts = sync_positions(buf, codec.sync)
-        lengths = np.full(len(starts), -1, dtype=np.int64)  # -1: the header is still incomplete
-        headed = starts + codec.header_size <= end
-        lengths[headed] = codec.frame_lengths(buf, starts[headed])
-        complete = (lengths > 0) & (starts + lengths <= end)
-        valid = np.zeros(len(starts), dtype=bool)
-        valid[complete], rows = codec.parse(buf, starts[complete], lengths[complete])
-        taken, corrupt, stop = _walk(starts, lengths, complete, valid)
-        rows = rows[np.searchsorted(np.flatnonzero(valid), taken)]
-        starts, lengths = starts[taken], lengths[taken]
+        starts, lengths, rows, corrupt, stop = find_frames(codec, buf)
         counters.corrupt += corrupt
         if stop is None:
             last_end = int(starts[-1] + lengths[-1]) if len(starts) else 0
@@ -299,6 +290,32 @@ class ByteFramer(Framer):
         self.counters.skipped_bytes += len(self._buf)
         self._buf = b""
         self._joined = False
+
+
+class Found(NamedTuple):
+    """The valid frames :func:`find_frames` takes in a buffer, and what the search left."""
+
+    starts: np.ndarray  # offsets (int64) of the frames taken, in order
+    lengths: np.ndarray  # their lengths (int64)
+    rows: np.ndarray  # their fields (the codec's structured array)
+    corrupt: int  # candidates that failed their check
+    stop: int | None  # offset where the search waits for more data, None when it found no open frame
+
+
+def find_frames(codec: ByteCodec, buf: np.ndarray) -> Found:
+    """The search of a :class:`ByteFramer` over ``buf`` (uint8): every sync word located at once, the frames
+    behind them checked as arrays, then taken in order (see :func:`_walk`)."""
+    end = len(buf)
+    starts = sync_positions(buf, codec.sync)
+    lengths = np.full(len(starts), -1, dtype=np.int64)  # -1: the header is still incomplete
+    headed = starts + codec.header_size <= end
+    lengths[headed] = codec.frame_lengths(buf, starts[headed])
+    complete = (lengths > 0) & (starts + lengths <= end)
+    valid = np.zeros(len(starts), dtype=bool)
+    valid[complete], rows = codec.parse(buf, starts[complete], lengths[complete])
+    taken, corrupt, stop = _walk(starts, lengths, complete, valid)
+    rows = rows[np.searchsorted(np.flatnonzero(valid), taken)]
+    return Found(starts[taken], lengths[taken], rows, corrupt, stop)
 
 
 def _walk(starts: np.ndarray, lengths: np.ndarray, complete: np.ndarray, valid: np.ndarray

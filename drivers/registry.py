@@ -7,6 +7,7 @@ A third party adds a protocol without touching this package by declaring an entr
 from __future__ import annotations
 
 import importlib
+import inspect
 from importlib.metadata import entry_points
 from typing import Any
 
@@ -29,13 +30,23 @@ def codec_class(name: str) -> type:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == name:
             return ep.load()
-    known = ", ".join(sorted(CODECS) + [ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)])
-    raise KeyError(f"protocol {name!r}: unknown; known protocols: {known}")
+    raise KeyError(f"protocol {name!r}: unknown; known protocols: {', '.join(protocol_names())}")
+
+
+def protocol_names() -> list[str]:
+    """Every registered protocol: the built-ins (sorted), then the entry points'."""
+    return sorted(CODECS) + [ep.name for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in CODECS]
 
 
 def make_codec(name: str, **options: Any) -> Any:
     """A codec instance, e.g. ``make_codec("kvh1750", rate_hz=1000, gyro_output="rate")``."""
     return codec_class(name)(**options)
+
+
+def with_rate(cls: type, rate_hz: float, **options: Any) -> Any:
+    """An instance of codec class ``cls``, given ``rate_hz`` when its constructor takes one."""
+    takes_rate = "rate_hz" in inspect.signature(cls).parameters
+    return cls(rate_hz=rate_hz, **options) if takes_rate else cls(**options)
 
 
 def imu_codec(imu: Any, rate_hz: float) -> Any:

@@ -85,6 +85,7 @@ class Transport(ABC):
     """A source of raw chunks that can be reopened after it fails."""
 
     stream: str
+    address: str  # the port as the config names it, for messages
     byte_stream: bool = False  # a read returns all bytes that have arrived (several frames after a wait)
 
     @abstractmethod
@@ -107,6 +108,7 @@ class SerialTransport(Transport):
 
     def __init__(self, url: str, baudrate: int, stream: str) -> None:
         self.url, self.baudrate, self.stream = url, baudrate, stream
+        self.address = url
         self.port: serial.SerialBase | None = None
         self._pty = PtyGuard(url)  # never reopened onto another program's pty (drivers.pty_guard)
 
@@ -186,6 +188,7 @@ class CanTransport(Transport):
 
     def __init__(self, interface: str, channel: str, stream: str, bitrate: int | None = None) -> None:
         self.interface, self.channel, self.bitrate, self.stream = interface, channel, bitrate, stream
+        self.address = f"{CAN_SCHEME}://{interface}/{channel}"
         self.bus: can.BusABC | None = None
 
     def open(self) -> None:

@@ -11,7 +11,8 @@ DEFAULT_CONFIG = "configs/emulated_swing.yaml"
 CALIBRATION_CONFIG = "configs/calibration.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
-  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected)
+  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected,
+     bytes that decode as no frame: output.stream_timeout_s)
      or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept;
      a campaign with failed runs or ended by a signal (outputs of the runs done; --resume goes on)
   2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
@@ -130,9 +131,12 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    from drivers.capture import decode_capture
+    from drivers.capture import decode_capture, detect_capture
 
-    print(json.dumps(decode_capture(args.protocol, args.file, out_csv=args.out, dbc=args.dbc)))
+    auto = args.protocol == "auto"
+    protocol = detect_capture(args.file) if auto else args.protocol
+    counters = decode_capture(protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    print(json.dumps({"protocol": protocol, **counters} if auto else counters))
     return 0
 
 
@@ -244,8 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml)")
     p.set_defaults(func=cmd_report)
 
-    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters as JSON on the last line")
-    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc")
+    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "
+                                      "last line")
+    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc, or auto (named from a byte dump's first "
+                                    "64 kB; not for CAN logs)")
     p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
     p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
     p.add_argument("--dbc", help="DBC file for can-dbc")

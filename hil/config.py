@@ -285,6 +285,7 @@ class OutputConfig(Model):
     figures: bool = True
     outage_limit_s: float = Field(10.0, gt=0)  # live: no data from any device for this long ends the trial
     limits: ReportLimits = ReportLimits()
+    stream_timeout_s: float = Field(5.0, gt=0)  # live: a stream's bytes without a frame this long end the trial
 
 
 class Config(Model):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import yaml
@@ -79,3 +80,30 @@ def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(
     assert code == 2
     assert "--viewer save: the viewer did not start: rerun: address already in use" in _one_line(capsys.readouterr().err)
     assert (out / "emulator.log").exists() and not (out / "ports.json").exists()  # spawned, then stopped
+
+
+def test_swapped_ports_end_the_trial_with_one_line_naming_the_port(tmp_path, capsys):
+    device = _config(tmp_path, "device")
+    proc, ports = spawn_emulator(device, tmp_path / "ports.json", "1", 30.0, wait_readers=False)  # streams as hardware
+    try:
+        lab = yaml.safe_load((ROOT / "configs" / "lab_swing.yaml").read_text())
+        lab["imu"]["port"] = ports["turntable_data"]
+        lab["turntable"]["data_port"] = ports["imu"]
+        del lab["turntable"]["command_port"]
+        harness = tmp_path / "swapped.yaml"
+        harness.write_text(yaml.safe_dump(lab))
+        out = tmp_path / "out"
+        started = time.monotonic()
+        assert main(["run", str(harness), "--quiet", "--viewer", "none", "--no-figures", "--out", str(out)]) == 1
+        took = time.monotonic() - started
+    finally:
+        proc.kill()
+        proc.wait()
+    lines = capsys.readouterr().err.strip().splitlines()
+    swapped = "are the IMU and table ports swapped?"
+    assert len(lines) == 1 and lines[0] in (  # whichever stream's 5 s run out first
+        f"hil: trial early: the imu port ({ports['turntable_data']}) carries tts1 frames: {swapped}",
+        f"hil: trial early: the turntable data port ({ports['imu']}) carries kvh1750 frames: {swapped}"), lines
+    assert took < 12.0  # output.stream_timeout_s (5 s) after the first bytes, and the start and the outputs
+    result = yaml.safe_load((out / "result.json").read_text())
+    assert result["ended"] == f"early: {lines[0].removeprefix('hil: trial early: ')}"

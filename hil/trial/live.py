@@ -31,6 +31,7 @@ from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import IMU, TABLE, SamplesCallback, TrialProcessor
+from hil.pipeline.stream_watch import StreamWatch
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
@@ -148,8 +149,10 @@ class LiveTrial:
     shorter than ``output.outage_limit_s`` is ridden out (the readers reconnect), a longer one ends the
     trial early. ``stop_requested`` (optional) is polled every step: a signal name ends the trial as
     interrupted. A trial whose IMU samples are all rejected for ``STALL_S`` ends early with the
-    processor's diagnosis. ``on_end`` (optional) is called the moment acquisition ends, however it ends,
-    before the backlog is processed: where the table is turned off. ``on_samples`` goes to the processor
+    processor's diagnosis, and one whose stream's bytes arrive for ``output.stream_timeout_s`` without a
+    frame with the :class:`StreamWatch`'s line (the port, and what the bytes decode as). ``on_end``
+    (optional) is called the moment acquisition ends, however it ends, before the backlog is processed:
+    where the table is turned off. ``on_samples`` goes to the processor
     (:class:`TrialProcessor`); ``finished`` (optional) is polled every step: True ends the trial as
     completed (a trial whose length is set by what the harness commands). ``queue_items`` bounds the
     processing queue: a small one holds the emulated devices close behind the processing (the table then
@@ -183,8 +186,9 @@ class LiveTrial:
         self.motion_check = motion_check
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
         gather = read_period(cfg) if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
-        self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather)
-                        for t in transports(cfg, ports).values()]
+        opened = transports(cfg, ports)
+        self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
+        self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
 
     def run(self) -> str:
         """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``.
@@ -252,6 +256,7 @@ class LiveTrial:
                     raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
                 if self.processor.stalled:
                     raise TrialAborted(self.processor.stalled)
+                self._watch(item)
                 if isinstance(item, RawChunk):
                     self.latency.fed(item.host_time, self.processor.aligned)
                     if self.processor.updates != updates:
@@ -266,6 +271,16 @@ class LiveTrial:
                     self.on_progress(self.processor.trial_time, snap, health)
             if item is None and self.queue.empty():
                 self._check_alive(now, started)
+
+    def _watch(self, item: RawChunk | StreamEvent) -> None:
+        """Hand an item the processor has taken to the stream watch; its verdict ends the trial."""
+        if isinstance(item, StreamEvent):
+            self.stream_watch.event(item)
+            return
+        decoder = self.processor.decoders.get(item.stream)
+        verdict = None if decoder is None else self.stream_watch.fed(item, decoder.counters.frames)
+        if verdict:
+            raise TrialAborted(verdict)
 
     def _check_alive(self, now: float, started: float) -> None:
         last = self.fanout.last_arrival
