@@ -140,3 +140,13 @@ class Codec(ABC, Generic[R]):
     @abstractmethod
     def csv_row(self, record: R) -> list[Any]:
         """The record's fields in device units, in :meth:`csv_header` order."""
+
+
+BITS_PER_BYTE = 10  # a serial line's 8N1
+_PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)
+
+
+def imu_frame_bytes(codec: Codec) -> int:
+    """Bytes one IMU frame of ``codec`` takes on a serial line (0 for a codec whose frames are CAN messages)."""
+    frame = codec.encode(codec.from_sample(_PROBE))
+    return len(frame) if isinstance(frame, bytes) else 0

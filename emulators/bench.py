@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.acl import AclCommand
+from drivers.codec import BITS_PER_BYTE, imu_frame_bytes
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
 from emulators.clocks import device_clocks
@@ -27,12 +28,9 @@ from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
 from emulators.writer import DeviceWriter
 from hil.config import Config, ConfigError
-from hil.samples import ImuSample
 from hil.units import ARCSEC
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
-BITS_PER_BYTE = 10  # 8N1
-PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
 
 
 @dataclass(frozen=True)
@@ -141,7 +139,7 @@ class Bench:
             if imu_cfg.protocol == "can-dbc":
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:
-                check_baudrate("imu", len(codec.encode(codec.from_sample(PROBE))), rate, imu_cfg.baudrate)
+                check_baudrate("imu", imu_frame_bytes(codec), rate, imu_cfg.baudrate)
                 imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
             check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)

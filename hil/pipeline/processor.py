@@ -12,9 +12,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivers.codec import RawChunk, StreamEvent
+from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent, imu_frame_bytes
 from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec, make_codec
+from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
@@ -30,13 +31,10 @@ from hil.pipeline.plausibility import (
 )
 from hil.pipeline.sync_pairing import SyncPairing
 from hil.pipeline.time_offset import TimeOffsetEstimator
-from hil.samples import AlignedBatch, ImuGap, ImuSample, ImuSamples, StreamCounts, TableSamples
+from hil.samples import AlignedBatch, ImuGap, ImuSamples, StreamCounts, TableSamples
 from hil.units import DEG
 
 IMU, TABLE = "imu", "table"
-BITS_PER_BYTE = 10  # 8N1
-TTS1_BYTES = 24
-_PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)  # sizes an IMU frame
 TABLE_WAIT_S = 5.0  # s of the host's clock the IMU may run ahead of a silent table before it goes on without it
 UNPACED_TABLE_WAIT_S = 120.0  # s of trial time, at --speed max (see table_wait)
 
@@ -111,9 +109,8 @@ class TrialProcessor:
         """The sync pairing of the two streams' counters (docs/harness.md, "Sync pairing")."""
         codec = self.decoders[IMU].codec
         rate = cfg.imu_rate_hz
-        frame = codec.encode(codec.from_sample(_PROBE))
-        imu_bytes = len(frame) if isinstance(frame, bytes) else 0  # a CAN frame's bus time is negligible
-        wire = (imu_bytes * BITS_PER_BYTE / cfg.imu.baudrate, TTS1_BYTES * BITS_PER_BYTE / cfg.turntable.baudrate)
+        wire = (imu_frame_bytes(codec) * BITS_PER_BYTE / cfg.imu.baudrate,  # a CAN frame's bus time: negligible
+                TTS1_BYTES * BITS_PER_BYTE / cfg.turntable.baudrate)
 
         def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
             return TableRotations(self.geometry, self.earth, rate, cfg.table_counts_per_frame, counts, angles)
