@@ -108,11 +108,17 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 def cmd_noise(args: argparse.Namespace) -> int:
     from hil.outputs.noise import noise_summary
+    from hil.trial.noise_acquisition import AcquisitionFailed
     from hil.trial.noise_runner import run_noise
 
     out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
-    print(noise_summary(run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
-                                  rerun=args.rerun), out))
+    try:
+        doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
+                        rerun=args.rerun, duration=args.duration, quiet=args.quiet)
+    except AcquisitionFailed as exc:
+        print(f"hil: noise: {exc}", file=sys.stderr)
+        return exc.exit_code
+    print(noise_summary(doc, out))
     return 0
 
 
@@ -217,8 +223,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=cmd_estimate)
 
-    p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (simulated), run or CSV")
-    p.add_argument("source", help="a trial config (simulated), a run directory or recording, or a CSV of increments")
+    p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (its devices read, or "
+                                     "simulated), run or CSV")
+    p.add_argument("source", help="a trial config (devices on ports: a static record acquired into OUT/acquisition; "
+                                  "emulated: simulated), a run directory or recording, or a CSV of increments")
+    p.add_argument("--duration", type=float, help="seconds to acquire from devices (default: trial.duration_s)")
+    p.add_argument("--quiet", action="store_true", help="no progress line while acquiring")
     p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
     p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
     p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")

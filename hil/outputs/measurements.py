@@ -14,6 +14,9 @@ from hil.config import ReportLimits
 from hil.estimation.table_reference import drifts_agree
 
 PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
+# the measurements of the streams themselves, whatever the estimators made of them
+STREAM_MEASUREMENTS = frozenset({"frames_dropped", "frames_corrupt", "imu_missing_fraction", "imu_gated_fraction",
+                                 "imu_without_angles_fraction", "sync_offset"})
 
 
 @dataclass(frozen=True)

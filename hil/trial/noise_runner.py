@@ -1,6 +1,6 @@
 """``hil noise``: the Allan deviation and the IEEE noise terms of a trial's increments.
 
-The source is a trial config (simulated, as ``hil simulate``), a run directory or recording (replayed
+The source is a trial config (its devices read, or simulated as ``hil simulate``), a run directory or recording (replayed
 through the same decoding, alignment and gates as the live run) or a CSV of increments. A static trial
 is analysed as it is (earth rate and gravity are constants, invisible to the Allan variance); on a
 moving one the table's motion is first taken out with its angles (:mod:`hil.pipeline.table_motion`).
@@ -9,7 +9,7 @@ moving one the table's motion is first taken out with its angles (:mod:`hil.pipe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ class NoiseRecord:
     """A trial's increments and what the analysis needs to know of the trial."""
 
     batch: AlignedBatch
-    source: str  # "simulation", "recording" or "csv"
+    source: str  # "devices", "simulation", "recording" or "csv"
     cfg: Config | None  # the trial's config (site, table): --config, else the recorded or simulated one
 
 
@@ -48,6 +48,15 @@ def read_source(source: str | Path, config: str | Path | None = None) -> NoiseRe
     if path.suffix == ".csv":
         return NoiseRecord(read_increments_csv(path), "csv", given)
     return simulated(load_config(resolve_path(path)))
+
+
+def reads_devices(source: str | Path) -> Config | None:
+    """The config ``source`` names when its devices are read from ports (not emulated), else None."""
+    path = Path(source)
+    if path.is_dir() or path.suffix in (".mcap", ".csv"):
+        return None
+    cfg = load_config(resolve_path(path))
+    return None if cfg.imu.source == cfg.turntable.source == "emulator" else cfg
 
 
 def simulated(cfg: Config) -> NoiseRecord:
@@ -152,13 +161,21 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
 
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
-              figure: bool = True, export: Path | None = None, rerun: bool = False) -> dict:
+              figure: bool = True, export: Path | None = None, rerun: bool = False, duration: float | None = None,
+              quiet: bool = False) -> dict:
     """Analyse ``source`` and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd;
-    returns the noise document."""
+    returns the noise document. A config that reads devices is acquired first (``duration`` s, see
+    :mod:`hil.trial.noise_acquisition`)."""
     from hil.outputs.noise import write_noise
     from hil.outputs.report import write_noise_report
 
-    record = read_source(source, config)
+    cfg = reads_devices(source)
+    if cfg is not None:
+        from hil.trial.noise_acquisition import acquire
+
+        record = replace(read_source(acquire(cfg, Path(source), out, duration, quiet), config or source), source="devices")
+    else:
+        record = read_source(source, config)
     if export is not None:
         write_increments_csv(export, record.batch)
     analysis = analyse_record(record, str(source), level)
