@@ -143,6 +143,8 @@ def main() -> None:
         print("chunk arrival -> estimate updated, ms (latency: from the chunk completing a block; age: from the "
               "chunk that completed its oldest sample): " + ", ".join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in lat.items()))
         stats = json.loads((out / "emulator.json").read_text())
+        written = ", ".join(f"{name} {device['frames']} frames" for name, device in stats["devices"].items())
+        print(f"emulator (its own process): {stats['pulses']} pulses in {stats['elapsed_s']:.1f} s, {written}")
         table_start = counter_starts(cfg)[1] / cfg.imu_rate_hz
         ages = frames.percentiles_ms(stats["started"], trial.processor.estimator.t0, cfg.imu.latch_delay_us * 1e-6,
                                      table_start)

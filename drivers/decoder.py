@@ -2,11 +2,13 @@
 
 Used by the trial's processor (live and replay) and by ``hil decode``; a frame the codec rejects is
 counted as corrupt and skipped, and the framer resynchronises on the bytes after it. A byte stream's
-chunk becomes arrays at once: frames (:class:`~drivers.codec.FrameBatch`), then SI samples.
+chunk becomes arrays at once: frames (:class:`~drivers.codec.FrameBatch`), then SI samples; a message stream's
+chunks of one read tick do (:meth:`StreamDecoder.feed`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from drivers.codec import (
@@ -34,8 +36,11 @@ class StreamDecoder:
 
     codec: Codec
     time_scale: float | None = 1.0
+    read_s: float | None = None
     framer: Framer = field(init=False)
     outages: int = 0
+    _pending: list[Decoded] = field(init=False, default_factory=list)
+    _tick: int | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         self.framer = self.codec.framer(self.time_scale)
@@ -48,14 +53,31 @@ class StreamDecoder:
         """The complete frames of a chunk, still in device units (for captures)."""
         return self.framer.feed_chunk(chunk)
 
-    def feed(self, chunk: RawChunk) -> ImuSamples | TableSamples:
-        """The samples (SI) of a chunk's complete frames; frames that give no sample are counted corrupt."""
+    def feed(self, chunk: RawChunk) -> ImuSamples | TableSamples | None:
+        """The samples (SI) of a chunk's complete frames; frames that give no sample are counted corrupt.
+
+        A message stream (CAN: a chunk a message) with ``read_s`` is read in ticks of ``read_s`` of the host's
+        clock, as a byte stream's reader reads: the frames of the chunks received within one tick come out
+        together, with the first chunk of a later tick (or :meth:`flush`); None until then."""
         if isinstance(self.framer, ByteFramer):
             frames = self.framer.feed_batch(chunk.data, chunk.host_time)
             samples = self.codec.samples(frames)
             self.framer.counters.corrupt += len(frames) - len(samples)
             return samples
-        return self.codec.to_samples(self.frames(chunk))
+        if self.read_s is None:
+            return self.codec.to_samples(self.frames(chunk))
+        tick = math.floor(chunk.host_time / self.read_s)
+        ready = self.flush() if tick != self._tick else None
+        self._tick = tick
+        self._pending += self.frames(chunk)
+        return ready
+
+    def flush(self) -> ImuSamples | TableSamples | None:
+        """The samples of a message stream's tick still held (None: nothing held)."""
+        if not self._pending:
+            return None
+        samples, self._pending = self.codec.to_samples(self._pending), []
+        return samples
 
     def event(self, event: StreamEvent) -> None:
         """A reader's event: an outage is counted; the framer forgets its partial frame."""

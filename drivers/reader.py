@@ -10,7 +10,7 @@ On a byte stream a read returns every byte that has arrived, so a reader given `
 per tick of a ``gather_s`` grid on the host's monotonic clock after a read that returned data (as a USB
 serial adapter's latency timer does): a read then carries the frames of that interval, and everything
 downstream handles them as one batch, at the cost of up to ``gather_s`` of waiting in the port's buffer
-(:data:`GATHER_S` for a live trial). Readers with the same ``gather_s`` share the grid, so the consumer
+(``hil.config.Config.read_s`` for a live trial). Readers with the same ``gather_s`` share the grid, so the consumer
 wakes once a tick for all of them (a thread woken from idle pays a fixed cost that batched work amortises).
 """
 
@@ -23,11 +23,6 @@ from collections.abc import Iterable
 from drivers.codec import RawChunk, StreamEvent
 from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
-
-# The shortest time between reads of a live trial's byte streams (hil.trial.live.read_period: longer for slower
-# IMUs): 4 frames at 200 Hz, 40 at 2 kHz. At 10 ms the harness took 15-16 % of a core at 200 Hz against 10-11 % at
-# 20 ms (benchmarks/live_harness.py, paired 60 s runs).
-GATHER_S = 0.02
 
 
 def next_tick(now: float, period: float) -> float:
@@ -74,12 +69,13 @@ class DeviceReader:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                chunk = self.transport.read()
+                chunks = self.transport.read()
             except TransportError as exc:
                 self._reconnect(exc)
                 continue
-            if chunk is not None:
-                self._handle(chunk)
+            if chunks:
+                for chunk in chunks:
+                    self._handle(chunk)
                 if self.gather_s:
                     self._stop.wait(next_tick(time.monotonic(), self.gather_s))
 

@@ -26,6 +26,10 @@ from drivers.tap import message_to_chunk
 from hil.config import InputError
 
 POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request promptly
+CAN_READ_MAX = 2000  # CAN messages one read takes at most (1/6 s of a 2 kHz IMU sending six a sample)
+# bytes asked for a CAN socket's receive buffer (docs/harness.md, "CAN over udp_multicast"): granted twice that,
+# 1.7 s of a 2 kHz IMU's six messages a sample, the kernel charging each small datagram 832 bytes on the loopback
+CAN_RECEIVE_BUFFER = 1 << 23
 SOCKET_READ_MAX = 1 << 16  # bytes taken from a socket:// port in one read (a TCP receive buffer's worth)
 
 
@@ -93,8 +97,8 @@ class Transport(ABC):
         """Open the device; raises :class:`TransportError`."""
 
     @abstractmethod
-    def read(self) -> RawChunk | None:
-        """What has arrived (None after ``POLL_S`` of silence); raises :class:`TransportError`."""
+    def read(self) -> list[RawChunk]:
+        """What has arrived (nothing after ``POLL_S`` of silence); raises :class:`TransportError`."""
 
     @abstractmethod
     def close(self) -> None:
@@ -124,7 +128,7 @@ class SerialTransport(Transport):
             pass  # not a local UART (pty, socket, rfc2217): nothing to tune
         self.port = port
 
-    def read(self) -> RawChunk | None:
+    def read(self) -> list[RawChunk]:
         if self.port is None:
             raise TransportError(f"{self.stream}: {self.url} is not open")
         try:
@@ -133,7 +137,7 @@ class SerialTransport(Transport):
                 data += self._arrived()
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"{self.stream}: read from {self.url} failed: {exc}") from exc
-        return RawChunk(self.stream, time.time(), data) if data else None
+        return [RawChunk(self.stream, time.time(), data)] if data else []
 
     def _arrived(self) -> bytes:
         """The bytes that have arrived, without waiting. A socket:// port's ``in_waiting`` only says whether
@@ -165,6 +169,7 @@ class SerialTransport(Transport):
 
 
 IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)  # Linux; not exported by every Python
+SO_RCVBUFFORCE_LINUX = 33  # not exported by Python
 
 
 def open_can_bus(interface: str, channel: str, bitrate: int | None = None) -> can.BusABC:
@@ -177,10 +182,26 @@ def open_can_bus(interface: str, channel: str, bitrate: int | None = None) -> ca
     elif bitrate is not None and interface not in ("virtual",):
         kwargs["bitrate"] = bitrate
     bus = can.Bus(**kwargs)
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None) or getattr(bus, "socket", None)
     if sys.platform == "linux" and sock is not None and sock.family == socket.AF_INET:
         sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+    if isinstance(sock, socket.socket):
+        receive_buffer(sock, CAN_RECEIVE_BUFFER)
     return bus
+
+
+def receive_buffer(sock: socket.socket, size: int) -> int:
+    """Ask for a receive buffer of ``size`` bytes (past ``net.core.rmem_max`` where the process may: Linux's
+    SO_RCVBUFFORCE needs CAP_NET_ADMIN); returns the bytes the kernel grants (it doubles the request for its
+    bookkeeping, and caps a plain request at twice ``rmem_max``)."""
+    force = getattr(socket, "SO_RCVBUFFORCE", SO_RCVBUFFORCE_LINUX if sys.platform == "linux" else None)
+    try:
+        if force is None:
+            raise PermissionError
+        sock.setsockopt(socket.SOL_SOCKET, force, size)
+    except PermissionError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
+    return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
 
 
 class CanTransport(Transport):
@@ -197,14 +218,20 @@ class CanTransport(Transport):
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             raise TransportError(f"{self.stream}: cannot open CAN {self.interface}:{self.channel}: {exc}") from exc
 
-    def read(self) -> RawChunk | None:
+    def read(self) -> list[RawChunk]:
+        """The first message to arrive within ``POLL_S`` and every one already waiting behind it (at most
+        :data:`CAN_READ_MAX`): a read a message would cost a thread wake-up each, six a sample at 1 kHz."""
         if self.bus is None:
             raise TransportError(f"{self.stream}: CAN {self.interface}:{self.channel} is not open")
+        chunks: list[RawChunk] = []
         try:
             message = self.bus.recv(timeout=POLL_S)
+            while message is not None:
+                chunks.append(message_to_chunk(message, self.stream))
+                message = self.bus.recv(timeout=0.0) if len(chunks) < CAN_READ_MAX else None
         except (can.CanError, OSError) as exc:
             raise TransportError(f"{self.stream}: CAN receive failed: {exc}") from exc
-        return None if message is None else message_to_chunk(message, self.stream)
+        return chunks
 
     def send(self, message: can.Message) -> None:
         if self.bus is None:

@@ -19,6 +19,7 @@ from hil.config_types import ZERO3, Model, Vec2, Vec3, Vec6
 from hil.inputs import InputError
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
+MIN_READ_S = 0.02  # the shortest time between a live trial's reads (Config.read_s)
 MAX_READ_FRAMES = 50  # IMU frames a live read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 class ConfigError(InputError, ValueError):
@@ -335,6 +336,12 @@ class Config(Model):
     def reads_per_block(self) -> int:
         """Live reads a block is split into: at most :data:`MAX_READ_FRAMES` IMU frames a read."""
         return math.ceil(self.block_samples / MAX_READ_FRAMES)
+
+    @property
+    def read_s(self) -> float:
+        """s between a live trial's reads: one block, or the largest whole fraction of it that holds at most
+        :data:`MAX_READ_FRAMES` IMU frames, at least :data:`MIN_READ_S` (docs/harness.md, "Reads")."""
+        return max(self.block_samples / self.imu_rate_hz / self.reads_per_block, MIN_READ_S)
 
     @property
     def table_divider(self) -> int:

@@ -16,6 +16,7 @@ from conftest import Decoding
 from drivers.can_dbc import CanDbcCodec
 from drivers.capture import decode_capture
 from drivers.codec import RawChunk
+from drivers.decoder import StreamDecoder
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
 from drivers.reader import DeviceReader
 from drivers.tap import CanLogTap
@@ -161,6 +162,44 @@ def test_udp_multicast_bus_never_leaves_the_host():
         assert bus._multicast._socket.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
     finally:
         bus.shutdown()
+
+
+def test_a_can_bus_gets_a_receive_buffer_for_seconds_of_a_2khz_imu():
+    bus = open_can_bus("udp_multicast", "239.74.163.78")
+    try:
+        granted = bus._multicast._socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    finally:
+        bus.shutdown()
+    # as root past net.core.rmem_max; otherwise capped by it (the kernel doubles what it grants)
+    cap = 2 * int(open("/proc/sys/net/core/rmem_max").read())
+    assert granted >= min(2 * (1 << 23), cap)
+
+
+def test_a_can_read_takes_every_message_waiting_and_the_decoder_groups_them_by_read_tick():
+    codec = CanDbcCodec.for_dbc(HIGHRES, 1000.0)
+    channel = "drivers-test-batch"
+    transport, sender = CanTransport("virtual", channel, "imu"), open_can_bus("virtual", channel)
+    transport.open()
+    try:
+        for i in range(50):
+            for message in codec.encode(codec.from_sample(sample(i))):
+                sender.send(message)
+        chunks = transport.read()
+    finally:
+        sender.shutdown()
+        transport.close()
+    assert len(chunks) == 300  # one read: every message already on the bus
+
+    decoder = StreamDecoder(codec, read_s=0.05)
+    # the receive times of 50 samples at 1 kHz from t = 10.0205 s: ticks of 50 ms end at 10.05 s and 10.10 s
+    ticks = []
+    for k, chunk in enumerate(chunks):
+        out = decoder.feed(RawChunk("imu", 10.0205 + 1e-3 * (k // 6), chunk.data, chunk.arbitration_id,
+                                    chunk.is_extended_id))
+        if out is not None:
+            ticks.append((k, [int(i) for i in out.sync_index]))
+    assert ticks == [(6 * 30, list(range(30)))]  # the first message of 10.05 s releases those before
+    assert [int(i) for i in decoder.flush().sync_index] == list(range(30, 50)) and decoder.flush() is None
 
 
 def test_cantools_decode_command_reads_our_frames():

@@ -24,7 +24,8 @@ def test_noise_of_a_lab_config_acquires_the_devices_and_finds_their_white_noise(
     cfg = emulated(RATE_HZ, "kvh1750", duration_s=600.0, kind="static", baudrate=921600)
     cfg["imu"]["errors"] = ERRORS
     with Emulator(tmp_path, cfg) as emulator:
-        lab = lab_config(cfg, emulator.ports, tmp_path)
+        # a record with a few samples filled (a loaded host's reads late) is still analysed; past 5 % it is refused
+        lab = lab_config(cfg, emulator.ports, tmp_path, limits={"missing_max": 0.05})
         out = tmp_path / "noise"
         code = main(["noise", str(lab), "--duration", "40", "--out", str(out), "--no-figures", "--quiet"])
     assert code == 0

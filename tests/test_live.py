@@ -14,7 +14,7 @@ from hil.cli import main
 from hil.config import load_config
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
-from hil.trial.live import LatencyStats, LiveTrial, TrialAborted, read_period
+from hil.trial.live import LatencyStats, LiveTrial, TrialAborted
 from hil.trial.offline import replay_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -189,7 +189,7 @@ def test_the_read_period_is_one_block_within_its_bounds(imu_rate, batch, period)
     cfg = load_config("configs/emulated_swing.yaml")
     cfg = cfg.model_copy(update={"imu": cfg.imu.model_copy(update={"rate_hz": imu_rate}),
                                  "estimator": cfg.estimator.model_copy(update={"batch_samples": batch})})
-    assert read_period(cfg) == pytest.approx(period)
+    assert cfg.read_s == pytest.approx(period)
 
 
 def test_a_live_trial_rides_out_an_outage_shorter_than_its_limit(tmp_path):

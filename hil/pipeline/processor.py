@@ -59,12 +59,11 @@ class TrialProcessor:
     it; later chunks (the devices' last bytes, their ports closing) are counted and ignored.
     ``time_scale`` is the emulator's speed (see :class:`drivers.decoder.StreamDecoder`).
 
-    ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s) and
-    gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion
-    check); ``on_samples`` with the trial times (N,), increments (N, 3) and angles (N, 3; NaN where the
-    table had none) of each run of aligned samples the estimator took and of each batch fed (for
-    the calibration's windows);
-    all run on the caller's thread.
+    ``on_snapshot`` is called with each new snapshot and the stream health, ``on_table`` with the trial times (s)
+    and gimbal angles (rad, (N, 3)) of the samples the estimator took (for the viewer and the motion check),
+    ``on_samples`` with the trial times (N,), increments (N, 3) and angles (N, 3; NaN where the table had none)
+    of each run of aligned samples the estimator took and each batch fed (the calibration's windows), all on
+    the caller's thread.
     """
 
     def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0,
@@ -73,9 +72,9 @@ class TrialProcessor:
         self.cfg = cfg
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
-        self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale),
+        self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale, cfg.read_s),
                          TABLE: StreamDecoder(make_codec("tts1", pulses_per_frame=cfg.table_counts_per_frame),
-                                              time_scale)}
+                                              time_scale, cfg.read_s)}
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
                                table_wait_s=table_wait(time_scale), free_running=free_running)
@@ -118,10 +117,11 @@ class TrialProcessor:
         return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
 
     def feed(self, item: RawChunk | StreamEvent) -> None:
-        """Process one chunk or event from any stream. A stream's events reach its decoder even after the
-        end, so that its outage count is the recording's."""
+        """Process one chunk or event from any stream; events reach the decoder after the end too (its outage
+        count is the recording's)."""
         decoder = self.decoders.get(item.stream)
         if isinstance(item, StreamEvent) and decoder is not None:
+            self._read(item.stream, decoder.flush())  # the read before the event
             decoder.event(item)
         if self.complete:
             self.after_end += 1
@@ -133,8 +133,13 @@ class TrialProcessor:
             if self.pairing is not None:
                 self.pairing.event(item.stream, item.event)
             return
-        samples = decoder.feed(item)
-        if item.stream == TABLE:
+        self._read(item.stream, decoder.feed(item))
+
+    def _read(self, stream: str, samples: ImuSamples | TableSamples | None) -> None:
+        """One read's samples of a stream through the checks and the pairing to the aligner and the estimator."""
+        if samples is None or self.complete:
+            return
+        if stream == TABLE:
             self._estimate(self._aligned(*(self.pairing.add_table(samples) if self.pairing else (samples, None))))
             return
         if self.compensation is not None:
@@ -197,6 +202,8 @@ class TrialProcessor:
     def finish(self) -> None:
         """End of data: release what the aligner still holds (the samples still waiting for a pairing are
         unpaired)."""
+        for stream, decoder in self.decoders.items():
+            self._read(stream, decoder.flush())
         ready = self._aligned(*self.pairing.flush()) if self.pairing is not None else []
         self._estimate(ready + self.aligner.flush(), final=True)
 
@@ -272,16 +279,13 @@ class TrialProcessor:
     def _estimate(self, ready: list[AlignedBatch | ImuGap], final: bool = False) -> None:
         """Hand the samples one read has aligned to the estimator.
 
-        At the devices' speed the estimator takes every sample waiting once a read completes at least
-        half of what a live read holds (:attr:`_take_at`): each read period's samples are taken by the
-        read that aligns them, whichever stream's it is (the IMU's, or the table's that brings the
-        angles they wait for), and the few a read leaves waiting for a table frame still on the wire
-        join the next read's. So no sample waits for a block to fill, and the reads, recorded one
-        message each, decide the updates: a replay updates the estimator exactly as the live run did.
-        Otherwise (``--speed max``, where a read holds whatever has arrived, or a silent table) it takes
-        whole blocks of ``Config.block_samples``, whose boundaries depend on the samples alone: a run
-        at ``--speed max`` gives the same result bit for bit however its bytes were read. A gap or the
-        end closes a block early."""
+        At the devices' speed it takes every sample waiting once a read completes at least half of what a
+        live read holds (:attr:`_take_at`), whichever stream's read aligns them; the few left waiting for a
+        table frame still on the wire join the next read's. The reads, recorded one message each (a CAN
+        stream's grouped by their receive times), decide the updates: a replay updates as the live run did.
+        Otherwise (``--speed max``, or a silent table) it takes whole blocks of ``Config.block_samples``,
+        bounded by the samples alone, so a run at ``--speed max`` gives one result however its bytes were
+        read. A gap or the end closes a block early."""
         if self.estimator is None:
             if not ready:
                 return
@@ -318,8 +322,7 @@ class TrialProcessor:
         self._block, self._blocked = [_part(run, n, len(run))] if n < len(run) else [], len(run) - n
 
     def _until_the_end(self, ready: list[AlignedBatch | ImuGap]) -> list[AlignedBatch | ImuGap]:
-        """``ready`` up to the configured duration: one read can carry samples beyond it (they stay in the
-        recording; the estimator stops at the sample that ends the trial)."""
+        """``ready`` up to the configured duration (a read's samples beyond it stay in the recording only)."""
         if self.duration is None or not ready:
             return ready
         end = self.estimator.t0 + self.duration + 0.5 / self.cfg.imu_rate_hz

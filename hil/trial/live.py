@@ -24,7 +24,7 @@ import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent
 from drivers.latency import LatencyHistogram
-from drivers.reader import GATHER_S, DeviceReader
+from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
 from hil.config import Config
@@ -115,15 +115,6 @@ class LatencyStats:
         return out
 
 
-def read_period(cfg: Config) -> float:
-    """s between the reads of a live trial's byte streams: one estimator block, or the largest whole fraction
-    of it that holds at most :data:`~hil.config.MAX_READ_FRAMES` IMU frames, so that the processing thread wakes once a
-    block or a few times (a thread woken from idle pays a fixed cost: 8.4 % of a core at 200 Hz with blocks
-    of 50 ms read every 50 ms, against 13.9 % read every 20 ms, paired 30 s runs of
-    benchmarks/live_harness.py); at least :data:`~drivers.reader.GATHER_S`."""
-    return max(cfg.block_samples / cfg.imu_rate_hz / cfg.reads_per_block, GATHER_S)
-
-
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
     """The IMU and table transports, from the emulator's ports (ports.json) or from the config."""
     ports = ports or {}
@@ -185,7 +176,7 @@ class LiveTrial:
         feed = ViewerFeed(viewer, self._live_health)
         self.motion_check = motion_check
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
-        gather = read_period(cfg) if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
+        gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
