@@ -148,5 +148,27 @@ def test_a_window_whose_samples_were_all_lost_ends_the_trial_early_with_the_wind
     sequence.on_samples(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
     outcome = TrialOutcome(cfg, "", tmp_path / "out", {"ended": "completed"}, [])
     calibrated = CalibrationOutcome.of_sequence(outcome, sequence, True)
-    assert calibrated.ended == "early: calibration window 2.00..6.00 s holds no samples"
+    assert calibrated.ended == ("early: calibration position 1: 800 of the 800 samples of its window 2.00..6.00 s "
+                                "were rejected or lost (more than 0.00%): no fit on it")
     assert calibrated.calibration is None and "calibration" not in calibrated.result
+
+
+@pytest.mark.parametrize(("lost", "lacking_max", "fails"), [(1, 0.0, True), (7, 0.01, False), (8, 0.01, True)])
+def test_a_window_that_lacks_samples_ends_the_trial_as_soon_as_it_closes(tmp_path, lost, lacking_max, fails):
+    """A dwell of 4 s at 200 Hz (800 samples) with ``lost`` of them rejected in its middle (and the one after the
+    gap, whose interval is not whole): failed at once, by the samples that close it, beyond ``lacking_max`` of them
+    (and one sample, a boundary's rounding)."""
+    cfg = load_config(calibration_config(tmp_path, positions=[[0, 0, 0]], plateau_s=0))
+    sequence = CalibrationSequence(checked_schedule(cfg), None, 1.0 / RATE_HZ, lacking_max=lacking_max)
+    sequence.windows_found.append(StepWindow(sequence.steps[0], 2.0, 6.0))
+    t = np.arange(1, 1401) / RATE_HZ
+    kept = np.ones(len(t), bool)
+    kept[800:800 + lost] = False  # rejected at 4.0 s, inside the window
+    sequence.on_samples(t[:1000][kept[:1000]], *(np.zeros((int(kept[:1000].sum()), 3)),) * 3)
+    assert sequence.failure is None  # the window is still open
+    sequence.on_samples(t[1000:][kept[1000:]], *(np.zeros((int(kept[1000:].sum()), 3)),) * 3)
+    if fails:
+        assert sequence.failure == (f"calibration position 1: {lost + 1} of the 800 samples of its window 2.00..6.00 s "
+                                    f"were rejected or lost (more than {lacking_max:.2%}): no fit on it")
+    else:
+        assert sequence.failure is None and sequence.windows()[0].samples == 800 - lost - 1

@@ -156,3 +156,30 @@ def test_a_calibration_of_a_running_emulator_completes(tmp_path):
     doc = json.loads((out / "calibration.json").read_text())
     assert len(doc["positions"]) == 6 and result(out)["streams"]["sync"]["repairs"] == []
     assert abs(doc["accel"]["bias_ug"][2] - 260.0) < 10.0  # the emulator's truth, to its noise
+
+
+@pytest.mark.parametrize("faults", [
+    {"drop_rate": 0.003, "drop_burst": 4},  # 1.2 % of the frames lost, a few in every window
+    {"power_cycle_at_s": 20.0, "power_cycle_s": 15.0},  # 15 s silent once attached: windows lost, or samples bridged
+])
+def test_a_calibration_whose_imu_loses_samples_is_not_filed_as_pass(tmp_path, faults):
+    """Ended early naming the window that lacks samples, or completed and FAILed on the samples missing."""
+    import yaml
+
+    from hil.config import load_config
+    from hil.outputs.measurements import FAIL, measurements
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_short.yaml").read_text())
+    cfg["calibration"].update(positions=6, plateau_s=3)
+    cfg["imu"]["faults"] = faults
+    with Emulator(tmp_path, cfg, duration=300.0) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
+        time.sleep(1.0)
+        out = tmp_path / "cal"
+        code = main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"])
+    doc = result(out)
+    failed = {m.name for m in measurements(doc, load_config(lab).limits) if m.outcome == FAIL}
+    if code == 1:
+        assert "rejected or lost" in doc["ended"] and not (out / "calibration.json").exists(), doc["ended"]
+    else:
+        assert code == 3 and doc["ended"] == "completed" and "imu_missing_fraction" in failed, (code, failed)

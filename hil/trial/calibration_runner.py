@@ -40,8 +40,10 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
 
     def commanded(control, cfg: Config, viewer) -> tuple[object, dict]:
         control.client.apply_limits()
+        limits = (cfg.limits.missing_max, cfg.limits.gated_max)  # a window may lack what the trial may
+        lacking = 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
         sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz,
-                                       **sequence_views(viewer, schedule, cfg))
+                                       **sequence_views(viewer, schedule, cfg), lacking_max=lacking)
         sequence.start()
         control.client.configure_sync(True)
         sequences.append(sequence)

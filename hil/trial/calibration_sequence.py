@@ -56,10 +56,11 @@ class CalibrationSequence:
 
     def __init__(self, schedule: Schedule, client, sample_period: float,
                  on_step: Callable[[float, int], None] | None = None,
-                 on_window: Callable[[float, int, Window], None] | None = None) -> None:
+                 on_window: Callable[[float, int, Window], None] | None = None, lacking_max: float = 0.0) -> None:
         self.steps: list[Dwell | Plateau] = list(schedule.dwells) + list(schedule.plateaus)
         self.client = client
         self.period = sample_period
+        self.lacking_max = lacking_max  # fraction of a window's samples that may be missing (rejected, lost)
         self.on_step = on_step
         self.on_window = on_window
         self._reported = 0  # windows handed to on_window
@@ -89,18 +90,20 @@ class CalibrationSequence:
 
     def on_samples(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
         """Aligned samples the estimator took (the processor's ``on_samples``), kept for :meth:`windows`;
-        a closed window whose samples have all arrived goes to ``on_window``."""
+        a closed window whose samples have all arrived is cut at once: one that lacks samples ends the trial
+        (:attr:`failure`), the others go to ``on_window``."""
         self._samples.append((t, dtheta, dv, angles))
-        if self.on_window is None or self._reported == len(self.windows_found) or len(t) == 0:
+        if self._reported == len(self.windows_found) or len(t) == 0:
             return
         if t[-1] >= self.windows_found[self._reported].end:
             samples = self._joined()
             while self._reported < len(self.windows_found) and t[-1] >= self.windows_found[self._reported].end:
                 try:
                     window = self._cut(self.windows_found[self._reported], *samples)
-                except ValueError:  # an empty window: :meth:`windows` says so at the end; the views go without it
-                    window = None
-                if window is not None:
+                except ValueError as exc:
+                    self.failure = self.failure or str(exc)
+                    return
+                if self.on_window is not None:
                     self.on_window(self.windows_found[self._reported].end, self._reported, window)
                 self._reported += 1
 
@@ -184,11 +187,12 @@ class CalibrationSequence:
         if self.on_step is not None:
             self.on_step(t, self._index)
 
-    def _name(self) -> str:
-        step = self.steps[self._index]
-        if isinstance(step, Plateau):
-            return f"plateau {self._index - sum(isinstance(s, Dwell) for s in self.steps) + 1}"
-        return f"position {self._index + 1}"
+    def _name(self, index: int | None = None) -> str:
+        """The step's name (the current one's without ``index``), as the messages give it."""
+        index = self._index if index is None else index
+        if isinstance(self.steps[index], Plateau):
+            return f"plateau {index - sum(isinstance(s, Dwell) for s in self.steps) + 1}"
+        return f"position {index + 1}"
 
     def windows(self) -> list[Window]:
         """The calibration windows (dwells, then plateaus) from the samples kept, each the samples whose
@@ -210,8 +214,11 @@ class CalibrationSequence:
     def _cut(self, found: StepWindow, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray,
              contiguous: np.ndarray) -> Window:
         sel = np.flatnonzero(contiguous & (t - self.period >= found.start - 1e-9) & (t <= found.end + 1e-9))
-        if len(sel) == 0:
-            raise ValueError(f"calibration window {found.start:.2f}..{found.end:.2f} s holds no samples")
+        expected = round((found.end - found.start) / self.period)
+        if expected - len(sel) > max(1.0, self.lacking_max * expected):
+            raise ValueError(f"calibration {self._name(self.steps.index(found.step))}: {expected - len(sel)} of the "
+                             f"{expected} samples of its window {found.start:.2f}..{found.end:.2f} s were rejected or "
+                             f"lost (more than {self.lacking_max:.2%}): no fit on it")
         turn = wrapped(angles[sel] - angles[sel - 1])  # each interval's encoder turn
         rates = np.zeros(3)
         if isinstance(found.step, Plateau):
