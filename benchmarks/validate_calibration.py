@@ -8,7 +8,7 @@ shipped one with ``--shipped-schedule``). Per term (calibration.json against ``t
 the fraction of seeds with |error| <= 3 sigma (an angle's sigma combined with the encoder resolution, as
 calibration.html), the worst |error| / sigma and the RMS of error / sigma; then the fraction over all
 terms and seeds (target >= 95 %; the exit code says whether it was met). A last run without the
-configured noise prints the worst relative errors with their sigmas (docs/calibration.md, Validation:
+configured noise prints the worst relative errors with their sigmas (docs/calibration.md, "Validation":
 on this short schedule the terms only the earth rate gives keep a small deterministic error there). The
 live runs are not bit-reproducible: at ``--speed max`` the windows' sample counts depend on the machine's load.
 With ``--simulate`` each run is ``hil calibrate --simulate`` (the same sequence commanding the servo in

@@ -1,4 +1,4 @@
-"""KVH 1750 "format A": 36-byte big-endian frames with a CRC-32/MPEG-2 (DESIGN.md, Wire protocols)."""
+"""KVH 1750 "format A": 36-byte big-endian frames with a CRC-32/MPEG-2 (docs/wire-formats.md, "KVH 1750")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The layout of DESIGN.md held against the code: imports point down the layer list, no import cycles
+"""The layers of docs/design.md, "Layers", held against the code: imports point down the layer list, no import cycles
 (lazy imports included), no module over 400 lines."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("hil", "drivers", "emulators")
 MAX_LINES = 400
-# DESIGN.md "Layout": an import may only point to its own layer or one above it in this list
+# docs/design.md, "Layers": an import may only point to its own layer or one above it in this list
 LAYERS = (
     ("hil.config", "hil.config_types", "hil.inputs", "hil.units", "hil.samples", "hil.frames"),
     ("hil.estimation",),
@@ -53,7 +53,7 @@ def _layer(module: str) -> int:
     for k, prefixes in enumerate(LAYERS):
         if any(module == p or module.startswith(p + ".") for p in prefixes):
             return k
-    raise AssertionError(f"{module} is in no layer of DESIGN.md's list")
+    raise AssertionError(f"{module} is in no layer of docs/design.md's list")
 
 
 def _graph() -> dict[str, set[str]]:

@@ -1,4 +1,4 @@
-"""Codecs against golden byte vectors written by hand from the protocol text (DESIGN.md, Wire protocols)."""
+"""Codecs against golden byte vectors written by hand from the protocol text (docs/wire-formats.md)."""
 
 from __future__ import annotations
 

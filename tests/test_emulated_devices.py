@@ -1,4 +1,4 @@
-"""The emulated devices on ptys: a frame checker written from DESIGN.md, the framers, the truth model."""
+"""The emulated devices on ptys: a frame checker written from docs/wire-formats.md, the framers, the truth model."""
 
 from __future__ import annotations
 

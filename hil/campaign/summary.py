@@ -50,7 +50,7 @@ def _vector(row: dict[str, Any], key: str) -> list[float | None]:
 
 def bias_error(row: dict[str, Any]) -> np.ndarray | None:
     """Estimate minus truth (µg) of a run; the truth at the trial's end when the drift model estimates it
-    there (DESIGN.md "Bias model"). None when the run has no estimate or no truth."""
+    there (docs/contracts.md, "result.json"). None when the run has no estimate or no truth."""
     estimate, truth = _vector(row, ESTIMATE), _vector(row, TRUTH)
     if row.get(ERROR) is not None or None in estimate or None in truth or None in _vector(row, SIGMA):
         return None

@@ -1,4 +1,4 @@
-"""``OUT/calibration.json``: the calibration document of DESIGN.md, (read back for ``imu.calibration`` by :mod:`hil.pipeline.compensation`).
+"""``OUT/calibration.json``: the calibration document (docs/contracts.md, "calibration.json"), read back for ``imu.calibration`` by :mod:`hil.pipeline.compensation`.
 
 The ``accel`` and ``gyro`` blocks use the keys, order and signs of ``imu.errors``; a term the schedule
 could not observe, or that was not fitted, is ``null`` with its reason under ``"unobservable"`` keyed

@@ -1,4 +1,4 @@
-"""The noise characterisation's files: ``noise.json`` (DESIGN.md, "Noise characterisation") and ``allan.png``.
+"""The noise characterisation's files: ``noise.json`` (docs/contracts.md, "noise.json") and ``allan.png``.
 
 Terms and deviations in datasheet units (``hil.estimation.allan.GYRO_UNITS``, ``ACCEL_UNITS``); a term
 the record cannot resolve is null. matplotlib is imported when the figure is drawn, not with this module.
@@ -23,7 +23,7 @@ from hil.estimation.allan import (
 from hil.outputs.figures import pyplot
 
 NOISE_JSON, ALLAN_PNG = "noise.json", "allan.png"
-# (sensor, its units, the DESIGN.md key of each term in the order white, bias instability, random walk)
+# (sensor, its units, the noise.json key of each term in the order white, bias instability, random walk)
 SENSORS = (
     ("gyro", GYRO_UNITS, ("arw_deg_per_sqrt_h", "bias_instability_dph", "rrw_deg_per_h_per_sqrt_h")),
     ("accel", ACCEL_UNITS, ("vrw_m_per_s_per_sqrt_h", "bias_instability_ug", "rrw_m_per_s2_per_sqrt_h")),
@@ -45,7 +45,7 @@ def _rows(values: np.ndarray) -> list[list[float]]:
 
 
 def noise_document(gyro: AllanAnalysis, accel: AllanAnalysis) -> dict:
-    """The noise.json document of DESIGN.md from the gyro and accelerometer analyses (same tau)."""
+    """The noise.json document (docs/contracts.md, "noise.json") from the gyro and accelerometer analyses (same tau)."""
     if not np.array_equal(gyro.tau, accel.tau):
         raise ValueError("gyro and accelerometer records differ in length or rate: analyse them over the same samples")
     doc: dict = {}

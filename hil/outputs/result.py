@@ -1,4 +1,4 @@
-"""result.json (schema in DESIGN.md): the document of a trial, its console summary, and the file."""
+"""result.json (schema: docs/contracts.md, "result.json"): the document of a trial, its console summary, and the file."""
 
 from __future__ import annotations
 

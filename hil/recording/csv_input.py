@@ -1,4 +1,4 @@
-"""Increments as CSV (the layout of DESIGN.md): read those exported from other acquisition software, and
+"""Increments as CSV (docs/contracts.md, "CSV of increments"): read those exported from other acquisition software, and
 write a trial's own."""
 
 from __future__ import annotations

@@ -64,7 +64,7 @@ class TrialOutcome:
         return cls(cfg, config_text, out, result, snapshots)
 
     def exit_code(self, verdict: str) -> int:
-        """DESIGN.md's exit code: 1 a trial that ended early or was interrupted, 3 one that completed but
+        """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that completed but
         FAILs its limits, 0 otherwise."""
         if self.ended != COMPLETED:
             return 1
