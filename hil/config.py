@@ -340,7 +340,8 @@ class Config(Model):
     @property
     def read_s(self) -> float:
         """s between a live trial's reads: one block, or the largest whole fraction of it that holds at most
-        :data:`MAX_READ_FRAMES` IMU frames, at least :data:`MIN_READ_S` (docs/harness.md, "Reads")."""
+        :data:`MAX_READ_FRAMES` IMU frames, at least :data:`MIN_READ_S` (docs/harness.md, "What a read costs, and
+        the block length")."""
         return max(self.block_samples / self.imu_rate_hz / self.reads_per_block, MIN_READ_S)
 
     @property

@@ -46,8 +46,10 @@ def acquire(cfg: Config, config_path: Path, out: Path, duration: float | None, q
     outcome.write(figures=False)
     if outcome.ended != COMPLETED:
         raise AcquisitionFailed(f"the acquisition {outcome.ended}: no noise analysis ({directory / 'report.html'})", 1)
-    failed = [m for m in measurements(outcome.result, cfg.limits) if m.name in STREAM_MEASUREMENTS and m.outcome == FAIL]
+    judged = measurements(outcome.result, cfg.limits)
+    failed = [m for m in judged if m.name in STREAM_MEASUREMENTS and m.outcome == FAIL]
     if failed:
         named = ", ".join(f"{m.name} {format_value(m.value)} (limit {m.limit})" for m in failed)
-        raise AcquisitionFailed(f"the record's streams FAIL {named}: no noise analysis ({directory / 'report.html'})", 3)
+        report = directory / "report.html"
+        raise AcquisitionFailed(f"the record's streams FAIL {named}: no noise analysis ({report})", 3)
     return directory

@@ -173,7 +173,8 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     if cfg is not None:
         from hil.trial.noise_acquisition import acquire
 
-        record = replace(read_source(acquire(cfg, Path(source), out, duration, quiet), config or source), source="devices")
+        recorded = acquire(cfg, Path(source), out, duration, quiet)
+        record = replace(read_source(recorded, config or source), source="devices")
     else:
         record = read_source(source, config)
     if export is not None:
