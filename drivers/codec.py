@@ -13,6 +13,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
+from hil.config import ConfigError
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
 
 R = TypeVar("R")
@@ -150,3 +151,12 @@ def imu_frame_bytes(codec: Codec) -> int:
     """Bytes one IMU frame of ``codec`` takes on a serial line (0 for a codec whose frames are CAN messages)."""
     frame = codec.encode(codec.from_sample(_PROBE))
     return len(frame) if isinstance(frame, bytes) else 0
+
+
+def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
+    """Raise :class:`ConfigError` naming ``<name>.baudrate`` when frames of ``frame_bytes`` at ``rate_hz`` do not
+    fit the serial line (8N1): the device could not send them, or is not set as the config says."""
+    needed = frame_bytes * BITS_PER_BYTE * rate_hz
+    if needed > baudrate:
+        raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "
+                          f"(8N1), more than the configured {baudrate}; raise the baudrate or lower the rate")

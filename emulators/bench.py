@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.acl import AclCommand
-from drivers.codec import BITS_PER_BYTE, imu_frame_bytes
+from drivers.codec import check_baudrate, imu_frame_bytes
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
 from emulators.clocks import device_clocks
@@ -27,7 +27,7 @@ from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
 from emulators.writer import DeviceWriter
-from hil.config import Config, ConfigError
+from hil.config import Config
 from hil.units import ARCSEC
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
@@ -80,14 +80,6 @@ class SyncClock:
         due = self.due(t)
         delay = 0.0 if due is None else due - time.monotonic()
         return not stop.wait(delay) if delay > 0 else not stop.is_set()
-
-
-def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
-    """Raise :class:`ConfigError` when frames of ``frame_bytes`` at ``rate_hz`` do not fit the line."""
-    needed = frame_bytes * BITS_PER_BYTE * rate_hz
-    if needed > baudrate:
-        raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "
-                          f"(8N1), more than the configured {baudrate}; raise the baudrate or lower the rate")
 
 
 def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, DeviceStream]]:

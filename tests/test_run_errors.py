@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import socket
 import time
 from pathlib import Path
 
+import pytest
 import yaml
 
 from emulators.process import spawn_emulator
@@ -34,6 +36,26 @@ def test_a_config_the_emulator_rejects_is_one_line_with_its_reason(tmp_path, cap
     assert main(["run", str(config), "--duration", "5", *FAST, "--out", str(tmp_path / "out")]) == 2
     line = _one_line(capsys.readouterr().err)
     assert "imu.baudrate" in line and "9600" in line
+
+
+@pytest.mark.parametrize(("block", "rate", "key"), [("imu", {"rate_hz": 1000.0, "baudrate": 115200}, "imu.baudrate"),
+                                                    ("turntable", {"baudrate": 9600}, "turntable.baudrate")])
+def test_a_real_line_too_slow_for_its_frames_is_refused_before_reading(tmp_path, capsys, block, rate, key):
+    """KVH 1750 frames of 36 bytes at 1 kHz need 360 000 baud; tts1 frames of 24 bytes at 200 Hz need 48 000."""
+    server = socket.create_server(("127.0.0.1", 0))
+    url = f"socket://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        config = _config(tmp_path, "real-slow", imu={"source": "serial", "port": url},
+                         turntable={"source": "serial", "data_port": url})
+        cfg = yaml.safe_load(config.read_text())
+        cfg[block].update(rate)
+        config.write_text(yaml.safe_dump(cfg))
+        assert main(["run", str(config), "--duration", "5", "--viewer", "none", "--quiet", "--out",
+                     str(tmp_path / "out")]) == 2
+    finally:
+        server.close()
+    line = _one_line(capsys.readouterr().err)
+    assert key in line and "baud" in line, line
 
 
 def test_an_emulated_can_imu_on_the_in_process_virtual_bus_is_refused(tmp_path, capsys):
@@ -107,3 +129,15 @@ def test_swapped_ports_end_the_trial_with_one_line_naming_the_port(tmp_path, cap
     assert took < 12.0  # output.stream_timeout_s (5 s) after the first bytes, and the start and the outputs
     result = yaml.safe_load((out / "result.json").read_text())
     assert result["ended"] == f"early: {lines[0].removeprefix('hil: trial early: ')}"
+
+
+
+@pytest.mark.parametrize(("offset", "rate", "warned"), [(6e-3, 200.0, True), (-5.5e-3, 200.0, True),
+                                                       (4.9e-3, 200.0, False), (1.2e-3, 1000.0, True), (None, 200, False)])
+def test_a_lag_between_the_streams_beyond_one_imu_period_is_a_console_warning(offset, rate, warned):
+    from hil.trial.live import lag_warning
+
+    warning = lag_warning(offset, rate)
+    assert (warning is not None) == warned
+    if warned:
+        assert f"by {offset * 1e3:.2f} ms, more than one IMU period ({1e3 / rate:.2f} ms)" in warning

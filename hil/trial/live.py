@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import queue
+import sys
 import threading
 import time
 from collections import deque
@@ -22,11 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from drivers.codec import RawChunk, StreamEvent
+from drivers.codec import RawChunk, StreamEvent, check_baudrate, imu_frame_bytes
 from drivers.latency import LatencyHistogram
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
+from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.result import COMPLETED
@@ -38,6 +40,7 @@ from hil.trial.viewer_feed import Viewer, ViewerFeed
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
+SYNC_CHECK_S = 10.0  # trial s between the checks of the streams' lag (a cross-correlation over up to 60 s of data)
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
 START_TIMEOUT_S = 15.0  # the first data must arrive within this
 SETTLE_S = 0.5  # after the devices' process has ended, the readers' last chunks arrive within this
@@ -157,8 +160,11 @@ class LiveTrial:
                  source_done: Callable[[], bool] | None = None,
                  stop_requested: Callable[[], str | None] | None = None,
                  on_end: Callable[[], None] | None = None, on_samples: SamplesCallback | None = None,
-                 finished: Callable[[], bool] | None = None, queue_items: int = QUEUE_ITEMS) -> None:
+                 finished: Callable[[], bool] | None = None, queue_items: int = QUEUE_ITEMS,
+                 on_warning: Callable[[str], None] | None = None) -> None:
         self.cfg = cfg
+        self.on_warning = on_warning or (lambda text: print(f"hil: WARNING: {text}", file=sys.stderr))
+        self.sync_warned = False
         self.out = out
         self.duration = duration
         self.viewer = viewer
@@ -178,6 +184,10 @@ class LiveTrial:
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
+        if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
+            frame_bytes = imu_frame_bytes(self.processor.decoders[IMU].codec)
+            check_baudrate("imu", frame_bytes, cfg.imu_rate_hz, cfg.imu.baudrate)
+        check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
 
@@ -231,7 +241,7 @@ class LiveTrial:
 
     def _loop(self) -> None:
         started = time.monotonic()
-        next_progress = started
+        next_progress, next_sync_check = started, SYNC_CHECK_S  # the latter in trial time
         while not (self.processor.complete or self.ended_by_source or self.finished()):
             self.interrupted = self.stop_requested()
             if self.interrupted:
@@ -260,8 +270,20 @@ class LiveTrial:
                     estimator = self.processor.estimator
                     snap = estimator.snapshots[-1] if estimator is not None and estimator.snapshots else None
                     self.on_progress(self.processor.trial_time, snap, health)
+            if self.processor.trial_time >= next_sync_check and not self.sync_warned:
+                next_sync_check = self.processor.trial_time + SYNC_CHECK_S
+                self._check_sync()
             if item is None and self.queue.empty():
                 self._check_alive(now, started)
+
+    def _check_sync(self) -> None:
+        """Warn once, as soon as it shows, of a lag between the streams beyond one IMU period (:func:`lag_warning`)."""
+        offset = self.processor.time_offset.estimate() if self.processor.estimator is not None else None
+        warning = lag_warning(offset, self.cfg.imu_rate_hz)
+        if warning is not None:
+            self.sync_warned = True
+            self.on_warning(warning)
+
 
     def _watch(self, item: RawChunk | StreamEvent) -> None:
         """Hand an item the processor has taken to the stream watch; its verdict ends the trial."""
@@ -294,3 +316,14 @@ class LiveTrial:
             why = "; ".join(reader.down for reader in self.readers if reader.down)
             message = f"no data from any device for {limit:g} s (output.outage_limit_s)"
             raise TrialAborted(f"{message}: {why}" if why else message)
+
+
+def lag_warning(offset: float | None, rate_hz: float) -> str | None:
+    """The console's warning of a lag ``offset`` (s) of the table's angles behind the IMU beyond one IMU period: the
+    sync wiring or a latch delay is wrong, and every estimate of the trial with it (``output.limits.
+    sync_offset_ms_max`` judges it at the end); None within a period, or unmeasured."""
+    period = 1.0 / rate_hz
+    if offset is None or abs(offset) <= period:
+        return None
+    return (f"the table's angles lag the IMU by {offset * 1e3:.2f} ms, more than one IMU period ({period * 1e3:.2f} "
+            "ms): check the sync pulse wiring and imu.latch_delay_us")

@@ -81,7 +81,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
                 check, extra = commanded(control, cfg, viewer)
             trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
                               motion_check=check, on_progress=progress.update, stop_requested=stop_requested,
-                              on_end=control.stop if control is not None else None,
+                              on_end=control.stop if control is not None else None, on_warning=progress.warn,
                               source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
                               if emulator else None, **extra)
             return trial, trial.run()

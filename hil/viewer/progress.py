@@ -65,6 +65,10 @@ class ConsoleProgress:
             self._next_plain = now + PLAIN_S
             self.console.print(line, soft_wrap=True, highlight=False, markup=False)
 
+    def warn(self, text: str) -> None:
+        """A warning line above the status line (printed when quiet too)."""
+        self.console.print(f"hil: WARNING: {text}", soft_wrap=True, highlight=False, markup=False)
+
     def parts(self, trial_time: float, snap: Snapshot | None, health: dict[str, dict[str, float]],
               rates: dict[str, float]) -> list[str]:
         """The status line's parts, most important first."""
