@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,18 +23,22 @@ CHUNK = 5000
 
 @dataclass
 class Simulation:
-    """Truth + sensor errors for one trial; yields aligned batches of measured increments and table angles."""
+    """Truth + sensor errors for one trial; yields aligned batches of measured increments and the table's angles as
+    it reports them: the true gimbal angles minus ``zero_offset`` (rad, outer, middle, inner), as its frames do
+    (:class:`emulators.sources.TableSource`)."""
 
     truth: Truth
     errors: SensorErrorModel
     rate_hz: float
     duration: float
+    zero_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def from_config(cls, cfg: Config) -> Simulation:
         if cfg.trial.duration_s is None:
             raise ConfigError("trial.duration_s: required key is missing (an emulated trial needs a duration)")
-        return cls(*emulated_world(cfg), cfg.imu_rate_hz, cfg.trial.duration_s)
+        return cls(*emulated_world(cfg), cfg.imu_rate_hz, cfg.trial.duration_s,
+                   np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
 
     @property
     def samples(self) -> int:
@@ -49,7 +53,7 @@ class Simulation:
             t0 = start / self.rate_hz
             dtheta, dv = self.truth.increments(t0, t)
             dtheta, dv = self.errors.apply(t, dtheta, dv)
-            yield AlignedBatch(t, dtheta, dv, self.truth.angles(t), t0)
+            yield AlignedBatch(t, dtheta, dv, self.truth.angles(t) - self.zero_offset, t0)
 
 
 def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+from pathlib import Path
 
+import numpy as np
+import pytest
 import yaml
 
 from hil.cli import main
@@ -56,3 +59,47 @@ def test_a_trial_without_imu_calibration_says_none_was_applied(tmp_path, capsys)
     result, report, summary = _simulate(tmp_path, _config(tmp_path), capsys)
     assert "calibration_applied" in result and result["calibration_applied"] is None
     assert "no calibration applied (imu.calibration not set)" in report and "calibration" not in summary
+
+
+def test_a_calibration_applied_to_a_swing_of_the_same_imu_and_table_leaves_no_bias_and_no_tilt(tmp_path):
+    """``hil calibrate --simulate`` on configs/calibration_short.yaml, then a swing of the same emulated IMU and table
+    (the same gimbal zero offsets) with ``imu.calibration``: the IMU's terms compensate its increments, the file's
+    zero offsets correct the table's angles, so the table-referenced bias is the residual of the calibration (within
+    a few micro-g) and the method-2 alignment error is the swing's noise level, not the zero offsets' 30 arcsec."""
+    root = Path(__file__).resolve().parents[1]
+    calibrated = tmp_path / "cal"
+    assert main(["calibrate", str(root / "configs" / "calibration_short.yaml"), "--simulate", "--out", str(calibrated),
+                 "--no-figures", "--viewer", "none"]) == 0
+    source = yaml.safe_load((root / "configs" / "calibration_short.yaml").read_text())
+    swing = yaml.safe_load((root / "configs" / "emulated_swing.yaml").read_text())
+    swing["trial"]["duration_s"] = 300
+    swing["turntable"]["zero_offset_arcsec"] = source["turntable"]["zero_offset_arcsec"]
+    swing["imu"]["errors"] = source["imu"]["errors"]
+    swing["imu"]["calibration"] = str(calibrated / "calibration.json")
+    config = tmp_path / "swing.yaml"
+    config.write_text(yaml.safe_dump(swing))
+    out = tmp_path / "swing"
+    main(["simulate", str(config), "--out", str(out), "--no-figures"])
+    result = json.loads((out / "result.json").read_text())
+    table = result["table_reference"]
+    assert np.all(np.abs(table["accel_bias_ug"]) < 3 * np.array(table["accel_bias_sigma_ug"]) + 5.0), table
+    assert abs(result["alignment_deg"]["method2"]["pitch"]) < 2e-3 and abs(result["alignment_deg"]["method2"]["roll"]) < 2e-3
+
+
+def test_the_files_zero_offsets_are_added_to_the_table_angles_and_listed_as_applied(tmp_path):
+    from hil.pipeline.compensation import CalibrationFileError, Compensation, applied_terms
+    from hil.samples import TableSamples
+
+    document = {**DOCUMENT, "turntable": {"zero_offset_arcsec": [36.0, -18.0, None]}}
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps(document))
+    angles = np.array([[0.1, -0.2, 0.3], [0.4, 0.5, -0.6]])
+    table = TableSamples(np.arange(2), angles, np.zeros(2), np.zeros(2), np.zeros(2, int))
+    corrected = Compensation(path, 0.005).table(table).angles
+    arcsec = np.pi / (180 * 3600)
+    np.testing.assert_allclose(corrected - angles, [[36 * arcsec, -18 * arcsec, 0.0]] * 2, rtol=1e-12, atol=1e-18)
+    applied = applied_terms(document)
+    assert applied["terms"]["turntable"] == ["zero_offset_arcsec"] and "turntable.zero_offset_arcsec.2" in applied["null_terms"]
+    path.write_text(json.dumps({**DOCUMENT, "turntable": {"zero_offset_arcsec": [1.0, "x", 0.0]}}))
+    with pytest.raises(CalibrationFileError, match=r"turntable.zero_offset_arcsec\[1\]: expected a finite number"):
+        Compensation(path, 0.005)

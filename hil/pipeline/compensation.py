@@ -2,7 +2,10 @@
 else of the pipeline sees them (:func:`hil.estimation.calibration_model.compensate`).
 
 The file's ``accel`` and ``gyro`` blocks use the keys, order and signs of ``imu.errors``; a ``null`` term is
-not compensated. A file that cannot be applied raises :class:`CalibrationFileError` (a
+not compensated. Its ``turntable.zero_offset_arcsec`` (true gimbal angle minus encoder reading, outer, middle,
+inner; optional) is added to the table's reported angles: the IMU's terms were fitted against the corrected
+angles, and the table-referenced estimates need them too (the inner offset, unobservable, is folded into the
+IMU's misalignment and ``null``). A file that cannot be applied raises :class:`CalibrationFileError` (a
 :class:`hil.config.ConfigError`) naming the key, the file and the reason, in one line.
 :attr:`Compensation.applied` says which file (path, SHA-256 of the bytes read) and which terms were applied:
 result.json's ``calibration_applied``.
@@ -20,13 +23,14 @@ import numpy as np
 
 from hil.config import ConfigError
 from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate
-from hil.samples import AlignedBatch, ImuSamples
+from hil.samples import AlignedBatch, ImuSamples, TableSamples
 from hil.units import ARCSEC, DEG_PER_H, PPM, UG, UG_PER_G2
 
 # (key, slice of theta, SI per unit)
 ACCEL_KEYS = (("bias_ug", BIAS, UG), ("scale_ppm", SCALE, PPM), ("misalignment_arcsec", MIS, ARCSEC),
               ("nonlinearity_ug_per_g2", NONLIN, UG_PER_G2))
 GYRO_KEYS = (("bias_dph", BIAS, DEG_PER_H), ("scale_ppm", SCALE, PPM), ("misalignment_arcsec", MIS, ARCSEC))
+ZERO_KEY = "zero_offset_arcsec"  # of the file's turntable block
 
 
 class CalibrationFileError(ConfigError):
@@ -40,6 +44,7 @@ class Compensation:
         self.path = str(path)
         data, doc = _read(Path(path))
         self.accel, self.gyro = _thetas(Path(path), doc)
+        self.zero_offsets = _zero_offsets(Path(path), doc)
         self.period = period
         self.applied = {"path": self.path, "sha256": hashlib.sha256(data).hexdigest(), **applied_terms(doc)}
 
@@ -50,11 +55,16 @@ class Compensation:
         dtheta, dv = compensate(self.accel, self.gyro, samples.dtheta, samples.dv, self.period)
         return dataclasses.replace(samples, dtheta=dtheta, dv=dv)
 
+    def table(self, samples: TableSamples) -> TableSamples:
+        """Decoded table samples with the gimbal zero offsets added to their encoder angles."""
+        return dataclasses.replace(samples, angles=samples.angles + self.zero_offsets) if len(samples) else samples
+
     def batch(self, batch: AlignedBatch) -> AlignedBatch:
-        """A batch with compensated increments, each over its own interval."""
+        """A batch with compensated increments, each over its own interval, and zero-offset angles."""
         dt = np.diff(np.concatenate(([batch.t0], batch.t)))
         dtheta, dv = compensate(self.accel, self.gyro, batch.dtheta, batch.dv, dt)
-        return dataclasses.replace(batch, dtheta=dtheta, dv=dv)
+        angles = None if batch.angles is None else batch.angles + self.zero_offsets
+        return dataclasses.replace(batch, dtheta=dtheta, dv=dv, angles=angles)
 
 
 def load_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -71,9 +81,12 @@ def applied_terms(doc: dict) -> dict:
     left uncompensated (``null``), of a document :func:`load_calibration` accepts."""
     terms: dict[str, list[str]] = {}
     nulls: list[str] = []
-    for block, keys in (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS)):
-        terms[block] = [key for key, _, _ in keys if any(v is not None for v in doc[block][key])]
-        nulls += [f"{block}.{key}.{i}" for key, _, _ in keys for i, v in enumerate(doc[block][key]) if v is None]
+    blocks = [("accel", ACCEL_KEYS, doc["accel"]), ("gyro", GYRO_KEYS, doc["gyro"])]
+    if isinstance(doc.get("turntable"), dict) and ZERO_KEY in doc["turntable"]:
+        blocks.append(("turntable", ((ZERO_KEY, None, ARCSEC),), doc["turntable"]))
+    for block, keys, part in blocks:
+        terms[block] = [key for key, _, _ in keys if any(v is not None for v in part[key])]
+        nulls += [f"{block}.{key}.{i}" for key, _, _ in keys for i, v in enumerate(part[key]) if v is None]
     return {"terms": terms, "null_terms": nulls}
 
 
@@ -89,6 +102,26 @@ def _read(path: Path) -> tuple[bytes, dict]:
     if not isinstance(doc, dict):
         raise CalibrationFileError(f"imu.calibration: {path}: expected a JSON object at the top level")
     return data, doc
+
+
+def _zero_offsets(path: Path, doc: dict) -> np.ndarray:
+    """``turntable.zero_offset_arcsec`` in rad (3,), a ``null`` (or a missing block) as zero."""
+    part = doc.get("turntable")
+    if part is None or ZERO_KEY not in part:
+        return np.zeros(3)
+    values = part[ZERO_KEY] if isinstance(part, dict) else None
+    if not isinstance(values, list) or len(values) != 3:
+        raise CalibrationFileError(f"imu.calibration: {path}: turntable.{ZERO_KEY}: expected a list of 3 numbers or nulls")
+    return np.array([_number(path, f"turntable.{ZERO_KEY}[{i}]", v) for i, v in enumerate(values)]) * ARCSEC
+
+
+def _number(path: Path, where: str, value: object) -> float:
+    """A term's value (``null``: 0, not compensated); raises :class:`CalibrationFileError` for anything else."""
+    if value is None:
+        return 0.0
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CalibrationFileError(f"imu.calibration: {path}: {where}: expected a finite number, got {value!r}")
+    return float(value)
 
 
 def _thetas(path: Path, doc: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -111,9 +144,5 @@ def _theta(path: Path, doc: dict, block: str, keys: tuple) -> np.ndarray:
             got = f"{len(values)}" if isinstance(values, list) else type(values).__name__
             raise CalibrationFileError(f"imu.calibration: {path}: {block}.{key}: expected a list of {n} numbers or nulls, got {got}")
         for i, v in enumerate(values):
-            if v is None:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise CalibrationFileError(f"imu.calibration: {path}: {block}.{key}[{i}]: expected a finite number, got {v!r}")
-            theta[sl.start + i] = v * unit
+            theta[sl.start + i] = _number(path, f"{block}.{key}[{i}]", v) * unit
     return theta

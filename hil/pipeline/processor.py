@@ -139,11 +139,11 @@ class TrialProcessor:
         """One read's samples of a stream through the checks and the pairing to the aligner and the estimator."""
         if samples is None or self.complete:
             return
+        if self.compensation is not None:  # imu.calibration: the IMU's terms, the table's zero offsets
+            samples = self.compensation.table(samples) if stream == TABLE else self.compensation.samples(samples)
         if stream == TABLE:
             self._estimate(self._aligned(*(self.pairing.add_table(samples) if self.pairing else (samples, None))))
             return
-        if self.compensation is not None:
-            samples = self.compensation.samples(samples)
         good = self.plausibility.ok(samples.dtheta, samples.dv)
         if not good.all():
             self._rejected(self.plausibility, len(good) - int(good.sum()))
