@@ -207,6 +207,20 @@ def _tau_alpha(identified: int | None, parts: np.ndarray) -> int:
     return min(plausible, key=lambda alpha: (abs(alpha - identified), -parts[ALPHAS.index(alpha)]))
 
 
+def _edfs(alpha: np.ndarray, factors: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Greenhall's EDF at each tau and axis (M, K), from M = counts differences; the axes mostly share a
+    noise type, so each sum is taken once."""
+    known: dict[tuple[int, int], float] = {}
+    out = np.empty(alpha.shape)
+    for j, (m, count) in enumerate(zip(factors, counts)):
+        for k, a in enumerate(alpha[j]):
+            key = (int(a), int(m))
+            if key not in known:
+                known[key] = greenhall_edf(key[0], key[1], int(count) + 2 * key[1])
+            out[j, k] = known[key]
+    return out
+
+
 def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
             taus: str | tuple[float, ...] = "octave") -> AllanAnalysis:
     """Allan deviation on the ``taus`` grid (``allan_taus``) with intervals, and the terms fitted over the
@@ -243,8 +257,7 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     identified = [lag1_alpha(phase, int(m)) for m in factors]
     alpha = np.array([[_tau_alpha(None if ids is None else ids[k], parts[k][j]) for k in range(dx.shape[1])]
                       for j, ids in enumerate(identified)])
-    nu = np.array([[greenhall_edf(int(a), int(m), int(c) + 2 * int(m)) for a in row]
-                   for row, m, c in zip(alpha, factors, counts)])
+    nu = _edfs(alpha, factors, counts)
     lower, upper = chi2_interval(avar, nu, level)
     sd = [np.sqrt(np.diag(f.covariance)) for f in fits]
     white, flicker, walk = (tuple(_term(f.coefficients[i], s[i], level) for f, s in zip(fits, sd)) for i in range(3))
