@@ -79,18 +79,19 @@ def static_trial(seed: int, hours: float) -> tuple[np.ndarray, np.ndarray]:
 def report(name: str, analysis: AllanAnalysis, truth: dict[str, float], units: TermUnits,
            quiet: bool) -> dict[str, list]:
     """Prints configured vs fitted per term and axis (unless quiet); returns (relative error, inside
-    interval) per term, None for an unresolved term."""
+    interval) per term: error None for an unresolved term, both None for one without an interval."""
     out: dict[str, list] = {}
     for term, value in truth.items():
         unit = getattr(units, term)
         for axis, fitted in enumerate(getattr(analysis, term)):
+            inside = None if fitted.upper is None else fitted.lower <= value <= fitted.upper
             if fitted.value is None:
                 if not quiet:
-                    print(f"  {name} {term:16s} {'xyz'[axis]}: configured {value / unit:.5g}, fitted null")
-                out.setdefault(term, []).append(None)
+                    limit = "" if fitted.upper is None else f" [{fitted.lower / unit:.5g}, {fitted.upper / unit:.5g}]"
+                    print(f"  {name} {term:16s} {'xyz'[axis]}: configured {value / unit:.5g}, fitted null{limit}")
+                out.setdefault(term, []).append((None, inside))
                 continue
             error = fitted.value / value - 1.0
-            inside = fitted.lower <= value <= fitted.upper
             if not quiet:
                 print(f"  {name} {term:16s} {'xyz'[axis]}: configured {value / unit:.5g}, fitted "
                       f"{fitted.value / unit:.5g} [{fitted.lower / unit:.5g}, {fitted.upper / unit:.5g}] {error:+.1%}"
@@ -126,15 +127,15 @@ def main() -> None:
                 results.setdefault(f"{name.strip()} {term}", []).extend(rows)
     print(f"summary over seeds and axes (the binomial 95 % band of coverage at the level {args.level:.1%}):")
     for key, rows in results.items():
-        resolved = [row for row in rows if row is not None]
-        worst = max((abs(e) for e, _ in resolved), default=math.inf)
+        errors = [abs(e) for e, _ in rows if e is not None]
+        bounded = [i for _, i in rows if i is not None]
+        worst = max(errors, default=math.inf)
         target = TARGETS[key.split(" ", 1)[1]]
-        inside = sum(i for _, i in resolved)
-        low, high = coverage_band(len(resolved), args.level) if resolved else (math.nan, math.nan)
-        coverage = inside / len(resolved) if resolved else math.nan
+        low, high = coverage_band(len(bounded), args.level) if bounded else (math.nan, math.nan)
+        coverage = sum(bounded) / len(bounded) if bounded else math.nan
         verdict = "ok" if worst <= target and low <= coverage <= high else "FAILS"
-        print(f"  {key:24s} worst {worst:.1%} (target {target:.0%}), {len(rows) - len(resolved)} unresolved, "
-              f"coverage {inside}/{len(resolved)} = {coverage:.3f} (band {low:.3f}-{high:.3f}): {verdict}")
+        print(f"  {key:24s} worst {worst:.1%} (target {target:.0%}), {len(rows) - len(errors)} unresolved, "
+              f"coverage {sum(bounded)}/{len(bounded)} = {coverage:.3f} (band {low:.3f}-{high:.3f}): {verdict}")
     print(
         f"runtime {time.perf_counter() - t0:.1f} s: emulation {simulate:.1f} s, analysis {analysis_time:.1f} s"
         f" ({analysis_time / (2 * args.seeds):.2f} s per sensor triad)"

@@ -181,19 +181,21 @@ def fit_terms(tau: np.ndarray, avar: np.ndarray, products: np.ndarray) -> TermFi
 
 
 def _term(coefficient: float, sd: float, level: float) -> Term:
-    """sqrt(coefficient) and its interval at ``level``, or None when the record cannot resolve it.
+    """sqrt(coefficient) and its interval at ``level``; the value None when the record cannot resolve it.
 
-    Rule: unresolved when coefficient <= sd, its standard deviation. Otherwise the interval is the normal
-    one, coefficient -/+ z sd (z the two-sided normal quantile of ``level``), cut at zero, then the square
-    root: the coefficient is a weighted sum of many estimates with weights of both signs, not one
-    chi-square variance (docs/noise.md).
+    The interval is the normal one, coefficient -/+ z sd (z the two-sided normal quantile of ``level``),
+    cut at zero, then the square root: the coefficient is a weighted sum of many estimates with weights of
+    both signs, not one chi-square variance (docs/noise.md). It is given whenever the fit holds the term
+    (coefficient > 0), also where the value is not: unresolved when coefficient <= sd (consistent with
+    zero), and then the interval is the upper limit a lab quotes. A term out of the fit has neither.
     """
     from scipy import stats  # here, not with the module: see chi2_interval
 
-    if not coefficient > sd:
+    if not coefficient > 0.0:
         return Term(None, None, None)
     z = float(stats.norm.ppf(0.5 + level / 2.0))
-    return Term(*(math.sqrt(max(v, 0.0)) for v in (coefficient, coefficient - z * sd, coefficient + z * sd)))
+    lower, upper = (math.sqrt(max(v, 0.0)) for v in (coefficient - z * sd, coefficient + z * sd))
+    return Term(math.sqrt(coefficient) if coefficient > sd else None, lower, upper)
 
 
 def _tau_alpha(identified: int | None, parts: np.ndarray) -> int:

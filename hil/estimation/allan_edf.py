@@ -40,13 +40,18 @@ _D = 2
 def sw(t: np.ndarray, alpha: int) -> np.ndarray:
     """Greenhall's sw(t) (Eq. 7), 0 ln 0 taken as 0."""
     t = np.abs(np.asarray(t, dtype=float))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log = np.where(t > 0.0, np.log(np.where(t > 0.0, t, 1.0)), 0.0)
-    table = {2: lambda: -t, 1: lambda: t**2 * log, 0: lambda: t**3, -1: lambda: -(t**4) * log,
-             -2: lambda: -(t**5)}
-    if alpha not in table:
-        raise ValueError(f"noise exponent alpha = {alpha} is outside 2..-2")
-    return table[alpha]()
+    if alpha == 2:
+        return -t
+    if alpha == 0:
+        return t**3
+    if alpha == -2:
+        return -(t**5)
+    log = np.log(np.where(t > 0.0, t, 1.0))
+    if alpha == 1:
+        return t**2 * log
+    if alpha == -1:
+        return -(t**4) * log
+    raise ValueError(f"noise exponent alpha = {alpha} is outside 2..-2")
 
 
 def sx(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
