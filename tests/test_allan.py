@@ -66,7 +66,8 @@ INDEX = np.arange(N)
 WHITE_COV = np.eye(N)
 WALK_COV = np.minimum.outer(INDEX, INDEX) + 1.0  # a rate random walk constant over each interval
 # Flicker from the emulator's Gauss-Markov sum at 20 Hz, flat from m = 2 (0.1 s)
-FLICKER_COV = sum(np.exp(-0.05 / tc) ** np.abs(np.subtract.outer(INDEX, INDEX)) for tc in BiasInstability.CORRELATION_TIMES)
+FLICKER_COV = sum(np.exp(-0.05 / tc) ** np.abs(np.subtract.outer(INDEX, INDEX))
+                  for tc in BiasInstability.CORRELATION_TIMES)
 OCTAVES = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
 
 
@@ -112,7 +113,8 @@ def test_the_covariance_of_estimates_at_two_tau_is_the_quadratic_forms():
     operators = [_second_differences(int(m), n) for m in factors]
     index = np.arange(n)
     for q, cov, first in ((0, np.eye(n), 0), (2, np.minimum.outer(index, index) + 1.0, 3)):
-        exact = np.array([[2.0 * np.sum((a @ cov @ b.T) ** 2) / (len(a) * len(b)) for b in operators] for a in operators])
+        exact = np.array([[2.0 * np.sum((a @ cov @ b.T) ** 2) / (len(a) * len(b)) for b in operators]
+                          for a in operators])
         parts = np.zeros((len(factors), 3))
         parts[:, q] = [np.trace(a @ cov @ a.T) / len(a) for a in operators]
         ours = avar_covariance(products, parts)

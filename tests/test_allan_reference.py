@@ -62,7 +62,8 @@ def test_the_grids_have_the_taus_labs_use():
                                                      20_000, 50_000, 100_000, 200_000, 500_000, 1_000_000]
     assert list(decade_factors(100_000, 0.005)) == [1, 2, 4, 10, 20, 40, 100, 200, 400, 1000, 2000, 4000, 10_000,
                                                     20_000, 40_000]  # 200 Hz: 0.005 s, 0.01 s, 0.02 s, 0.05 s, ...
-    assert list(decade_factors(1000, 0.003)) == [2, 3, 7, 17, 33, 67, 167, 333]  # 5 ms, 10 ms, 20 ms ... as multiples of 3 ms
+    # 5 ms, 10 ms, 20 ms ... as the nearest multiples of 3 ms
+    assert list(decade_factors(1000, 0.003)) == [2, 3, 7, 17, 33, 67, 167, 333]
     assert list(tau_factors("all", 9, 1.0)) == [1, 2, 3, 4]
     assert list(listed_factors((1.0, 3600.0, 10.0), 1_000_000, 0.01)) == [100, 1000, 360_000]
 

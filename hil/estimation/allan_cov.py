@@ -16,7 +16,8 @@ g is smooth between the lags where an argument of R_q crosses 0 (and the count b
 integers of a piece is taken directly where it is short, else as the integral over the piece (Gauss-Legendre;
 exact for white and random walk, whose g is polynomial there, to O(1 / length^2) otherwise). White and
 random walk correlate only while the two differences share samples; flicker is summed a further
-2 max(m_i, m_j) lags each side, where its correlations have fallen below 1e-2 of their peak.
+2 max(m_i, m_j) lags each side, where its correlation has fallen to 2.4 % of its peak (the square the sum
+takes, to 6e-4).
 """
 
 from __future__ import annotations

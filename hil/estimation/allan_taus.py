@@ -2,8 +2,8 @@
 
 ``octave``: m = 1, 2, 4, ...; ``decade``: tau = 1, 2, 5 x 10^k s from the sample period up (Stable32's
 decade run in seconds, the taus datasheets quote), each the nearest multiple of T; ``all``: every m the
-record allows, whose overlapping variances cost n^2 / 2 operations for n samples (seconds for 1e5 samples,
-hours for the 2.9e6 of 8 h at 100 Hz); a list of taus in seconds, each a multiple of T. Every grid stops
+record allows, whose overlapping variances cost n^2 / 2 operations for n samples (a CPU-minute for a triad
+of 1e5 samples, days for the 2.9e6 of 8 h at 100 Hz); a list of taus in seconds, each a multiple of T. Every grid stops
 where one second difference is left (2m <= n).
 """
 
