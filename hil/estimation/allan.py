@@ -174,9 +174,16 @@ def fit_terms(tau: np.ndarray, avar: np.ndarray, products: np.ndarray) -> TermFi
     covariance = np.zeros((3, 3))
     active = coefficients > 0.0
     if active.any():
-        root_w = 1.0 / np.sqrt(np.diag(avar_covariance(products, parts)))
+        full = avar_covariance(products, parts)
+        root_w = 1.0 / np.sqrt(np.diag(full))
         pseudo_inverse = np.linalg.pinv(design[:, active] * root_w[:, None]) * root_w  # G
-        covariance[np.ix_(active, active)] = pseudo_inverse @ avar_covariance(products, parts) @ pseudo_inverse.T
+        covariance[np.ix_(active, active)] = pseudo_inverse @ full @ pseudo_inverse.T
+        for q in np.flatnonzero(~active):  # a term out of the fit: its variance were it in, for its upper limit
+            with_q = active.copy()
+            with_q[q] = True
+            g = np.linalg.pinv(design[:, with_q] * root_w[:, None]) * root_w
+            row = int(np.count_nonzero(with_q[:q]))
+            covariance[q, q] = (g @ full @ g.T)[row, row]
     return TermFit(coefficients, covariance, parts.sum(axis=1), parts)
 
 
@@ -185,13 +192,14 @@ def _term(coefficient: float, sd: float, level: float) -> Term:
 
     The interval is the normal one, coefficient -/+ z sd (z the two-sided normal quantile of ``level``),
     cut at zero, then the square root: the coefficient is a weighted sum of many estimates with weights of
-    both signs, not one chi-square variance (docs/noise.md). It is given whenever the fit holds the term
-    (coefficient > 0), also where the value is not: unresolved when coefficient <= sd (consistent with
-    zero), and then the interval is the upper limit a lab quotes. A term out of the fit has neither.
+    both signs, not one chi-square variance (docs/noise.md). It is given also where the value is not:
+    unresolved when coefficient <= sd (consistent with zero), and then the interval is the upper limit a
+    lab quotes; for a term out of the non-negative fit (coefficient 0), [0, sqrt(z sd)] with sd its
+    standard deviation were it in. A record without noise (sd 0) has neither.
     """
     from scipy import stats  # here, not with the module: see chi2_interval
 
-    if not coefficient > 0.0:
+    if not sd > 0.0:
         return Term(None, None, None)
     z = float(stats.norm.ppf(0.5 + level / 2.0))
     lower, upper = (math.sqrt(max(v, 0.0)) for v in (coefficient - z * sd, coefficient + z * sd))
