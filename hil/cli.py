@@ -114,7 +114,7 @@ def cmd_noise(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
-                        rerun=args.rerun, duration=args.duration, quiet=args.quiet)
+                        rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet)
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code
@@ -234,6 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")
     p.add_argument("--no-figures", action="store_true", help="skip allan.png")
     p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
+    p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
+                                                    "10^k s), all (every multiple of the period: n^2/2 operations), "
+                                                    "or taus in s such as 1,10,100,3600")
     p.set_defaults(func=cmd_noise)
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "

@@ -159,17 +159,18 @@ def test_coverage_statistics_of_hand_made_rows():
     values = [1.8, 2.1, 2.4, 1.9, 2.0, 2.2, 2.6, 1.5, 2.3]
     rows = [_row(i, v, v - 0.25, v + 0.25) for i, v in enumerate(values)]  # holds 2.0 unless |v - 2| > 0.25
     rows += [_row(9, None, None, None), {"id": "p000-r0010", "point": 0, "run": 10, "seed": 10, "error": "boom"}]
+    rows.append(_row(11, None, 0.0, 2.1))  # unresolved, its upper limit holding the truth: counts in the coverage
     p = point_summary(0, {"trial.duration_s": 60}, rows)
     arw = p["terms"]["gyro.arw_deg_per_sqrt_h"][0]
-    assert (p["runs"], p["failed"], p["done"], p["ci_level"]) == (11, 1, 10, 0.683)
-    assert (arw["resolved"], arw["unresolved"], arw["covered"]) == (9, 1, 5)
-    assert arw["coverage"] == pytest.approx(5 / 9)
+    assert (p["runs"], p["failed"], p["done"], p["ci_level"]) == (12, 1, 11, 0.683)
+    assert (arw["resolved"], arw["unresolved"], arw["intervals"], arw["covered"]) == (9, 2, 10, 6)
+    assert arw["coverage"] == pytest.approx(6 / 10)
     assert arw["mean"] == pytest.approx(np.mean(values)) and arw["std"] == pytest.approx(np.std(values, ddof=1))
     assert arw["relative_error_mean"] == pytest.approx(np.mean(values) / 2.0 - 1.0)
-    assert arw["coverage_band"] == pytest.approx(_binomial_band(9, 0.683))
+    assert arw["coverage_band"] == pytest.approx(_binomial_band(10, 0.683))
     assert arw["coverage_inside"] and p["coverage_consistent"] and p["coverage_tested"] == 1
     vrw = p["terms"]["accel.vrw_m_per_s_per_sqrt_h"][0]
-    assert vrw == {"truth": 0.0, "resolved": 10, "unresolved": 0}  # not configured: a count, no statistics
+    assert vrw == {"truth": 0.0, "resolved": 11, "unresolved": 0}  # not configured: a count, no statistics
     assert "consistent with their level on all 1 terms" in point_lines(p)[0]
 
     narrow = [_row(i, 2.0 + 0.1 * (-1) ** i, 2.0 + 0.1 * (-1) ** i - 0.05, 2.0 + 0.1 * (-1) ** i + 0.05)

@@ -2,14 +2,15 @@
 compare with the terms the config puts in, and how often the reported interval holds them.
 
 With M runs whose term is resolved, v_i their fitted values and t the truth: the mean and std (M - 1
-degrees of freedom) of v, the mean relative error mean((v_i - t) / t), and the coverage c = K / M, K the
-runs whose interval [lower_i, upper_i] contains t. When the intervals have their nominal level p (noise.json
-``ci.level``), K ~ Binomial(M, p), so c lies in ``[F^-1(0.025) / M, F^-1(0.975) / M]`` (F the binomial
-distribution function) with at least 95 % probability: a coverage outside that band says the intervals are
-too narrow (below) or too wide (above); the point's headline ``coverage_consistent`` is every coverage
-inside its band (``coverage_above`` and ``coverage_below`` count the others). A run that cannot resolve a term has no interval for it: it counts in
-``unresolved``, not in M. A term the config does not put in (truth 0) is counted when a run resolves it
-(``resolved``), with no statistics.
+degrees of freedom) of v and the mean relative error mean((v_i - t) / t); with M' runs that give the term
+an interval (a term the fit holds but cannot resolve has its interval, the upper limit a lab quotes, and
+no value), the coverage c = K / M', K the runs whose interval [lower_i, upper_i] contains t. When the
+intervals have their nominal level p (noise.json ``ci.level``), K ~ Binomial(M', p), so c lies in
+``[F^-1(0.025) / M', F^-1(0.975) / M']`` (F the binomial distribution function) with at least 95 %
+probability: a coverage outside that band says the intervals are too narrow (below) or too wide (above);
+the point's headline ``coverage_consistent`` is every coverage inside its band (``coverage_above`` and
+``coverage_below`` count the others). A run that cannot resolve a term counts in ``unresolved``. A term the
+config does not put in (truth 0) is counted when a run resolves it (``resolved``), with no statistics.
 """
 
 from __future__ import annotations
@@ -43,14 +44,17 @@ def term_axis(rows: list[dict[str, Any]], term: str, axis: int, nominal: float) 
     out: dict[str, Any] = {"truth": truth, "resolved": len(found), "unresolved": len(rows) - len(found)}
     if not truth > 0.0 or not found:
         return out
-    values, lower, upper = (np.array([row[f"{prefix}.{axis}"] for row in found], dtype=float)
-                            for prefix in (term, f"ci.{sensor}.{key}.lower", f"ci.{sensor}.{key}.upper"))
+    values = np.array([row[f"{term}.{axis}"] for row in found], dtype=float)
+    bounded = [row for row in rows if row.get(f"ci.{sensor}.{key}.upper.{axis}") is not None]
+    lower, upper = (np.array([row[f"ci.{sensor}.{key}.{side}.{axis}"] for row in bounded], dtype=float)
+                    for side in ("lower", "upper"))
     covered = int(np.sum((lower <= truth) & (truth <= upper)))
-    low, high = coverage_band(len(found), nominal)
-    coverage = covered / len(found)
+    low, high = coverage_band(len(bounded), nominal)
+    coverage = covered / len(bounded)
     return {**out, "mean": float(values.mean()), "std": float(values.std(ddof=1)) if len(found) > 1 else None,
-            "relative_error_mean": float(np.mean(values / truth - 1.0)), "covered": covered, "coverage": coverage,
-            "coverage_band": [low, high], "coverage_inside": bool(low <= coverage <= high)}
+            "relative_error_mean": float(np.mean(values / truth - 1.0)), "intervals": len(bounded),
+            "covered": covered, "coverage": coverage, "coverage_band": [low, high],
+            "coverage_inside": bool(low <= coverage <= high)}
 
 
 def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:

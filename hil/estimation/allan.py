@@ -6,7 +6,9 @@ phase points at period T, the overlapping Allan variance at tau = m T is (NIST S
 
     avar(tau) = sum_{i=0}^{N-2m-1} (x_{i+2m} - 2 x_{i+m} + x_i)^2 / (2 tau^2 (N - 2m)),
 
-at octave-spaced m = 1, 2, 4, ... with N - 2m >= 1. Its unit is the rate's squared (rad^2/s^2, m^2/s^4).
+at the m of a grid (``allan_taus``: octave, decade, all, or a list) with N - 2m >= 1. Its unit is the
+rate's squared (rad^2/s^2, m^2/s^4). A missing sample (a NaN row, a gap) leaves out every difference
+that spans it; the count left is the M of the EDF.
 
 Noise model (IEEE Std 952-1997, Annex C, Eqs. C.11, C.15, C.17; Std 1293-1998 the same for accelerometers):
 
@@ -17,31 +19,33 @@ the deviation is 0.664 B), K the rate (acceleration) random walk. In the power-l
 frequency metrology the rate is the "frequency": white rate is white FM (alpha = 0), bias instability
 flicker FM (alpha = -1), random walk RW FM (alpha = -2).
 
-Equivalent degrees of freedom: NIST SP 1065 Table 5 (Howe, Allan, Barnes 1981; Stable32's "simple"
-EDF for the overlapping Allan variance), see ``edf``. Where several terms contribute at one tau the EDF
-is the mixture of ``mixed_edf``: a lower bound on the true EDF, so the intervals err on the wide side.
-Intervals are chi-square (SP 1065 Eq. 68): nu avar / chi2_{nu}((1 + p) / 2) <= AVAR <= nu avar /
-chi2_{nu}((1 - p) / 2).
+Intervals at each tau: the noise type identified there (``allan_edf``: lag-1 autocorrelation, else the
+fitted model's largest term), Greenhall's EDF nu for it, and chi-square (SP 1065 Eq. 68):
+nu avar / chi2_{nu}((1 + p) / 2) <= AVAR <= nu avar / chi2_{nu}((1 - p) / 2).
 
-The terms come from one non-negative fit of the model to the Allan variances, each weighted by its
-inverse variance 2 AVAR^2 / nu with AVAR and nu from the model itself (iterated to convergence), see
-``fit_terms``.
+The terms come from one non-negative fit of the model to the Allan variances at octave tau, weighted by
+the model's own standard deviations and iterated; their intervals from the fit's covariance with the
+estimates' full covariance (``allan_cov``), see ``fit_terms``. docs/noise.md has the derivation.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
+from hil.estimation.allan_cov import avar_covariance, noise_products
+from hil.estimation.allan_edf import ALPHAS, greenhall_edf, lag1_alpha, model_alpha
+from hil.estimation.allan_taus import octave_factors, tau_factors
 from hil.units import DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_SQRT_H, PER_SQRT_H, UG
 
-Noise = Literal["white", "flicker", "random_walk"]
-NOISES: tuple[Noise, ...] = ("white", "flicker", "random_walk")
 FLICKER_FLOOR = 2.0 * math.log(2.0) / math.pi  # avar floor / B^2 (IEEE 952 Eq. C.15); sqrt: 0.664
 DEFAULT_LEVEL = 0.683  # two-sided, the "1-sigma" intervals of Stable32
+# The lag-1 identification of one tau is kept to the noise types that make at least this part of the fitted
+# model there: from a few hundred points it calls flicker white or random walk at a third to half the taus.
+PLAUSIBLE_PART = 0.1
+MAX_MISSING = 0.1  # a record with more of its samples in gaps is refused
 _MIN_OCTAVES = 4  # fewer tau than this cannot separate three terms
 _MAX_ITERATIONS = 100
 
@@ -72,13 +76,15 @@ class AllanAnalysis:
     adev: np.ndarray  # (M, K)
     lower: np.ndarray  # (M, K), interval at ``level``
     upper: np.ndarray  # (M, K)
-    edf: np.ndarray  # (M, K), from the fitted model's mixture of noise types
+    edf: np.ndarray  # (M, K), Greenhall's for the noise type identified at each tau
+    alpha: np.ndarray  # (M, K), that noise type's exponent: 0 white, -1 flicker, -2 random walk
     model_adev: np.ndarray  # (M, K), the fitted model
     white: tuple[Term, ...]
     bias_instability: tuple[Term, ...]
     random_walk: tuple[Term, ...]
     level: float
     duration_s: float
+    missing: int  # samples missing in gaps
 
 
 @dataclass(frozen=True)
@@ -95,50 +101,27 @@ GYRO_UNITS = TermUnits(DEG_PER_SQRT_H, DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_
 ACCEL_UNITS = TermUnits(PER_SQRT_H, UG, PER_SQRT_H, UG)  # m/s/sqrt(h), ug, m/s^2/sqrt(h), ug
 
 
-def octave_factors(n_samples: int) -> np.ndarray:
-    """Averaging factors m = 1, 2, 4, ... with at least one second difference (2m <= n_samples)."""
-    return 2 ** np.arange(max(int(n_samples).bit_length() - 1, 0))
-
-
-def overlapping_avar(increments: np.ndarray, period: float, factors: np.ndarray) -> np.ndarray:
-    """Overlapping Allan variance (SP 1065 Eq. 14) of increments (n, K) at tau = m period: (M, K)."""
+def overlapping_avar(increments: np.ndarray, period: float, factors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Overlapping Allan variance (SP 1065 Eq. 14) of increments (n, K) at tau = m period: (M, K), and the
+    count of second differences at each m, (M,). A row with a NaN is a missing sample: the differences
+    that span it are left out (Eq. 14's mean taken over the others; a tau with none left gives NaN)."""
     dx = np.asarray(increments, dtype=float)
+    dx = dx[:, None] if dx.ndim == 1 else dx
+    missing = np.isnan(dx).any(axis=1)
     # The mean increment is a linear phase, which the second difference removes exactly; taking it out
     # first keeps the running sum small, so that long records keep their precision.
-    x = np.vstack([np.zeros((1,) + dx.shape[1:]), np.cumsum(dx - dx.mean(axis=0), axis=0)])
-    out = np.empty((len(factors),) + dx.shape[1:])
+    centred = np.where(missing[:, None], 0.0, dx - np.nanmean(dx[~missing], axis=0) if (~missing).any() else 0.0)
+    x = np.vstack([np.zeros((1,) + dx.shape[1:]), np.cumsum(centred, axis=0)])
+    gaps = np.concatenate([[0], np.cumsum(missing)])
+    out, counts = np.full((len(factors),) + dx.shape[1:], np.nan), np.zeros(len(factors), dtype=int)
     for j, m in enumerate(factors):
         d = x[2 * m :] - 2.0 * x[m:-m] + x[: -2 * m]
-        out[j] = np.mean(d * d, axis=0) / (2.0 * (m * period) ** 2)
-    return out
-
-
-def edf(noise: Noise, n_phase: int, m: np.ndarray) -> np.ndarray:
-    """EDF of the overlapping Allan variance, N phase points, factor m (NIST SP 1065 Table 5).
-
-    white (white FM): [3(N-1)/(2m) - 2(N-2)/N] 4m^2/(4m^2+5); flicker (flicker FM): 2(N-2)^2/(2.3N-4.9)
-    at m = 1, 5N^2/(4m(N+3m)) above; random_walk (RW FM): (N-2)/m [(N-1)^2 - 3m(N-1) + 4m^2]/(N-3)^2.
-    """
-    n = float(n_phase)
-    m = np.asarray(m, dtype=float)
-    if noise == "white":
-        return (3.0 * (n - 1.0) / (2.0 * m) - 2.0 * (n - 2.0) / n) * 4.0 * m**2 / (4.0 * m**2 + 5.0)
-    if noise == "flicker":
-        return np.where(m == 1, 2.0 * (n - 2.0) ** 2 / (2.3 * n - 4.9), 5.0 * n**2 / (4.0 * m * (n + 3.0 * m)))
-    if noise == "random_walk":
-        return (n - 2.0) / m * ((n - 1.0) ** 2 - 3.0 * m * (n - 1.0) + 4.0 * m**2) / (n - 3.0) ** 2
-    raise ValueError(f"unknown noise type {noise!r}: expected one of {NOISES}")
-
-
-def mixed_edf(parts: np.ndarray, edfs: np.ndarray) -> np.ndarray:
-    """EDF where independent noises with Allan variances parts (M, 3) and EDFs edfs (M, 3) add.
-
-    1/sqrt(nu) = sum_i (A_i / A) / sqrt(nu_i): since var(avar-hat) = 2 tr((Q S)^2) for the estimator's
-    quadratic form Q and a covariance S = sum_i S_i, Cauchy-Schwarz gives sd <= sum_i sd_i, so this
-    nu is a lower bound (intervals no narrower than the data allow).
-    """
-    total = parts.sum(axis=1)
-    return total**2 / np.sum(parts / np.sqrt(edfs), axis=1) ** 2
+        whole = gaps[2 * m :] == gaps[: -2 * m]
+        counts[j] = int(np.count_nonzero(whole))
+        if counts[j]:
+            d = d[whole] if counts[j] < len(d) else d
+            out[j] = np.mean(d * d, axis=0) / (2.0 * (m * period) ** 2)
+    return out, counts
 
 
 def chi2_interval(avar: np.ndarray, nu: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
@@ -153,62 +136,105 @@ def chi2_interval(avar: np.ndarray, nu: np.ndarray, level: float) -> tuple[np.nd
 
 @dataclass(frozen=True)
 class TermFit:
-    """The fitted coefficients of ``fit_terms`` and what they were weighted with."""
+    """The fitted coefficients of ``fit_terms``, their covariance, and the model they give."""
 
     coefficients: np.ndarray  # (3,): N^2, B^2, K^2
-    sd: np.ndarray  # (3,): bound on their standard deviations
-    edf: np.ndarray  # (M,)
-    model: np.ndarray  # (M,)
+    covariance: np.ndarray  # (3, 3)
+    model: np.ndarray  # (M,) Allan variance of the fitted model
+    parts: np.ndarray  # (M, 3): what each term contributes to it
 
 
-def fit_terms(tau: np.ndarray, avar: np.ndarray, n_phase: int, m: np.ndarray) -> TermFit:
+def design_matrix(tau: np.ndarray) -> np.ndarray:
+    """(M, 3): the Allan variance per unit N^2, B^2, K^2 at ``tau`` (IEEE 952 Eqs. C.11, C.15, C.17)."""
+    return np.column_stack([1.0 / tau, np.full_like(tau, FLICKER_FLOOR), tau / 3.0])
+
+
+def fit_terms(tau: np.ndarray, avar: np.ndarray, products: np.ndarray) -> TermFit:
     """Non-negative weighted least-squares fit of N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 to avar (M,).
 
-    Weights nu / (2 AVAR^2), the inverse variance of each estimate, with AVAR and nu (``mixed_edf``) from
-    the current model, iterated to a fixed point. Linear in (N^2, B^2, K^2), so the standard deviation
-    of each coefficient is bounded by sum_j |G_ij| sd_j, G the weighted pseudo-inverse and sd_j =
-    AVAR_j sqrt(2 / nu_j): a bound that holds whatever the correlation between the overlapping estimates.
+    Each estimate is weighted by its inverse standard deviation under the current model (``allan_cov``
+    with the ``products`` of the tau), iterated to a fixed point. The coefficients are G avar, G the
+    weighted pseudo-inverse of the active terms, so their covariance is G C G^T with C the full covariance
+    of the estimates under the fitted model: their correlation over neighbouring tau counted, not bounded.
     """
     from scipy import optimize  # here, not with the module: see chi2_interval
 
-    design = np.column_stack([1.0 / tau, np.full_like(tau, FLICKER_FLOOR), tau / 3.0])
-    edfs = np.column_stack([edf(noise, n_phase, m) for noise in NOISES])
+    design = design_matrix(tau)
+    coefficients = np.zeros(3)
     if not np.any(avar > 0.0):
-        return TermFit(np.zeros(3), np.zeros(3), edfs[:, 0], np.zeros_like(avar))
-    model, nu = np.maximum(avar, avar[avar > 0.0].min()), edfs[:, 0]
+        return TermFit(coefficients, np.zeros((3, 3)), np.zeros_like(avar), np.zeros_like(design))
+    parts = np.column_stack([np.maximum(avar, avar[avar > 0.0].min()), np.zeros((len(avar), 2))])
     for _ in range(_MAX_ITERATIONS):
-        root_w = np.sqrt(nu / 2.0) / model
-        coefficients = optimize.nnls(design * root_w[:, None], avar * root_w)[0]
-        parts = design * coefficients
-        new_model = parts.sum(axis=1)
-        nu = mixed_edf(parts, edfs)
-        converged = np.allclose(new_model, model, rtol=1e-10, atol=0.0)
-        model = new_model
-        if converged:
+        root_w = 1.0 / np.sqrt(np.diag(avar_covariance(products, parts)))
+        new = optimize.nnls(design * root_w[:, None], avar * root_w)[0]
+        converged = np.allclose(new, coefficients, rtol=1e-10, atol=0.0)
+        coefficients, parts = new, design * new
+        if converged or not np.any(new > 0.0):
             break
+    covariance = np.zeros((3, 3))
     active = coefficients > 0.0
-    weighted = design[:, active] * root_w[:, None]
-    pseudo_inverse = np.linalg.pinv(weighted) * root_w  # G: coefficients = G avar
-    sd = np.zeros(3)
-    sd[active] = np.abs(pseudo_inverse) @ (model * np.sqrt(2.0 / nu))
-    return TermFit(coefficients, sd, nu, model)
+    if active.any():
+        full = avar_covariance(products, parts)
+        root_w = 1.0 / np.sqrt(np.diag(full))
+        pseudo_inverse = np.linalg.pinv(design[:, active] * root_w[:, None]) * root_w  # G
+        covariance[np.ix_(active, active)] = pseudo_inverse @ full @ pseudo_inverse.T
+        for q in np.flatnonzero(~active):  # a term out of the fit: its variance were it in, for its upper limit
+            with_q = active.copy()
+            with_q[q] = True
+            g = np.linalg.pinv(design[:, with_q] * root_w[:, None]) * root_w
+            row = int(np.count_nonzero(with_q[:q]))
+            covariance[q, q] = (g @ full @ g.T)[row, row]
+    return TermFit(coefficients, covariance, parts.sum(axis=1), parts)
 
 
 def _term(coefficient: float, sd: float, level: float) -> Term:
-    """sqrt(coefficient) and its interval at ``level``, or None when the record cannot resolve it.
+    """sqrt(coefficient) and its interval at ``level``; the value None when the record cannot resolve it.
 
-    Rule: unresolved when coefficient <= sd, its standard deviation (bound), i.e. fewer than 2 EDF.
-    Otherwise the interval is chi-square with nu = 2 (coefficient / sd)^2, the EDF of a variance with
-    that spread.
+    The interval is the normal one, coefficient -/+ z sd (z the two-sided normal quantile of ``level``),
+    cut at zero, then the square root: the coefficient is a weighted sum of many estimates with weights of
+    both signs, not one chi-square variance (docs/noise.md). It is given also where the value is not:
+    unresolved when coefficient <= sd (consistent with zero), and then the interval is the upper limit a
+    lab quotes; for a term out of the non-negative fit (coefficient 0), [0, sqrt(z sd)] with sd its
+    standard deviation were it in. A record without noise (sd 0) has neither.
     """
-    if not coefficient > sd:
+    from scipy import stats  # here, not with the module: see chi2_interval
+
+    if not sd > 0.0:
         return Term(None, None, None)
-    lo, hi = chi2_interval(coefficient, 2.0 * (coefficient / sd) ** 2, level)
-    return Term(*(math.sqrt(float(v)) for v in (coefficient, lo, hi)))
+    z = float(stats.norm.ppf(0.5 + level / 2.0))
+    lower, upper = (math.sqrt(max(v, 0.0)) for v in (coefficient - z * sd, coefficient + z * sd))
+    return Term(math.sqrt(coefficient) if coefficient > sd else None, lower, upper)
 
 
-def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL) -> AllanAnalysis:
-    """Allan deviation at octave tau with intervals, and the fitted terms, of increments (n, K) or (n,).
+def _tau_alpha(identified: int | None, parts: np.ndarray) -> int:
+    """The noise type at a tau: of the types that make at least PLAUSIBLE_PART of the fitted model there, the
+    one nearest the lag-1 identification ``identified`` (the largest when the record is too short for it)."""
+    plausible = [alpha for alpha, part in zip(ALPHAS, parts) if part >= PLAUSIBLE_PART * parts.sum() and part > 0.0]
+    if not plausible:
+        return ALPHAS[0] if identified is None else model_alpha(int(identified))
+    if identified is None:
+        return ALPHAS[int(np.argmax(parts))]
+    return min(plausible, key=lambda alpha: (abs(alpha - identified), -parts[ALPHAS.index(alpha)]))
+
+
+def _edfs(alpha: np.ndarray, factors: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Greenhall's EDF at each tau and axis (M, K), from M = counts differences; the axes mostly share a
+    noise type, so each sum is taken once."""
+    known: dict[tuple[int, int], float] = {}
+    out = np.empty(alpha.shape)
+    for j, (m, count) in enumerate(zip(factors, counts)):
+        for k, a in enumerate(alpha[j]):
+            key = (int(a), int(m))
+            if key not in known:
+                known[key] = greenhall_edf(key[0], key[1], int(count) + 2 * key[1])
+            out[j, k] = known[key]
+    return out
+
+
+def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
+            taus: str | tuple[float, ...] = "octave") -> AllanAnalysis:
+    """Allan deviation on the ``taus`` grid (``allan_taus``) with intervals, and the terms fitted over the
+    octave tau, of increments (n, K) or (n,); rows with NaN are missing samples (gaps).
 
     ``period`` the sample interval in s; ``level`` the two-sided level of every interval.
     """
@@ -217,28 +243,46 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL)
     n = len(dx)
     if not period > 0.0:
         raise ValueError(f"the sample period must be positive, got {period}")
-    factors = octave_factors(n)
-    if len(factors) < _MIN_OCTAVES:
+    fit_factors = octave_factors(n)
+    if len(fit_factors) < _MIN_OCTAVES:
         raise ValueError(
-            f"{n} samples give {len(factors)} octaves of tau; the noise terms need at least {_MIN_OCTAVES} "
+            f"{n} samples give {len(fit_factors)} octaves of tau; the noise terms need at least {_MIN_OCTAVES} "
             f"({2 ** _MIN_OCTAVES} samples): record a longer trial"
         )
+    missing = int(np.count_nonzero(np.isnan(dx).any(axis=1)))
+    if missing > MAX_MISSING * n:
+        raise ValueError(f"{missing} of {n} samples ({missing / n:.1%}) are missing in gaps, more than the "
+                         f"{MAX_MISSING:.0%} the analysis takes: analyse the stretches between the gaps")
+    avar_fit, fit_counts = overlapping_avar(dx, period, fit_factors)
+    kept = fit_counts > 0
+    fit_factors, avar_fit, fit_counts = fit_factors[kept], avar_fit[kept], fit_counts[kept]
+    products = noise_products(fit_factors, fit_counts)
+    fits = [fit_terms(fit_factors * period, avar_fit[:, k], products) for k in range(dx.shape[1])]
+    factors = fit_factors if taus == "octave" else tau_factors(taus, n, period)
+    avar, counts = (avar_fit, fit_counts) if taus == "octave" else overlapping_avar(dx, period, factors)
+    factors, avar, counts = factors[counts > 0], avar[counts > 0], counts[counts > 0]
     tau = factors * period
-    avar = overlapping_avar(dx, period, factors)
-    fits = [fit_terms(tau, avar[:, k], n + 1, factors) for k in range(dx.shape[1])]
-    nu = np.column_stack([f.edf for f in fits])
+    phase = np.vstack([np.zeros((1, dx.shape[1])), np.cumsum(np.nan_to_num(dx), axis=0)])
+    parts = [design_matrix(tau) * f.coefficients for f in fits]
+    identified = [lag1_alpha(phase, int(m)) for m in factors]
+    alpha = np.array([[_tau_alpha(None if ids is None else ids[k], parts[k][j]) for k in range(dx.shape[1])]
+                      for j, ids in enumerate(identified)])
+    nu = _edfs(alpha, factors, counts)
     lower, upper = chi2_interval(avar, nu, level)
-    white, flicker, walk = (tuple(_term(f.coefficients[i], f.sd[i], level) for f in fits) for i in range(3))
+    sd = [np.sqrt(np.diag(f.covariance)) for f in fits]
+    white, flicker, walk = (tuple(_term(f.coefficients[i], s[i], level) for f, s in zip(fits, sd)) for i in range(3))
     return AllanAnalysis(
         tau=tau,
         adev=np.sqrt(avar),
         lower=np.sqrt(lower),
         upper=np.sqrt(upper),
         edf=nu,
-        model_adev=np.sqrt(np.column_stack([f.model for f in fits])),
+        alpha=alpha,
+        model_adev=np.sqrt(np.column_stack([p.sum(axis=1) for p in parts])),
         white=white,
         bias_instability=flicker,
         random_walk=walk,
         level=level,
         duration_s=n * period,
+        missing=missing,
     )

@@ -60,6 +60,8 @@ def noise_document(gyro: AllanAnalysis, accel: AllanAnalysis) -> dict:
     doc["adev"] = {s: _rows(a.adev / u.adev) for (s, u, _), a in zip(SENSORS, (gyro, accel))}
     doc["adev_units"] = ADEV_UNITS
     doc["edf"] = {s: _rows(a.edf) for (s, _, _), a in zip(SENSORS, (gyro, accel))}
+    doc["noise_alpha"] = {s: [[int(v) for v in column] for column in a.alpha.T]
+                          for (s, _, _), a in zip(SENSORS, (gyro, accel))}
     doc["ci"] = ci
     doc["duration_s"] = gyro.duration_s
     return doc
@@ -77,7 +79,8 @@ def write_noise(out: Path, doc: dict, gyro: AllanAnalysis, accel: AllanAnalysis,
 
 def noise_summary(doc: dict, out: Path) -> str:
     """The console summary of a noise.json document: every term per axis in datasheet units."""
-    lines = [f"noise of {doc['samples']} samples ({doc['duration_s']:.0f} s): outputs in {out}"]
+    gaps = f", {doc['missing']} missing in gaps" if doc.get("missing") else ""
+    lines = [f"noise of {doc['samples']} samples ({doc['duration_s']:.0f} s{gaps}): outputs in {out}"]
     for sensor, _, keys in SENSORS:
         for key in keys:
             values = doc[sensor][key]

@@ -23,8 +23,9 @@ def noise_section(doc: dict) -> str:
             bounds = doc.get("ci", {}).get(sensor, {}).get(key, {})
             cells = "".join(
                 f"<td class='num'>{e(format_value(v))}"
-                + (f"<br><small>[{e(format_value(lo))}, {e(format_value(hi))}]</small>" if v is not None else
-                   "<br><small>not resolved</small>") + "</td>"
+                + ("" if v is not None else "<br><small>not resolved</small>")
+                + (f"<br><small>[{e(format_value(lo))}, {e(format_value(hi))}]</small>" if hi is not None else "")
+                + "</td>"
                 for v, lo, hi in zip(values, bounds.get("lower", [None] * 3), bounds.get("upper", [None] * 3)))
             rows.append(f"<tr><td>{e(sensor)} {e(name)}</td>{cells}<td>{e(_UNITS[key])}</td></tr>")
     motion = ("the table's motion was taken out with its angles" if doc.get("motion_removed")

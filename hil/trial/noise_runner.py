@@ -133,9 +133,27 @@ class NoiseAnalysis:
     doc: dict
 
 
-def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL) -> NoiseAnalysis:
-    """The Allan deviation and noise terms of a record (the table's motion taken out first if it moved);
-    ``label`` names the source in errors. Nothing is written."""
+def with_gaps(t: np.ndarray, period: float, *columns: np.ndarray) -> tuple[int, list[np.ndarray]]:
+    """The samples missing between the times t (a step of k periods, rounded, leaves k - 1 out) and the
+    columns with a NaN row in each missing sample's place."""
+    steps = np.maximum(np.rint(np.diff(t) / period).astype(int), 1) if len(t) > 1 else np.zeros(0, dtype=int)
+    index = np.concatenate([[0], np.cumsum(steps)])
+    missing = int(index[-1] + 1 - len(t))
+    if not missing:
+        return 0, list(columns)
+    filled = []
+    for column in columns:
+        full = np.full((index[-1] + 1,) + column.shape[1:], np.nan)
+        full[index] = column
+        filled.append(full)
+    return missing, filled
+
+
+def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL,
+                   taus: str | tuple[float, ...] = "octave") -> NoiseAnalysis:
+    """The Allan deviation on the ``taus`` grid and the noise terms of a record (the table's motion taken out
+    first if it moved; samples missing in gaps left out, ``missing`` in the document); ``label`` names the
+    source in errors. Nothing is written."""
     from hil.outputs.noise import noise_document
     from hil.pipeline.table_motion import motion_residuals
 
@@ -152,23 +170,31 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
             raise TrialSetupError(f"{label}: a moving trial's CSV needs --config for the site and the table geometry")
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
+    missing, (dtheta, dv) = with_gaps(batch.t, period, dtheta, dv)
     try:
-        gyro, accel = analyse(dtheta, period, level), analyse(dv, period, level)
+        gyro, accel = analyse(dtheta, period, level, taus), analyse(dv, period, level, taus)
     except ValueError as exc:
         raise DataError(f"{label}: {exc}") from None
-    extra = {"source": record.source, "samples": len(dtheta), "period_s": period, "motion_removed": is_moving}
+    extra = {"source": record.source, "samples": len(batch), "period_s": period, "motion_removed": is_moving,
+             "missing": missing}
     return NoiseAnalysis(gyro, accel, {**noise_document(gyro, accel), **extra})
 
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
-              figure: bool = True, export: Path | None = None, rerun: bool = False, duration: float | None = None,
-              quiet: bool = False) -> dict:
-    """Analyse ``source`` and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd;
-    returns the noise document. A config that reads devices is acquired first (``duration`` s, see
+              figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
+              duration: float | None = None, quiet: bool = False) -> dict:
+    """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
+    separated) and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
+    document. A config that reads devices is acquired first (``duration`` s, see
     :mod:`hil.trial.noise_acquisition`)."""
+    from hil.estimation.allan_taus import parse_taus
     from hil.outputs.noise import write_noise
     from hil.outputs.report import write_noise_report
 
+    try:
+        grid = parse_taus(taus)
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
     cfg = reads_devices(source)
     if cfg is not None:
         from hil.trial.noise_acquisition import acquire
@@ -179,7 +205,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
         record = read_source(source, config)
     if export is not None:
         write_increments_csv(export, record.batch)
-    analysis = analyse_record(record, str(source), level)
+    analysis = analyse_record(record, str(source), level, grid)
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
     if rerun:
