@@ -8,7 +8,7 @@ fields and units; :meth:`Codec.to_sample` converts to the SI records of :mod:`hi
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
@@ -93,11 +93,13 @@ class Counters:
     missing: int = 0  # frames those jumps imply were lost
     duplicates: int = 0  # valid frames whose counter repeated the previous one (not delivered)
     out_of_order: int = 0  # valid frames that arrived after a later one (not delivered)
+    skipped_items: dict[str, int] = field(default_factory=dict)  # data items of delivered frames not read, by kind
 
-    def as_dict(self) -> dict[str, int]:
-        """The four headline counters, as ``hil decode`` prints them."""
-        return {"frames": self.frames, "corrupt": self.corrupt, "skipped_bytes": self.skipped_bytes,
-                "gaps": self.gaps}
+    def as_dict(self) -> dict[str, Any]:
+        """The four headline counters, as ``hil decode`` prints them, and the items skipped by kind if any."""
+        out: dict[str, Any] = {"frames": self.frames, "corrupt": self.corrupt, "skipped_bytes": self.skipped_bytes,
+                               "gaps": self.gaps}
+        return out | ({"skipped_items": dict(sorted(self.skipped_items.items()))} if self.skipped_items else {})
 
 
 class Codec(ABC, Generic[R]):

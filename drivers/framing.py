@@ -199,6 +199,10 @@ class ByteCodec(Codec[R]):
         """The SI samples (:class:`~hil.samples.ImuSamples` or :class:`~hil.samples.TableSamples`) of frames;
         a frame that gives no sample is left out."""
 
+    def count_items(self, rows: np.ndarray, counters: Counters) -> None:
+        """Add what the delivered frames ``rows`` carried beside what is read to ``counters`` (a protocol whose
+        frames carry optional items: ``counters.skipped_items``)."""
+
     def sequences(self, rows: np.ndarray) -> np.ndarray | None:
         """The frames' own counters (int64, -1 where a frame has none), or None for a protocol without."""
         return None
@@ -284,6 +288,7 @@ class ByteFramer(Framer):
         sizes = lengths[deliver]
         counters.skipped_bytes += stop - int(sizes.sum())
         self._buf = raw[stop:]
+        codec.count_items(rows[deliver], counters)
         return FrameBatch(rows[deliver], index[deliver], host_time, sizes)
 
     def reset(self) -> None:
