@@ -9,15 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from drivers.codec import (
-    Codec,
-    Counters,
-    Decoded,
-    Framer,
-    RawChunk,
-    StreamEvent,
-)
-from drivers.framing import ByteFramer
+from drivers.codec import Codec, Counters, FrameBatch, Framer, RawChunk, StreamEvent
 from hil.samples import ImuSamples, TableSamples
 
 
@@ -44,18 +36,16 @@ class StreamDecoder:
     def counters(self) -> Counters:
         return self.framer.counters
 
-    def frames(self, chunk: RawChunk) -> list[Decoded]:
+    def frames(self, chunk: RawChunk) -> FrameBatch:
         """The complete frames of a chunk, still in device units (for captures)."""
         return self.framer.feed_chunk(chunk)
 
     def feed(self, chunk: RawChunk) -> ImuSamples | TableSamples:
         """The samples (SI) of a chunk's complete frames; frames that give no sample are counted corrupt."""
-        if isinstance(self.framer, ByteFramer):
-            frames = self.framer.feed_batch(chunk.data, chunk.host_time)
-            samples = self.codec.samples(frames)
-            self.framer.counters.corrupt += len(frames) - len(samples)
-            return samples
-        return self.codec.to_samples(self.frames(chunk))
+        frames = self.framer.feed_chunk(chunk)
+        samples = self.codec.samples(frames)
+        self.framer.counters.corrupt += len(frames) - len(samples)
+        return samples
 
     def event(self, event: StreamEvent) -> None:
         """A reader's event: an outage is counted; the framer forgets its partial frame."""

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import Counters, Decoded, DecodeError, FrameBatch
+from drivers.codec import Counters, FrameBatch
 from drivers.framing import ByteCodec
+from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
 
 PREAMBLE = b"\xfa\xff\x36"  # preamble, bus id (master), message id MTData2
@@ -152,6 +153,13 @@ def rotation_vector_to_quaternion(v: Vec3) -> tuple[float, float, float, float]:
     return (math.cos(angle / 2.0), k * v[0], k * v[1], k * v[2])
 
 
+class XsensOptions(Model):
+    """The MTi's output configuration as the emulated device sends it (a real one is read in any precision)."""
+
+    precision: Literal["float32", "fp12.20", "fp16.32", "float64"] = "float32"
+    outputs: Literal["increments", "rates"] = "increments"  # DeltaQ and DeltaV, or RateOfTurn and Acceleration
+
+
 class XsensCodec(ByteCodec[MtData2Frame]):
     """Encode and decode MTData2 messages; increments from DeltaQ/DeltaV or from rates at ``rate_hz``.
 
@@ -166,16 +174,12 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     sequence_modulus: ClassVar[int] = 1 << 16
     check_name: ClassVar[str] = "checksum"
 
-    def __init__(self, rate_hz: float, precision: str = "float32", outputs: str = "increments") -> None:
-        if precision not in PRECISIONS:
-            raise ValueError(f"xsens-mtdata2: precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
-        if outputs not in ("increments", "rates"):
-            raise ValueError(f"xsens-mtdata2: outputs must be 'increments' or 'rates', got {outputs!r}")
-        self.rate_hz, self.precision, self.outputs = rate_hz, precision, outputs
+    Options: ClassVar[type[Model]] = XsensOptions
+    device_time: ClassVar[bool] = True
 
-    @classmethod
-    def from_config(cls, imu: Any, rate_hz: float) -> XsensCodec:
-        return cls(rate_hz)
+    def __init__(self, rate_hz: float, **options: Any) -> None:
+        super().__init__(rate_hz, **options)
+        self.precision, self.outputs = self.options.precision, self.options.outputs
 
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         short = buf[starts + 3].astype(np.int64)
@@ -229,9 +233,6 @@ class XsensCodec(ByteCodec[MtData2Frame]):
             message = PREAMBLE + b"\xff" + len(payload).to_bytes(2, "big") + payload
         return message + bytes([-sum(message[1:]) & 0xFF])
 
-    def sequence(self, record: MtData2Frame) -> int | None:
-        return record.packet_counter
-
     def sequences(self, rows: np.ndarray) -> np.ndarray:
         return rows["packet_counter"]
 
@@ -252,19 +253,6 @@ class XsensCodec(ByteCodec[MtData2Frame]):
         word, byte = frames.rows["status_word"], frames.rows["status_byte"]
         status = np.where(word >= 0, word, np.maximum(byte, 0))
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time), status).take(usable)
-
-    def to_sample(self, decoded: Decoded[MtData2Frame]) -> ImuSample:
-        r = decoded.record
-        row = np.zeros(1, dtype=FIELDS)
-        for name in _VALUES:
-            row[name] = _EMPTY_ROW[name] if getattr(r, name) is None else getattr(r, name)
-        dtheta, dv, usable = self.increments(row)
-        if not usable[0]:
-            raise DecodeError("xsens-mtdata2: message has neither DeltaQ/DeltaV nor RateOfTurn/Acceleration")
-        device_time = None if r.sample_time_fine is None else r.sample_time_fine / SAMPLE_TIME_HZ
-        status = r.status_word if r.status_word is not None else r.status_byte or 0
-        return ImuSample(decoded.sync_index, tuple(dtheta[0].tolist()), tuple(dv[0].tolist()), decoded.host_time,
-                         device_time, status)
 
     def from_sample(self, sample: ImuSample) -> MtData2Frame:
         """The message for an SI sample, with the items ``outputs`` names."""

@@ -89,7 +89,8 @@ def test_rates_without_increments_are_integrated_over_one_sample():
     frames = codec.framer().feed_batch(codec.encode(MtData2Frame(packet_counter=7, acceleration=(0.0, 0.0, 9.75),
                                                                  rate_of_turn=(0.5, -0.25, 0.0))))
     samples = codec.samples(frames)
-    assert samples.dtheta.tolist() == [[0.5 / 200, -0.25 / 200, 0.0]] and samples.dv.tolist() == [[0.0, 0.0, 9.75 / 200]]
+    assert samples.dtheta.tolist() == [[0.5 / 200, -0.25 / 200, 0.0]]
+    assert samples.dv.tolist() == [[0.0, 0.0, 9.75 / 200]]
 
 
 def test_an_item_of_the_wrong_size_for_its_precision_is_corrupt():
