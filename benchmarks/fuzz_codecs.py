@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/fuzz_codecs.py [--frames N] [--seed S] [--codec NAME ...]
 
-Byte codecs (kvh1750, tts1, xsens-mtdata2): the device sends frames with consecutive counters (they
+Byte codecs (kvh1750, tts1, xsens-mtdata2, stim300): the device sends frames with consecutive counters (they
 wrap during the run); each frame reaches the framer intact or, with probability 1/2, damaged by one of:
 bit flips, truncation, a random body behind a valid header, garbage before a frame cut at its end,
 garbage instead of the frame, overwritten bytes, duplicated bytes. The stream is fed in random reads
@@ -40,6 +40,7 @@ from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.framing import ByteCodec, SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec
+from drivers.stim300 import Stim300Codec
 from drivers.tts1 import Tts1Codec
 from drivers.xsens import XsensCodec
 from hil.config import CanSignals
@@ -53,7 +54,7 @@ LIMITS = {
     "cut": "a frame cut short whose missing tail equals the next frame's first bytes is a valid frame: "
            "it is delivered and the next frame, its sync taken, is lost",
     "check": "damage the frame check cannot see (8-bit sum of xsens-mtdata2 behind its structure and "
-             "unit-DeltaQ checks, 2^-16 for the CRC-16 of tts1, 2^-32 for the CRC-32 of kvh1750): the "
+             "unit-DeltaQ checks, 2^-16 for the CRC-16 of tts1, 2^-32 for the CRC-32 of kvh1750 and stim300): the "
              "damaged frame is accepted and swallows the intact bytes it overlaps",
     "false_sync": "a sync word inside garbage or a damaged frame, whose bytes from there pass the check: "
                   "the protocol cannot tell it from a frame, and the intact bytes it overlaps are lost",
@@ -338,10 +339,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=1_000_000, help="frames per codec (default 1 000 000)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--codec", nargs="*", default=["kvh1750", "tts1", "xsens-mtdata2", "can-dbc", "acl"])
+    parser.add_argument("--codec", nargs="*", default=["kvh1750", "tts1", "xsens-mtdata2", "stim300", "can-dbc", "acl"])
     parser.add_argument("--verbose", action="store_true", help="print each intact frame lost beyond the limits")
     args = parser.parse_args()
     kvh, tts1, xsens = Kvh1750Codec(rate_hz=1000), Tts1Codec(), XsensCodec(rate_hz=400)
+    stim = Stim300Codec(rate_hz=1000, datagram=0xA5)  # the temperatures too: every field of the longer datagram
     runs = {
         "kvh1750": lambda r: fuzz_bytes(kvh, lambda r, i: kvh.from_sample(_imu_sample(r, i)), args.frames, r,
                                         args.verbose),
@@ -350,10 +352,12 @@ def main() -> None:
             args.verbose),
         "xsens-mtdata2": lambda r: fuzz_bytes(xsens, lambda r, i: xsens.from_sample(_imu_sample(r, i)),
                                               args.frames, r, args.verbose),
+        "stim300": lambda r: fuzz_bytes(stim, lambda r, i: stim.from_sample(_imu_sample(r, i)), args.frames, r,
+                                        args.verbose),
         "can-dbc": lambda r: fuzz_can(args.frames, r),
         "acl": lambda r: fuzz_acl(args.frames, r),
     }
-    if any(name in ("kvh1750", "tts1", "xsens-mtdata2") for name in args.codec):
+    if any(name in ("kvh1750", "tts1", "xsens-mtdata2", "stim300") for name in args.codec):
         print(f"protocol limits (lost intact frames they explain; target: the rest <= {TARGET:g} of intact):")
         for name, text in LIMITS.items():
             print(f"  {name}: {text}")

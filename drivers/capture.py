@@ -15,6 +15,7 @@ from typing import Any
 import can
 import cantools
 from can.io.blf import BLFParseError
+from pydantic import ValidationError
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
@@ -22,6 +23,7 @@ from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES, byte_codecs, detect
 from drivers.tap import message_to_chunk
 from hil.config import CanConfig, InputError
+from hil.config_types import describe_validation
 from hil.plugins import codec_class
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
@@ -117,8 +119,11 @@ def _byte_codec(cls: Any, rate_hz: float, options: dict[str, Any]) -> Any:
     """The codec of a byte-stream protocol with the device's output settings ``options``."""
     try:
         return cls(rate_hz, **options)
-    except ValueError as exc:  # pydantic's ValidationError is one
-        raise CaptureError(f"protocol {cls.name}: {exc}") from None
+    except ValidationError as exc:
+        raise CaptureError(f"{cls.name} options: {describe_validation(exc)} (--option KEY=VALUE)") from None
+    except ValueError as exc:
+        message = str(exc) if str(exc).startswith(f"{cls.name}:") else f"{cls.name}: {exc}"
+        raise CaptureError(f"{message} (--rate, --option KEY=VALUE)") from None
 
 
 def _can_codec(dbc: str | Path, rate_hz: float, signals: dict[str, Any]) -> CanDbcCodec:

@@ -22,6 +22,7 @@ BUILT_IN: dict[str, str] = {
     "kvh1750": "drivers.kvh1750:Kvh1750Codec",
     "xsens-mtdata2": "drivers.xsens:XsensCodec",
     "can-dbc": "drivers.can_dbc:CanDbcCodec",
+    "stim300": "drivers.stim300:Stim300Codec",
     "tts1": "drivers.tts1:Tts1Codec",
     "acl": "drivers.acl:AclCodec",
 }

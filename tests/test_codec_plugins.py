@@ -23,7 +23,7 @@ def test_imu_protocol_is_a_registry_name_and_its_options_the_codecs():
     cfg = config({"protocol": "xsens-mtdata2", "options": {"precision": "fp16.32"}})
     codec = imu_codec(cfg.imu, 200.0)
     assert (codec.precision, codec.outputs) == ("fp16.32", "increments")  # the default filled in
-    with pytest.raises(ConfigError, match=r"imu.protocol: 'nmea': unknown; IMU protocols: can-dbc, kvh1750, "):
+    with pytest.raises(ConfigError, match=r"imu.protocol: 'nmea': unknown; IMU protocols: can-dbc, kvh1750, stim300, "):
         config({"protocol": "nmea"})
     with pytest.raises(ConfigError, match=r"imu.protocol: 'tts1': a table protocol, not an IMU's"):
         config({"protocol": "tts1"})
