@@ -201,7 +201,7 @@ class CanConfig(Model):
 class ImuConfig(Model):
     source: Literal["emulator", "serial", "can"] = "emulator"
     protocol: str = "kvh1750"  # a codec's name (hil.plugins: the built-ins and the entry points)
-    options: dict[str, Any] = {}  # the device's own output settings, validated by the codec's Options model
+    options: dict[str, Any] = Field({}, validate_default=True)  # the device's own output settings (its codec's model)
     port: str | None = None
     baudrate: int = Field(921600, gt=0)
     can: CanConfig | None = None  # a CAN protocol: the default bus when left out
