@@ -51,8 +51,9 @@ SCALARS: dict[int, tuple[str, struct.Struct]] = {
     0xE020: ("status_word", struct.Struct(">I")),
 }
 _XDI_OF = {name: xdi for xdi, (name, _) in {**VECTORS, **SCALARS}.items()}
-# Names of the items a message may carry beside those read, for the counts by kind (bits 0-3 cleared).
-OTHER_NAMES: dict[int, str] = {
+# Names of the data types (bits 0-3 cleared), for the counts by kind of the items not read.
+TYPE_NAMES: dict[int, str] = {
+    0x8030: "DeltaQ", 0x4010: "DeltaV", 0x4020: "Acceleration", 0x8020: "RateOfTurn",
     0x0810: "Temperature", 0x1010: "UtcTime", 0x1070: "SampleTimeCoarse", 0x2010: "Quaternion",
     0x2020: "RotationMatrix", 0x2030: "EulerAngles", 0x3010: "BaroPressure", 0x4030: "FreeAcceleration",
     0x5020: "AltitudeEllipsoid", 0x5030: "PositionEcef", 0x5040: "LatLon", 0x7010: "GnssPvtData",
@@ -71,9 +72,7 @@ _EMPTY_ROW = {name: -1 if name in _SCALAR_NAMES else (math.nan,) * FIELDS[name].
 
 def item_kind(xdi: int) -> str:
     """How the counts of :meth:`XsensCodec.count_items` name an item: its type's name, or its identifier."""
-    base = xdi & 0xFFF0
-    name = OTHER_NAMES.get(base) or next((f for x, (f, _) in VECTORS.items() if x == base), None)
-    return f"{name or 'item'} 0x{xdi:04X}"
+    return f"{TYPE_NAMES.get(xdi & 0xFFF0, 'item')} 0x{xdi:04X}"
 
 
 def numbers(data: bytes, pos: int, count: int, bits: int) -> tuple[float, ...]:

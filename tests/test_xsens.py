@@ -133,3 +133,15 @@ def test_real_captures_decode_to_the_published_values(precision):
     for k, want in enumerate(with_increments):
         assert samples.dtheta[k] == pytest.approx(_rotation_vector(want["delta_q"]), rel=1e-6, abs=1e-13)
         assert samples.dv[k].tolist() == pytest.approx(want["delta_v"], rel=1e-12)
+
+
+def test_a_sensor_item_in_another_coordinate_setting_is_skipped_and_counted():
+    """Bits 2-3 of an identifier select the coordinate system; a DeltaV sent with them set (0x4014, NED) is
+    not read as the sensor-frame DeltaV, and no sample comes of the message."""
+    message = bytes.fromhex("FA FF 36 14  1020 02 0001  4014 0C 3F000000 00000000 00000000")
+    message += bytes([-sum(message[1:]) & 0xFF])
+    codec = XsensCodec(100)
+    framer = codec.framer()
+    frames = framer.feed_batch(message)
+    assert codec.record(frames.rows[0]).delta_v is None and len(codec.samples(frames)) == 0
+    assert framer.counters.skipped_items == {"DeltaV 0x4014": 1}
