@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/fuzz_codecs.py [--frames N] [--seed S] [--codec NAME ...]
 
-Byte codecs (kvh1750, tts1, xsens-mtdata2): the device sends frames with consecutive counters (they
+Byte codecs (kvh1750, tts1, xsens-mtdata2, stim300): the device sends frames with consecutive counters (they
 wrap during the run); each frame reaches the framer intact or, with probability 1/2, damaged by one of:
 bit flips, truncation, a random body behind a valid header, garbage before a frame cut at its end,
 garbage instead of the frame, overwritten bytes, duplicated bytes. The stream is fed in random reads
@@ -40,6 +40,7 @@ from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.framing import ByteCodec, SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec
+from drivers.stim300 import Stim300Codec
 from drivers.tts1 import Tts1Codec
 from drivers.xsens import XsensCodec
 from hil.config import CanSignals
@@ -53,7 +54,7 @@ LIMITS = {
     "cut": "a frame cut short whose missing tail equals the next frame's first bytes is a valid frame: "
            "it is delivered and the next frame, its sync taken, is lost",
     "check": "damage the frame check cannot see (8-bit sum of xsens-mtdata2 behind its structure and "
-             "unit-DeltaQ checks, 2^-16 for the CRC-16 of tts1, 2^-32 for the CRC-32 of kvh1750): the "
+             "unit-DeltaQ checks, 2^-16 for the CRC-16 of tts1, 2^-32 for the CRC-32 of kvh1750 and stim300): the "
              "damaged frame is accepted and swallows the intact bytes it overlaps",
     "false_sync": "a sync word inside garbage or a damaged frame, whose bytes from there pass the check: "
                   "the protocol cannot tell it from a frame, and the intact bytes it overlaps are lost",
@@ -107,9 +108,16 @@ def _same(a, b) -> bool:
     return a == b
 
 
+def _counter(codec: ByteCodec, frame: bytes) -> int | None:
+    """The counter of one valid frame as the codec reads it (None for a protocol without)."""
+    _, rows = codec.parse(np.frombuffer(frame, np.uint8), np.zeros(1, dtype=np.int64), np.array([len(frame)]))
+    counters = codec.sequences(rows)
+    return None if counters is None else int(counters[0])
+
+
 def _valid_windows(codec: ByteCodec, stream: bytearray, starts: list[int], ends: list[int],
-                   damaged: list[int]) -> list[tuple[int, int, object, int]]:
-    """Every (offset, length, record, slot) where a sync word starts in the damaged bytes of a slot and
+                   damaged: list[int]) -> list[tuple[int, int, object, int, int | None]]:
+    """Every (offset, length, record, slot, counter) where a sync word starts in the damaged bytes of a slot and
     the bytes from there form a frame the codec accepts: what the protocol cannot tell from a frame."""
     sync, header_size, out = codec.sync, codec.header_size, []
     buf = np.frombuffer(bytes(stream), np.uint8)
@@ -121,7 +129,8 @@ def _valid_windows(codec: ByteCodec, stream: bytearray, starts: list[int], ends:
                 length = int(codec.frame_lengths(buf, np.array([p]))[0])
                 if 0 < length <= len(stream) - p:
                     try:
-                        out.append((p, length, codec.decode(bytes(stream[p:p + length])), k))
+                        frame = bytes(stream[p:p + length])
+                        out.append((p, length, codec.decode(frame), k, _counter(codec, frame)))
                     except ValueError:
                         pass
             p = stream.find(sync, p + 1, stop)
@@ -142,7 +151,7 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
     for block_start in range(0, n, BLOCK):
         count = min(BLOCK, n - block_start)
         stream = bytearray()
-        starts, ends, at, kinds, intact, records, damaged = [], [], [], [], [], [], []
+        starts, ends, at, kinds, intact, records, damaged, counters = [], [], [], [], [], [], [], []
         for k in range(count):
             source = make_record(rng, first + block_start + k)
             frame = codec.encode(source)
@@ -156,25 +165,28 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
             at.append(offset)
             kinds.append(kind)
             records.append(record)
+            counters.append(_counter(codec, frame))
             intact.append(piece == frame)  # also a mutation that undid itself (a bit flipped twice)
             if piece != frame:
                 damaged.append(k)
         stats["frames"] += count
         stats["intact"] += count - len(damaged)
         framer = codec.framer()
-        decoded, pos = [], 0
+        batches, pos = [], 0
         t0 = time.perf_counter()
         try:
             while pos < len(stream):
                 step = rng.randint(1, 4096)
-                decoded += framer.feed(bytes(stream[pos:pos + step]), math.nan)
+                batches.append(framer.feed_batch(bytes(stream[pos:pos + step]), math.nan))
                 pos += step
         except Exception as exc:  # the point of the fuzz: report anything that escapes
             elapsed += time.perf_counter() - t0
             fail(f"{type(exc).__name__}: {exc}")
             continue
         elapsed += time.perf_counter() - t0
-        if sum(d.size for d in decoded) + framer.counters.skipped_bytes + framer.buffered != len(stream):
+        decoded = [(codec.record(row), int(index), int(size)) for b in batches
+                   for row, index, size in zip(b.rows, b.sync_index, b.size)]
+        if sum(size for _, _, size in decoded) + framer.counters.skipped_bytes + framer.buffered != len(stream):
             fail("bytes not accounted for")
         stats["delivered"] += len(decoded)
         stats["corrupt"] += framer.counters.corrupt
@@ -183,14 +195,14 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
         windows = _valid_windows(codec, stream, starts, ends, damaged)
         window_records = {w[2] for w in windows}
         cause: dict[int, str] = {}
-        for p, length, record, k in windows:
+        for p, length, record, k, counter in windows:
             limit = "cut" if record == records[k] else "check" if p == starts[k] + at[k] else "false_sync"
             j = bisect.bisect_right(starts, p) - 1
             while j < count and starts[j] < p + length:
                 if j != k and intact[j] and ends[j] > p:
                     cause.setdefault(j, limit)
                 j += 1
-            if codec.sequence(record) != codec.sequence(records[k]):
+            if counter != counters[k]:
                 for j in range(k + 1, min(k + 1 + WINDOW, count)):
                     if intact[j]:
                         cause.setdefault(j, "counter")
@@ -207,13 +219,13 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
         slot_of = {r: k for k, r in enumerate(records)}
         got = [False] * count
         reference, offset = None, 0  # (slot, index) of the first intact frame delivered; index error
-        for d in decoded:
-            k = slot_of.get(d.record)
+        for record, index, _ in decoded:
+            k = slot_of.get(record)
             if k is None:
-                if d.record in window_records:
+                if record in window_records:
                     stats["false_accepts"] += 1
                 else:
-                    fail(f"delivered {d.record}, found nowhere in the stream")
+                    fail(f"delivered {record}, found nowhere in the stream")
                 continue
             if got[k]:
                 fail(f"frame {k} of block {block_start // BLOCK} delivered twice")
@@ -222,9 +234,9 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
             if not intact[k]:
                 stats["recovered"] += 1
             elif reference is None:
-                reference = (k, d.sync_index)
-            elif d.sync_index - reference[1] - (k - reference[0]) * codec.sequence_step != offset:
-                offset = d.sync_index - reference[1] - (k - reference[0]) * codec.sequence_step
+                reference = (k, index)
+            elif index - reference[1] - (k - reference[0]) * codec.sequence_step != offset:
+                offset = index - reference[1] - (k - reference[0]) * codec.sequence_step
                 stats["index_slips"] += 1
         for k in range(count):
             if intact[k] and not got[k]:
@@ -234,8 +246,8 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
                 if limit is None and verbose:
                     around = " ".join(f"{j - k:+d}:{'ok' if intact[j] else DAMAGE[kinds[j]]}"
                                       f"{'' if got[j] else '(lost)'}" for j in range(max(k - 3, 0), min(k + 3, count)))
-                    near = " ".join(f"{w[3] - k:+d}@{w[0] - starts[w[3]]}:seq {codec.sequence(w[2])} "
-                                    f"for {codec.sequence(records[w[3]])}" for w in windows if abs(w[3] - k) <= 12)
+                    near = " ".join(f"{w[3] - k:+d}@{w[0] - starts[w[3]]}:seq {w[4]} for {counters[w[3]]}"
+                                    for w in windows if abs(w[3] - k) <= 12)
                     print(f"  {codec.name}: block {block_start // BLOCK} frame {k} lost beyond the limits; {around}; "
                           f"valid windows near: {near or 'none'}")
     stats["seconds"] = elapsed
@@ -270,9 +282,9 @@ def fuzz_can(n: int, rng: random.Random) -> dict:
         try:
             for chunk in chunks:
                 fed += len(chunk.data)
-                for d in framer.feed_chunk(chunk):
-                    stats["decoded"] += 1
-                    decoded_bytes += d.size
+                batch = framer.feed_chunk(chunk)
+                stats["decoded"] += len(batch)
+                decoded_bytes += int(batch.size.sum())
         except Exception as exc:  # the point of the fuzz: report anything that escapes
             stats["failures"] += 1
             print(f"  FAILURE can-dbc: {type(exc).__name__}: {exc}")
@@ -327,10 +339,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=1_000_000, help="frames per codec (default 1 000 000)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--codec", nargs="*", default=["kvh1750", "tts1", "xsens-mtdata2", "can-dbc", "acl"])
+    parser.add_argument("--codec", nargs="*", default=["kvh1750", "tts1", "xsens-mtdata2", "stim300", "can-dbc", "acl"])
     parser.add_argument("--verbose", action="store_true", help="print each intact frame lost beyond the limits")
     args = parser.parse_args()
     kvh, tts1, xsens = Kvh1750Codec(rate_hz=1000), Tts1Codec(), XsensCodec(rate_hz=400)
+    stim = Stim300Codec(rate_hz=1000, datagram=0xA5)  # the temperatures too: every field of the longer datagram
     runs = {
         "kvh1750": lambda r: fuzz_bytes(kvh, lambda r, i: kvh.from_sample(_imu_sample(r, i)), args.frames, r,
                                         args.verbose),
@@ -339,10 +352,12 @@ def main() -> None:
             args.verbose),
         "xsens-mtdata2": lambda r: fuzz_bytes(xsens, lambda r, i: xsens.from_sample(_imu_sample(r, i)),
                                               args.frames, r, args.verbose),
+        "stim300": lambda r: fuzz_bytes(stim, lambda r, i: stim.from_sample(_imu_sample(r, i)), args.frames, r,
+                                        args.verbose),
         "can-dbc": lambda r: fuzz_can(args.frames, r),
         "acl": lambda r: fuzz_acl(args.frames, r),
     }
-    if any(name in ("kvh1750", "tts1", "xsens-mtdata2") for name in args.codec):
+    if any(name in ("kvh1750", "tts1", "xsens-mtdata2", "stim300") for name in args.codec):
         print(f"protocol limits (lost intact frames they explain; target: the rest <= {TARGET:g} of intact):")
         for name, text in LIMITS.items():
             print(f"  {name}: {text}")

@@ -13,12 +13,13 @@ from typing import Any, ClassVar
 
 import can
 import cantools
+import numpy as np
 
-from drivers.codec import Codec, Decoded, Framer, RawChunk
+from drivers.codec import Codec, FrameBatch, Framer, RawChunk
 from drivers.framing import SequenceUnwrapper, host_rate
 from hil.config import CanSignals
 from hil.inputs import resolve_path
-from hil.samples import ImuSample
+from hil.samples import ImuSample, ImuSamples
 from hil.units import G0
 
 DEG = math.pi / 180.0
@@ -44,6 +45,10 @@ KNOWN_MAPPINGS: tuple[dict[str, Any], ...] = (
 )
 
 
+# One sample as a row: signal values in the DBC's units, the counter (-1: none) and the status.
+FIELDS = np.dtype([("gyro", "f8", 3), ("accel", "f8", 3), ("sync_counter", "i8"), ("status", "i8")])
+
+
 @dataclass(frozen=True, slots=True)
 class CanImuFrame:
     """One sample's signal values in the DBC's units (gyro and accel x, y, z), counter and status."""
@@ -59,12 +64,15 @@ class CanDbcCodec(Codec[CanImuFrame]):
 
     name: ClassVar[str] = "can-dbc"
     kind: ClassVar[str] = "imu"
+    link: ClassVar[str] = "can"
+    unit_keys: ClassVar[tuple[str, str, str]] = ("imu.can.dbc (the accel signals' unit)",
+                                                 "imu.can.dbc (the gyro signals' unit)", "imu.can.signals")
 
     def __init__(self, dbc: str | Path, rate_hz: float, gyro: tuple[str, str, str], accel: tuple[str, str, str],
                  sync: str | None = None, status: str | None = None) -> None:
         """``dbc`` is a path or a shipped DBC's name (:func:`hil.inputs.resolve_path`)."""
+        super().__init__(rate_hz)
         self.db = cantools.database.load_file(str(resolve_path(dbc)))
-        self.rate_hz = rate_hz
         self.sync, self.status = sync, status
         self.quantities = [self._signal(name) for name in (*gyro, *accel)]  # (message, signal)
         self.messages = list(dict.fromkeys(message for message, _ in self.quantities))
@@ -80,6 +88,7 @@ class CanDbcCodec(Codec[CanImuFrame]):
 
     @classmethod
     def from_config(cls, imu: Any, rate_hz: float) -> CanDbcCodec:
+        """The DBC and its signals are the ``imu.can`` block's (the bus's description), not options."""
         c = imu.can
         return cls(c.dbc, rate_hz, c.signals.gyro, c.signals.accel, c.signals.sync, c.signals.status)
 
@@ -140,11 +149,15 @@ class CanDbcCodec(Codec[CanImuFrame]):
     def framer(self, time_scale: float | None = 1.0) -> CanFramer:
         return CanFramer(self, time_scale)
 
-    def to_sample(self, decoded: Decoded[CanImuFrame]) -> ImuSample:
-        r, s = decoded.record, self.scales
-        return ImuSample(decoded.sync_index, (r.gyro[0] * s[0], r.gyro[1] * s[1], r.gyro[2] * s[2]),
-                         (r.accel[0] * s[3], r.accel[1] * s[4], r.accel[2] * s[5]), decoded.host_time, None,
-                         r.status)
+    def record(self, row: Any) -> CanImuFrame:
+        counter = int(row["sync_counter"])
+        return CanImuFrame(tuple(row["gyro"].tolist()), tuple(row["accel"].tolist()), None if counter < 0 else counter,
+                           int(row["status"]))
+
+    def samples(self, frames: FrameBatch) -> ImuSamples:
+        scales = np.array(self.scales)
+        return ImuSamples(frames.sync_index, frames.rows["gyro"] * scales[:3], frames.rows["accel"] * scales[3:],
+                          np.full(len(frames), frames.host_time), frames.rows["status"].copy())
 
     @property
     def counter_modulus(self) -> int | None:
@@ -181,18 +194,20 @@ class CanFramer(Framer):
         """Bytes of an incomplete sample held back waiting for its other messages."""
         return self._pending_bytes
 
-    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
+    def feed_chunk(self, chunk: RawChunk) -> FrameBatch:
         codec, counters = self.codec, self.counters
         message = codec.messages_by_id.get((chunk.arbitration_id, chunk.is_extended_id))
+        none = FrameBatch(np.zeros(0, dtype=FIELDS), np.zeros(0, dtype=np.int64), chunk.host_time,
+                          np.zeros(0, dtype=np.int64))
         if message is None:
             counters.skipped_bytes += len(chunk.data)
-            return []
+            return none
         try:
             values = message.decode(chunk.data, decode_choices=False)
         except Exception:  # cantools raises several types for short or malformed data
             counters.corrupt += 1
             counters.skipped_bytes += len(chunk.data)
-            return []
+            return none
         counter = int(values[codec.sync]) if codec.sync else None
         if self._pending and (counter != self._counter or message.name in self._pending):
             self._drop_pending()
@@ -200,24 +215,27 @@ class CanFramer(Framer):
         self._pending[message.name] = values
         self._pending_bytes += len(chunk.data)
         if len(self._pending) < len(codec.messages):
-            return []
+            return none
         return self._complete(chunk.host_time)
 
-    def _complete(self, host_time: float) -> list[Decoded]:
+    def _complete(self, host_time: float) -> FrameBatch:
+        """The sample of the pending messages (none when it repeats or comes late)."""
         codec, pending = self.codec, self._pending
         numbers = [float(pending[m.name][s.name]) for m, s in codec.quantities]
         status = 0
         if codec.status:
             for values in pending.values():
                 status |= int(values[codec.status])
-        record = CanImuFrame(tuple(numbers[:3]), tuple(numbers[3:]), self._counter, status)
-        index, missing = self.unwrapper.next(self._counter, host_time)
-        delivered = self.unwrapper.count(self.counters, index, missing)
-        if not delivered:
+        counter = -1 if self._counter is None else self._counter
+        row = np.array([(numbers[:3], numbers[3:], counter, status)], dtype=FIELDS)
+        index, missing, repeated = self.unwrapper.next_many(None if self._counter is None else np.array([counter]),
+                                                            np.array([host_time]))
+        deliver = self.unwrapper.count_many(self.counters, missing, repeated)
+        if not deliver[0]:
             self.counters.skipped_bytes += self._pending_bytes
-        decoded = Decoded(record, index, host_time, self._pending_bytes)
+        size = np.array([self._pending_bytes])
         self._pending, self._pending_bytes = {}, 0
-        return [decoded] if delivered else []
+        return FrameBatch(row[deliver], index[deliver], host_time, size[deliver])
 
     def _drop_pending(self) -> None:
         self.counters.corrupt += 1

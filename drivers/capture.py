@@ -15,14 +15,16 @@ from typing import Any
 import can
 import cantools
 from can.io.blf import BLFParseError
+from pydantic import ValidationError
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.codec import RawChunk
 from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES, byte_codecs, detect
-from drivers.registry import codec_class, with_rate
 from drivers.tap import message_to_chunk
 from hil.config import CanConfig, InputError
+from hil.config_types import describe_validation
+from hil.plugins import codec_class
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
 DEFAULT_DBC = CanConfig().dbc  # the shipped DBC the config defaults to
@@ -45,16 +47,17 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so). Raises :class:`CaptureError`
     when the capture, the protocol, the DBC or the CSV cannot be used.
     """
-    if dbc and protocol != "can-dbc":
-        raise CaptureError(f"--dbc {dbc}: only for protocol can-dbc, not {protocol}")
+    cls = _codec_class(protocol)
+    if dbc and cls.link != "can":
+        raise CaptureError(f"--dbc {dbc}: only for a CAN protocol, not {protocol}")
     path = _capture_file(path)
-    if protocol == "can-dbc":
+    if cls.link == "can":
         codec = _can_codec(dbc or DEFAULT_DBC, rate_hz, codec_options)
         if path.suffix.lower() not in CAN_LOG_SUFFIXES:
             raise CaptureError(f"{path}: a can-dbc capture must be a python-can log ({', '.join(CAN_LOG_SUFFIXES)})")
         chunks = _can_log_chunks(path)
     else:
-        codec = _byte_codec(protocol, rate_hz, codec_options)
+        codec = _byte_codec(cls, rate_hz, codec_options)
         chunks = _byte_chunks(path)
     decoder = StreamDecoder(codec)
     try:
@@ -63,9 +66,10 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
             if writer:
                 writer.writerow(["sync_index", *codec.csv_header()])
             for chunk in chunks:
-                for decoded in decoder.frames(chunk):
-                    if writer:
-                        writer.writerow([decoded.sync_index, *codec.csv_row(decoded.record)])
+                frames = decoder.frames(chunk)
+                if writer:
+                    writer.writerows([int(k), *codec.csv_row(codec.record(row))]
+                                     for k, row in zip(frames.sync_index, frames.rows))
     except OSError as exc:
         raise CaptureError(f"{exc.filename or path}: {exc.strerror or exc}") from None
     return decoder.counters.as_dict()
@@ -99,8 +103,8 @@ def _capture_file(path: str | Path) -> Path:
     return path
 
 
-def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
-    """The codec of a byte-stream protocol that has data frames."""
+def _codec_class(protocol: str) -> Any:
+    """The codec class of a protocol that has data frames."""
     try:
         cls = codec_class(protocol)
     except KeyError as exc:
@@ -108,7 +112,18 @@ def _byte_codec(protocol: str, rate_hz: float, options: dict[str, Any]) -> Any:
     kind = getattr(cls, "kind", None)
     if kind not in ("imu", "table"):
         raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")
-    return with_rate(cls, rate_hz, **options)
+    return cls
+
+
+def _byte_codec(cls: Any, rate_hz: float, options: dict[str, Any]) -> Any:
+    """The codec of a byte-stream protocol with the device's output settings ``options``."""
+    try:
+        return cls(rate_hz, **options)
+    except ValidationError as exc:
+        raise CaptureError(f"{cls.name} options: {describe_validation(exc)} (--option KEY=VALUE)") from None
+    except ValueError as exc:
+        message = str(exc) if str(exc).startswith(f"{cls.name}:") else f"{cls.name}: {exc}"
+        raise CaptureError(f"{message} (--rate, --option KEY=VALUE)") from None
 
 
 def _can_codec(dbc: str | Path, rate_hz: float, signals: dict[str, Any]) -> CanDbcCodec:

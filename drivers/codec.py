@@ -1,37 +1,29 @@
-"""What every codec offers: frame records <-> wire, records -> SI samples, and a stream framer.
+"""What every codec offers, declared once with its defaults (as python-can's ``BusABC``): built from the
+IMU's rate and its own options, a stream framer that gives a read's frames as arrays, their SI samples,
+records <-> wire for the emulator, and what the harness asks of a device (counter modulus, frame size,
+status of a healthy device, the keys that set its units).
 
-A codec is the plug-in for one protocol (see :mod:`drivers.registry`). Records keep the device's own
-fields and units; :meth:`Codec.to_sample` converts to the SI records of :mod:`hil.samples` and
-:meth:`Codec.from_sample` builds a record from SI values (the emulators encode with it).
+A codec is the plug-in for one protocol (found by name: :mod:`hil.plugins`). Records keep the device's own
+fields and units; :meth:`Codec.samples` converts a batch of frames to the SI arrays of :mod:`hil.samples`
+and :meth:`Codec.from_sample` builds a record from SI values (the emulators encode with it).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
-from hil.config import ConfigError
+from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
 
 R = TypeVar("R")
-Sample = ImuSample | TableSample
 
 
 class DecodeError(ValueError):
     """Bytes or a frame that do not form a valid record of the protocol."""
-
-
-@dataclass(frozen=True, slots=True)
-class Decoded(Generic[R]):
-    """A valid frame as it came off the wire: the device record, its unwrapped sync index, host time."""
-
-    record: R
-    sync_index: int
-    host_time: float
-    size: int  # bytes the frame occupied on the wire (CAN: payload bytes of all its messages)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,8 +68,8 @@ class Framer(ABC):
         self.counters = Counters()
 
     @abstractmethod
-    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
-        """Decoded frames completed by this chunk."""
+    def feed_chunk(self, chunk: RawChunk) -> FrameBatch:
+        """The valid frames completed by this chunk."""
 
     def reset(self) -> None:
         """Forget a partial frame (after a reconnect); sequence continuity is kept."""
@@ -94,18 +86,46 @@ class Counters:
     missing: int = 0  # frames those jumps imply were lost
     duplicates: int = 0  # valid frames whose counter repeated the previous one (not delivered)
     out_of_order: int = 0  # valid frames that arrived after a later one (not delivered)
+    skipped_items: dict[str, int] = field(default_factory=dict)  # data items of delivered frames not read, by kind
 
-    def as_dict(self) -> dict[str, int]:
-        """The four headline counters, as ``hil decode`` prints them."""
-        return {"frames": self.frames, "corrupt": self.corrupt, "skipped_bytes": self.skipped_bytes,
-                "gaps": self.gaps}
+    def as_dict(self) -> dict[str, Any]:
+        """The four headline counters, as ``hil decode`` prints them, and the items skipped by kind if any."""
+        out: dict[str, Any] = {"frames": self.frames, "corrupt": self.corrupt, "skipped_bytes": self.skipped_bytes,
+                               "gaps": self.gaps}
+        return out | ({"skipped_items": dict(sorted(self.skipped_items.items()))} if self.skipped_items else {})
+
+
+class NoOptions(Model):
+    """The options of a codec that has none (``imu.options`` must then be empty)."""
 
 
 class Codec(ABC, Generic[R]):
-    """One protocol: encode and decode its frames, convert them to SI samples."""
+    """One protocol: encode and decode its frames, convert them to SI samples.
+
+    Built as ``cls(rate_hz, **options)``: ``options`` are validated by the codec's :attr:`Options` model (a
+    pydantic model; what the device's own output settings are, the ``imu.options`` of the config), and the
+    validated model is ``self.options``. A subclass that derives more from them extends ``__init__``.
+    """
 
     name: ClassVar[str]
     kind: ClassVar[str]  # "imu" or "table"
+    Options: ClassVar[type[Model]] = NoOptions
+    link: ClassVar[str] = "serial"  # "serial": frames are bytes on a line (baud checked); "can": CAN messages
+    healthy_status: ClassVar[int] = 0  # the status word of a device with nothing to report (the emulator sends it)
+    device_time: ClassVar[bool] = False  # the frames carry the device's own clock (the emulator fills it in)
+    # The config keys that set the accelerometer unit, the gyro unit and the gyro output (rate or increment),
+    # which the plausibility check names when the readings are off by a unit; None: the protocol fixes them.
+    unit_keys: ClassVar[tuple[str, str, str] | None] = None
+
+    def __init__(self, rate_hz: float | None = None, **options: Any) -> None:
+        """``rate_hz``: the device's output rate (None for a protocol that does not need it)."""
+        self.rate_hz = rate_hz
+        self.options = self.Options(**options)
+
+    @classmethod
+    def from_config(cls, imu: Any, rate_hz: float) -> Codec:
+        """The codec an ``imu`` config block (:class:`hil.config.ImuConfig`) asks for, at ``rate_hz``."""
+        return cls(rate_hz, **imu.options)
 
     @abstractmethod
     def encode(self, record: R) -> Any:
@@ -116,23 +136,34 @@ class Codec(ABC, Generic[R]):
         """A fresh stream framer for this codec; ``time_scale``: see :func:`drivers.framing.host_rate`."""
 
     @abstractmethod
-    def to_sample(self, decoded: Decoded[R]) -> Sample:
-        """The SI sample of a decoded frame."""
-
-    def to_samples(self, decoded: list[Decoded[R]]) -> ImuSamples | TableSamples:
-        """The SI samples of decoded frames, as arrays (a byte codec converts a :class:`FrameBatch` at once
-        with ``samples``)."""
-        samples = [self.to_sample(d) for d in decoded]
-        return (ImuSamples if self.kind == "imu" else TableSamples).stack(samples)
+    def record(self, row: Any) -> R:
+        """The record of one row of a :class:`FrameBatch` (``hil decode`` writes records)."""
 
     @abstractmethod
-    def from_sample(self, sample: Any, **device_fields: Any) -> R:
-        """A record carrying an SI sample (device-only fields such as temperature as keywords)."""
+    def samples(self, frames: FrameBatch) -> ImuSamples | TableSamples:
+        """The SI samples of a batch of frames; a frame that gives no sample is left out (counted corrupt by
+        the caller)."""
+
+    @abstractmethod
+    def from_sample(self, sample: Any) -> R:
+        """The record carrying an SI sample (the emulated device's output)."""
 
     @property
     def counter_modulus(self) -> int | None:
         """What the frames' sync counter counts modulo (None: the frames carry none)."""
         return None
+
+    def frame_bytes(self) -> int:
+        """Bytes one frame takes on a serial line, for the baud check (0 for frames that are CAN messages)."""
+        if self.link != "serial":
+            return 0
+        probe = (ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0) if self.kind == "imu"
+                 else TableSample(1, (0.0, 0.0, 0.0)))
+        return len(self.encode(self.from_sample(probe)))
+
+    def unit_advice(self) -> tuple[str, str, str]:
+        """What to check when the readings are off by a unit: the keys of :attr:`unit_keys`, else the protocol."""
+        return self.unit_keys or (f"imu.protocol ({self.name})",) * 3
 
     @abstractmethod
     def csv_header(self) -> list[str]:
@@ -144,18 +175,13 @@ class Codec(ABC, Generic[R]):
 
 
 BITS_PER_BYTE = 10  # a serial line's 8N1
-_PROBE = ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0)
-
-
-def imu_frame_bytes(codec: Codec) -> int:
-    """Bytes one IMU frame of ``codec`` takes on a serial line (0 for a codec whose frames are CAN messages)."""
-    frame = codec.encode(codec.from_sample(_PROBE))
-    return len(frame) if isinstance(frame, bytes) else 0
 
 
 def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
     """Raise :class:`ConfigError` naming ``<name>.baudrate`` when frames of ``frame_bytes`` at ``rate_hz`` do not
     fit the serial line (8N1): the device could not send them, or is not set as the config says."""
+    from hil.config import ConfigError  # here: hil.config finds the codecs through drivers.registry, which imports this
+
     needed = frame_bytes * BITS_PER_BYTE * rate_hz
     if needed > baudrate:
         raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "

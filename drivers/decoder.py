@@ -11,15 +11,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from drivers.codec import (
-    Codec,
-    Counters,
-    Decoded,
-    Framer,
-    RawChunk,
-    StreamEvent,
-)
-from drivers.framing import ByteFramer
+import numpy as np
+
+from drivers.codec import Codec, Counters, FrameBatch, Framer, RawChunk, StreamEvent
 from hil.samples import ImuSamples, TableSamples
 
 
@@ -39,7 +33,7 @@ class StreamDecoder:
     read_s: float | None = None
     framer: Framer = field(init=False)
     outages: int = 0
-    _pending: list[Decoded] = field(init=False, default_factory=list)
+    _pending: list[FrameBatch] = field(init=False, default_factory=list)
     _tick: int | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -49,7 +43,7 @@ class StreamDecoder:
     def counters(self) -> Counters:
         return self.framer.counters
 
-    def frames(self, chunk: RawChunk) -> list[Decoded]:
+    def frames(self, chunk: RawChunk) -> FrameBatch:
         """The complete frames of a chunk, still in device units (for captures)."""
         return self.framer.feed_chunk(chunk)
 
@@ -58,25 +52,30 @@ class StreamDecoder:
 
         A message stream (CAN: a chunk a message) with ``read_s`` is read in ticks of ``read_s`` of the host's
         clock, as a byte stream's reader reads: the frames of the chunks received within one tick come out
-        together, with the first chunk of a later tick (or :meth:`flush`); None until then."""
-        if isinstance(self.framer, ByteFramer):
-            frames = self.framer.feed_batch(chunk.data, chunk.host_time)
-            samples = self.codec.samples(frames)
-            self.framer.counters.corrupt += len(frames) - len(samples)
-            return samples
-        if self.read_s is None:
-            return self.codec.to_samples(self.frames(chunk))
+        together, at the host time of the last, with the first chunk of a later tick (or :meth:`flush`); None
+        until then."""
+        if chunk.arbitration_id is None or self.read_s is None:
+            return self._samples(self.framer.feed_chunk(chunk))
         tick = math.floor(chunk.host_time / self.read_s)
         ready = self.flush() if tick != self._tick else None
         self._tick = tick
-        self._pending += self.frames(chunk)
+        frames = self.framer.feed_chunk(chunk)
+        if len(frames):
+            self._pending.append(frames)
         return ready
 
     def flush(self) -> ImuSamples | TableSamples | None:
         """The samples of a message stream's tick still held (None: nothing held)."""
         if not self._pending:
             return None
-        samples, self._pending = self.codec.to_samples(self._pending), []
+        parts, self._pending = self._pending, []
+        joined = FrameBatch(np.concatenate([p.rows for p in parts]), np.concatenate([p.sync_index for p in parts]),
+                            parts[-1].host_time, np.concatenate([p.size for p in parts]))
+        return self._samples(joined)
+
+    def _samples(self, frames: FrameBatch) -> ImuSamples | TableSamples:
+        samples = self.codec.samples(frames)
+        self.framer.counters.corrupt += len(frames) - len(samples)
         return samples
 
     def event(self, event: StreamEvent) -> None:

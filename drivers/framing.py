@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
-from typing import Any, ClassVar, NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from drivers.codec import Codec, Counters, Decoded, DecodeError, FrameBatch, Framer, R, RawChunk
+from drivers.codec import Codec, Counters, DecodeError, FrameBatch, Framer, R, RawChunk
 
 
 def host_rate(rate_hz: float | None, time_scale: float | None) -> float | None:
@@ -31,7 +31,7 @@ class SequenceUnwrapper:
     """Unwraps a device counter that counts modulo ``modulus`` into a monotonic index.
 
     A counter that did not move is a repeated frame, and one that stepped back by at most
-    ``REORDER_WINDOW`` frames is a late (out-of-order) frame: neither moves the index, and :meth:`next`
+    ``REORDER_WINDOW`` frames is a late (out-of-order) frame: neither moves the index, and :meth:`next_many`
     marks them with a missing count of -1. Devices never repeat a number, so when the host receive
     times say that about a counter period or more has passed, the same readings are taken as wraps.
     With the device rate known, the host receive times also resolve wraps lost in an outage longer
@@ -63,16 +63,12 @@ class SequenceUnwrapper:
         self._time = math.nan
         self._suspect: int | None = None  # counter of an unconfirmed far jump
 
-    def next(self, sequence: int | None, host_time: float) -> tuple[int, int]:
-        """(index of this frame, frames missing since the previous one); missing is -1 for a repeated
-        or late frame, whose index is then the earlier one it carries, and -2 for an implausible jump."""
-        index, missing, _ = self.next_many(None if sequence is None else np.array([sequence]), np.array([host_time]))
-        return int(index[0]), int(missing[0])
-
     def next_many(self, sequences: np.ndarray | None, host_times: np.ndarray, adjacent: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`next` for consecutive frames (``sequences`` int64, -1 or None where a frame has no counter):
-        (indices, missing, repeated), ``repeated`` True where a -1 is a repeat rather than a late frame.
+        """(index of each frame, frames missing since the one before it, repeated) of consecutive frames
+        (``sequences`` int64, -1 or None where a frame has no counter). Missing is -1 for a repeated or late
+        frame, whose index is then the earlier one it carries (``repeated`` True where it is a repeat rather
+        than a late frame), and -2 for an implausible jump.
 
         ``adjacent`` marks frames whose bytes directly follow the previous frame's: no byte was lost
         between them, so their host times size nothing (a writer that was held up, not an outage).
@@ -144,11 +140,6 @@ class SequenceUnwrapper:
             index[stop], missing[stop] = self._index, -2
         return stop + 1
 
-    def count(self, counters: Counters, index: int, missing: int) -> bool:
-        """Add a :meth:`next` outcome to ``counters``; False for a repeated, late or implausible frame
-        (not to be delivered)."""
-        return bool(self.count_many(counters, np.array([missing]), np.array([index == self._index]))[0])
-
     def count_many(self, counters: Counters, missing: np.ndarray, repeated: np.ndarray) -> np.ndarray:
         """Add :meth:`next_many` outcomes to ``counters``; the frames to deliver (mask)."""
         if not missing.any():
@@ -175,7 +166,6 @@ class ByteCodec(Codec[R]):
     check_name: ClassVar[str] = "CRC"  # what :meth:`decode` says a frame failed
     sequence_modulus: ClassVar[int | None] = None  # None: the frame carries no counter
     sequence_step: int = 1  # counter steps between consecutive frames
-    rate_hz: float | None = None
 
     @property
     def counter_modulus(self) -> int | None:
@@ -190,21 +180,12 @@ class ByteCodec(Codec[R]):
     def parse(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(valid (N,) mask, the valid frames' fields as a structured array) of complete frames in ``buf``."""
 
-    @abstractmethod
-    def record(self, row: Any) -> R:
-        """The record of one row of :meth:`parse`'s array."""
-
-    @abstractmethod
-    def samples(self, frames: FrameBatch) -> Any:
-        """The SI samples (:class:`~hil.samples.ImuSamples` or :class:`~hil.samples.TableSamples`) of frames;
-        a frame that gives no sample is left out."""
+    def count_items(self, rows: np.ndarray, counters: Counters) -> None:
+        """Add what the delivered frames ``rows`` carried beside what is read to ``counters`` (a protocol whose
+        frames carry optional items: ``counters.skipped_items``)."""
 
     def sequences(self, rows: np.ndarray) -> np.ndarray | None:
         """The frames' own counters (int64, -1 where a frame has none), or None for a protocol without."""
-        return None
-
-    def sequence(self, record: R) -> int | None:
-        """The frame's own counter, or None."""
         return None
 
     def decode(self, frame: bytes) -> R:
@@ -253,14 +234,8 @@ class ByteFramer(Framer):
         """Bytes held back waiting for the rest of a frame."""
         return len(self._buf)
 
-    def feed_chunk(self, chunk: RawChunk) -> list[Decoded]:
-        return self.feed(chunk.data, chunk.host_time)
-
-    def feed(self, data: bytes, host_time: float = math.nan) -> list[Decoded]:
-        """Decoded frames completed by ``data``, received at ``host_time``, one record each."""
-        batch = self.feed_batch(data, host_time)
-        return [Decoded(self.codec.record(row), int(k), host_time, int(size))
-                for row, k, size in zip(batch.rows, batch.sync_index, batch.size, strict=True)]
+    def feed_chunk(self, chunk: RawChunk) -> FrameBatch:
+        return self.feed_batch(chunk.data, chunk.host_time)
 
     def feed_batch(self, data: bytes, host_time: float = math.nan) -> FrameBatch:
         """The frames completed by ``data``, received at ``host_time``, as arrays."""
@@ -284,6 +259,7 @@ class ByteFramer(Framer):
         sizes = lengths[deliver]
         counters.skipped_bytes += stop - int(sizes.sum())
         self._buf = raw[stop:]
+        codec.count_items(rows[deliver], counters)
         return FrameBatch(rows[deliver], index[deliver], host_time, sizes)
 
     def reset(self) -> None:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import Decoded, FrameBatch
+from drivers.codec import FrameBatch
 from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
+from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
 from hil.units import G0
 
@@ -37,6 +38,14 @@ class KvhFrame:
     temperature: int  # deg C
 
 
+class Kvh1750Options(Model):
+    """How the KVH 1750 itself is configured to output (its own settings, mirrored in ``imu.options``)."""
+
+    gyro_unit: Literal["rad", "deg"] = "rad"
+    gyro_output: Literal["delta", "rate"] = "delta"
+    accel_unit: Literal["g", "m/s^2"] = "g"
+
+
 class Kvh1750Codec(ByteCodec[KvhFrame]):
     """Encode and decode KVH 1750 frames; gyro and accel units follow the IMU's own configuration."""
 
@@ -46,24 +55,20 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
     header_size: ClassVar[int] = len(HEADER)
     sequence_modulus: ClassVar[int] = 128
 
-    def __init__(self, rate_hz: float, gyro_unit: str = "rad", gyro_output: str = "delta",
-                 accel_unit: str = "g") -> None:
-        if gyro_unit not in ("rad", "deg") or gyro_output not in ("delta", "rate"):
-            raise ValueError(f"kvh1750: gyro must be rad|deg and delta|rate, got {gyro_unit}, {gyro_output}")
-        if accel_unit not in ("g", "m/s^2"):
-            raise ValueError(f"kvh1750: accel unit must be g or m/s^2, got {accel_unit!r}")
-        self.rate_hz = rate_hz
-        self.gyro_unit, self.gyro_output, self.accel_unit = gyro_unit, gyro_output, accel_unit
+    Options: ClassVar[type[Model]] = Kvh1750Options
+    healthy_status: ClassVar[int] = STATUS_ALL_VALID
+    unit_keys: ClassVar[tuple[str, str, str]] = ("imu.options.accel_unit", "imu.options.gyro_unit",
+                                                 "imu.options.gyro_output")
+
+    def __init__(self, rate_hz: float, **options: Any) -> None:
+        super().__init__(rate_hz, **options)
+        self.gyro_unit, self.gyro_output, self.accel_unit = (self.options.gyro_unit, self.options.gyro_output,
+                                                             self.options.accel_unit)
         dt = 1.0 / rate_hz
         # Device units -> rad and m/s over one sample interval.
-        self._gyro_scale = (math.pi / 180.0 if gyro_unit == "deg" else 1.0) * (dt if gyro_output == "rate" else 1.0)
-        self._accel_scale = (G0 if accel_unit == "g" else 1.0) * dt
-
-    @classmethod
-    def from_config(cls, imu: Any, rate_hz: float) -> Kvh1750Codec:
-        """The codec for an ``imu`` config block (:class:`hil.config.ImuConfig`)."""
-        f = imu.kvh1750
-        return cls(rate_hz, f.gyro_unit, f.gyro_output, f.accel_unit)
+        self._gyro_scale = (math.pi / 180.0 if self.gyro_unit == "deg" else 1.0) * (
+            dt if self.gyro_output == "rate" else 1.0)
+        self._accel_scale = (G0 if self.accel_unit == "g" else 1.0) * dt
 
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         return np.full(len(starts), FRAME_SIZE, dtype=np.int64)
@@ -83,9 +88,6 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
                           record.temperature)
         return body + _CRC.pack(crc32_mpeg2(body))
 
-    def sequence(self, record: KvhFrame) -> int:
-        return record.sequence
-
     def sequences(self, rows: np.ndarray) -> np.ndarray:
         return rows["sequence"].astype(np.int64)
 
@@ -98,17 +100,11 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
                           frames.rows["status"].astype(np.int64))
 
-    def to_sample(self, decoded: Decoded[KvhFrame]) -> ImuSample:
-        r = decoded.record
-        dtheta, dv = self.increments(r.gyro, r.accel)
-        return ImuSample(decoded.sync_index, tuple(dtheta.tolist()), tuple(dv.tolist()), decoded.host_time, None,
-                         r.status)
-
-    def from_sample(self, sample: ImuSample, temperature: int = 25) -> KvhFrame:
-        """The frame for an SI sample; its status byte is ``sample.status`` (use STATUS_ALL_VALID)."""
+    def from_sample(self, sample: ImuSample) -> KvhFrame:
+        """The frame for an SI sample at 25 deg C; its status byte is ``sample.status`` (STATUS_ALL_VALID: healthy)."""
         g, a = self._gyro_scale, self._accel_scale
         return KvhFrame(tuple(x / g for x in sample.dtheta), tuple(x / a for x in sample.dv),
-                        sample.status, sample.sync_index % 128, temperature)
+                        sample.status, sample.sync_index % 128, 25)
 
     def csv_header(self) -> list[str]:
         gyro = self.gyro_unit + ("_s" if self.gyro_output == "rate" else "")

@@ -9,10 +9,12 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+from pydantic import Field
 
-from drivers.codec import Decoded, FrameBatch
+from drivers.codec import FrameBatch
 from drivers.crc import crc16_xmodem, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
+from hil.config_types import Model
 from hil.samples import TableSample, TableSamples
 
 SYNC = b"\x54\x53\x01"  # sync word "TS" and version 1
@@ -62,6 +64,12 @@ class Tts1Frame:
     latch_delay_us: int
 
 
+class Tts1Options(Model):
+    """n: the table latches every n-th pulse of the train it counts."""
+
+    pulses_per_frame: int = Field(1, ge=1)
+
+
 class Tts1Codec(ByteCodec[Tts1Frame]):
     """Encode and decode ``tts1`` frames; ``pulses_per_frame`` is n for a table that latches every n-th
     pulse of the train it counts (its counter steps by n from frame to frame)."""
@@ -72,8 +80,11 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
     header_size: ClassVar[int] = len(SYNC)
     sequence_modulus: ClassVar[int] = 1 << 32
 
-    def __init__(self, pulses_per_frame: int = 1) -> None:
-        self.sequence_step = pulses_per_frame
+    Options: ClassVar[type[Model]] = Tts1Options
+
+    def __init__(self, rate_hz: float | None = None, **options: Any) -> None:
+        super().__init__(rate_hz, **options)
+        self.sequence_step = self.options.pulses_per_frame
 
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         return np.full(len(starts), FRAME_SIZE, dtype=np.int64)
@@ -93,9 +104,6 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
                           *(wrap_udeg(a) for a in record.angles_udeg), record.latch_delay_us)
         return body + _CRC.pack(crc16_xmodem(body[2:]))
 
-    def sequence(self, record: Tts1Frame) -> int:
-        return record.sync_counter
-
     def sequences(self, rows: np.ndarray) -> np.ndarray:
         return rows["sync_counter"].astype(np.int64)
 
@@ -108,11 +116,6 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
         angles, delay = self.si(frames.rows["angles_udeg"], frames.rows["latch_delay_us"])
         return TableSamples(frames.sync_index, angles, np.full(len(frames), frames.host_time), delay,
                             frames.rows["status"].astype(np.int64))
-
-    def to_sample(self, decoded: Decoded[Tts1Frame]) -> TableSample:
-        r = decoded.record
-        angles, delay = self.si(r.angles_udeg, r.latch_delay_us)
-        return TableSample(decoded.sync_index, tuple(angles.tolist()), decoded.host_time, None, float(delay), r.status)
 
     def from_sample(self, sample: TableSample) -> Tts1Frame:
         """The frame for an SI sample; the status byte is ``sample.status`` (see :func:`status_byte`)."""

@@ -4,25 +4,27 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, fields, replace
-from typing import Any, ClassVar
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import Decoded, DecodeError, FrameBatch
+from drivers.codec import Counters, FrameBatch
 from drivers.framing import ByteCodec
+from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
 
 PREAMBLE = b"\xfa\xff\x36"  # preamble, bus id (master), message id MTData2
 MAX_PAYLOAD = 2048  # longer announced lengths are taken as a false sync
 SAMPLE_TIME_HZ = 10_000.0  # SampleTimeFine ticks per second
+MAX_OTHER = 32  # other items a message may carry that are counted by kind
 
 Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True, slots=True)
 class MtData2Frame:
-    """The items of one MTData2 message (None when absent), in device units (SI, float32 on the wire)."""
+    """The items of one MTData2 message (None when absent), in device units (SI, any precision on the wire)."""
 
     packet_counter: int | None = None  # uint16
     sample_time_fine: int | None = None  # uint32, 1e-4 s
@@ -31,24 +33,74 @@ class MtData2Frame:
     delta_v: Vec3 | None = None  # m/s
     acceleration: Vec3 | None = None  # m/s^2
     rate_of_turn: Vec3 | None = None  # rad/s
+    status_byte: int | None = None  # uint8, the low byte of the status word
 
 
-# XDI -> (record field, struct of the data); float32 precision, ENU frame.
-ITEMS: dict[int, tuple[str, struct.Struct]] = {
+# The low two bits of a data identifier select the precision of its numbers (MTData2 specification):
+# name -> (bits, bytes per number).
+PRECISIONS: dict[str, tuple[int, int]] = {"float32": (0, 4), "fp12.20": (1, 4), "fp16.32": (2, 6), "float64": (3, 8)}
+_BYTES = {bits: size for bits, size in PRECISIONS.values()}
+# Quantities in the sensor frame: identifier with the low nibble clear -> (record field, numbers).
+VECTORS: dict[int, tuple[str, int]] = {0x8030: ("delta_q", 4), 0x4010: ("delta_v", 3), 0x4020: ("acceleration", 3),
+                                       0x8020: ("rate_of_turn", 3)}
+# Counters and status: identifier -> (record field, struct).
+SCALARS: dict[int, tuple[str, struct.Struct]] = {
     0x1020: ("packet_counter", struct.Struct(">H")),
     0x1060: ("sample_time_fine", struct.Struct(">I")),
+    0xE010: ("status_byte", struct.Struct(">B")),
     0xE020: ("status_word", struct.Struct(">I")),
-    0x8030: ("delta_q", struct.Struct(">4f")),
-    0x4010: ("delta_v", struct.Struct(">3f")),
-    0x4020: ("acceleration", struct.Struct(">3f")),
-    0x8020: ("rate_of_turn", struct.Struct(">3f")),
 }
-_XDI_OF = {name: (xdi, s) for xdi, (name, s) in ITEMS.items()}
-_SCALARS = ("packet_counter", "sample_time_fine", "status_word")
-# One message as a row: -1 for an absent counter or word, NaN for an absent vector.
-FIELDS = np.dtype([("packet_counter", "i8"), ("sample_time_fine", "i8"), ("status_word", "i8"),
-                   ("delta_q", "f8", 4), ("delta_v", "f8", 3), ("acceleration", "f8", 3), ("rate_of_turn", "f8", 3)])
-_EMPTY_ROW = tuple(-1 if name in _SCALARS else (math.nan,) * FIELDS[name].shape[0] for name in FIELDS.names)
+_XDI_OF = {name: xdi for xdi, (name, _) in {**VECTORS, **SCALARS}.items()}
+# Names of the data types (bits 0-3 cleared), for the counts by kind of the items not read.
+TYPE_NAMES: dict[int, str] = {
+    0x8030: "DeltaQ", 0x4010: "DeltaV", 0x4020: "Acceleration", 0x8020: "RateOfTurn",
+    0x0810: "Temperature", 0x1010: "UtcTime", 0x1070: "SampleTimeCoarse", 0x2010: "Quaternion",
+    0x2020: "RotationMatrix", 0x2030: "EulerAngles", 0x3010: "BaroPressure", 0x4030: "FreeAcceleration",
+    0x5020: "AltitudeEllipsoid", 0x5030: "PositionEcef", 0x5040: "LatLon", 0x7010: "GnssPvtData",
+    0x7020: "GnssSatInfo", 0xA010: "AccelerationHR", 0xB010: "RateOfTurnHR", 0xC020: "MagneticField",
+    0xD010: "VelocityXYZ",
+}
+_SCALAR_NAMES = tuple(name for name, _ in SCALARS.values())
+# One message as a row: -1 for an absent counter or status, NaN for an absent vector; ``other`` lists the
+# identifiers of the items not read (0 after the last).
+FIELDS = np.dtype([("packet_counter", "i8"), ("sample_time_fine", "i8"), ("status_byte", "i8"), ("status_word", "i8"),
+                   ("delta_q", "f8", 4), ("delta_v", "f8", 3), ("acceleration", "f8", 3), ("rate_of_turn", "f8", 3),
+                   ("other", "u2", MAX_OTHER)])
+_VALUES = tuple(name for name in FIELDS.names if name != "other")
+_EMPTY_ROW = {name: -1 if name in _SCALAR_NAMES else (math.nan,) * FIELDS[name].shape[0] for name in _VALUES}
+
+
+def item_kind(xdi: int) -> str:
+    """How the counts of :meth:`XsensCodec.count_items` name an item: its type's name, or its identifier."""
+    return f"{TYPE_NAMES.get(xdi & 0xFFF0, 'item')} 0x{xdi:04X}"
+
+
+def numbers(data: bytes, pos: int, count: int, bits: int) -> tuple[float, ...]:
+    """``count`` numbers of precision ``bits`` at ``pos``: Float32, FP12.20 (int32 / 2^20), FP16.32 (a 48-bit
+    fixed point sent as its 32-bit fraction, then its signed 16-bit integer part) or Float64; big-endian."""
+    if bits == 0:
+        return struct.unpack_from(f">{count}f", data, pos)
+    if bits == 1:
+        return tuple(v / 1048576.0 for v in struct.unpack_from(f">{count}i", data, pos))
+    if bits == 2:
+        parts = struct.unpack_from(">" + "Ih" * count, data, pos)
+        return tuple(((parts[2 * k + 1] << 32) | parts[2 * k]) / 4294967296.0 for k in range(count))
+    return struct.unpack_from(f">{count}d", data, pos)
+
+
+def pack_numbers(values: Any, bits: int) -> bytes:
+    """The wire form of ``values`` at precision ``bits`` (see :func:`numbers`); fixed point rounds to nearest."""
+    if bits == 0:
+        return struct.pack(f">{len(values)}f", *values)
+    if bits == 3:
+        return struct.pack(f">{len(values)}d", *values)
+    scale, limit = (1 << 20, 1 << 31) if bits == 1 else (1 << 32, 1 << 47)
+    raw = [round(v * scale) for v in values]
+    if any(not -limit <= r < limit for r in raw):
+        raise ValueError(f"xsens-mtdata2: {values} out of the range of {'FP12.20' if bits == 1 else 'FP16.32'}")
+    if bits == 1:
+        return struct.pack(f">{len(raw)}i", *raw)
+    return b"".join(struct.pack(">Ih", r & 0xFFFFFFFF, r >> 32) for r in raw)
 
 
 def rotation_vectors(q: np.ndarray) -> np.ndarray:
@@ -64,6 +116,7 @@ def _items(frame: bytes) -> tuple | None:
     if len(frame) != header + length + 1 or sum(frame, -frame[0]) & 0xFF:
         return None
     values: dict[str, Any] = {}
+    other: list[int] = []
     pos, end = header, len(frame) - 1
     while pos < end:
         if end - pos < 3:
@@ -72,18 +125,24 @@ def _items(frame: bytes) -> tuple | None:
         pos += 3
         if pos + size > end:
             return None  # the item overruns the payload
-        item = ITEMS.get(xdi)
-        if item is not None:
-            name, layout = item
+        vector, scalar = VECTORS.get(xdi & 0xFFF0 if not xdi & 0xC else -1), SCALARS.get(xdi)
+        if vector is not None:
+            name, count = vector
+            if size != count * _BYTES[xdi & 0x3]:
+                return None
+            values[name] = numbers(frame, pos, count, xdi & 0x3)
+        elif scalar is not None:
+            name, layout = scalar
             if size != layout.size:
                 return None
-            data = layout.unpack_from(frame, pos)
-            values[name] = data[0] if name in _SCALARS else data
+            values[name] = layout.unpack_from(frame, pos)[0]
+        elif len(other) < MAX_OTHER:
+            other.append(xdi)
         pos += size
     q = values.get("delta_q")
     if q is not None and not abs(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0) < 1e-5:
         return None  # the 8-bit checksum misses some multi-bit damage; a DeltaQ is always normalised
-    return tuple(values.get(name, empty) for name, empty in zip(FIELDS.names, _EMPTY_ROW))
+    return (*(values.get(name, _EMPTY_ROW[name]) for name in _VALUES), other + [0] * (MAX_OTHER - len(other)))
 
 
 def rotation_vector_to_quaternion(v: Vec3) -> tuple[float, float, float, float]:
@@ -93,23 +152,33 @@ def rotation_vector_to_quaternion(v: Vec3) -> tuple[float, float, float, float]:
     return (math.cos(angle / 2.0), k * v[0], k * v[1], k * v[2])
 
 
+class XsensOptions(Model):
+    """The MTi's output configuration as the emulated device sends it (a real one is read in any precision)."""
+
+    precision: Literal["float32", "fp12.20", "fp16.32", "float64"] = "float32"
+    outputs: Literal["increments", "rates"] = "increments"  # DeltaQ and DeltaV, or RateOfTurn and Acceleration
+
+
 class XsensCodec(ByteCodec[MtData2Frame]):
-    """Encode and decode MTData2 messages; increments from DeltaQ/DeltaV or from rates at ``rate_hz``."""
+    """Encode and decode MTData2 messages; increments from DeltaQ/DeltaV or from rates at ``rate_hz``.
+
+    Decoding reads every precision whatever ``precision`` says; ``precision`` and ``outputs`` ("increments":
+    DeltaQ, DeltaV; "rates": RateOfTurn, Acceleration) are what :meth:`encode` sends (the emulated device's
+    output configuration)."""
 
     name: ClassVar[str] = "xsens-mtdata2"
     kind: ClassVar[str] = "imu"
     sync: ClassVar[bytes] = PREAMBLE
     header_size: ClassVar[int] = 6  # enough for the extended length
     sequence_modulus: ClassVar[int] = 1 << 16
-
-    def __init__(self, rate_hz: float) -> None:
-        self.rate_hz = rate_hz
-
-    @classmethod
-    def from_config(cls, imu: Any, rate_hz: float) -> XsensCodec:
-        return cls(rate_hz)
-
     check_name: ClassVar[str] = "checksum"
+
+    Options: ClassVar[type[Model]] = XsensOptions
+    device_time: ClassVar[bool] = True
+
+    def __init__(self, rate_hz: float, **options: Any) -> None:
+        super().__init__(rate_hz, **options)
+        self.precision, self.outputs = self.options.precision, self.options.outputs
 
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         short = buf[starts + 3].astype(np.int64)
@@ -128,40 +197,48 @@ class XsensCodec(ByteCodec[MtData2Frame]):
         valid = np.array([v is not None for v in values], dtype=bool)
         return valid, np.array([v for v in values if v is not None], dtype=FIELDS)
 
+    def count_items(self, rows: np.ndarray, counters: Counters) -> None:
+        """The items the delivered messages carried beside those read, counted by kind."""
+        other = rows["other"]
+        kinds, counts = np.unique(other[other != 0], return_counts=True)
+        for xdi, n in zip(kinds.tolist(), counts.tolist()):
+            counters.skipped_items[item_kind(xdi)] = counters.skipped_items.get(item_kind(xdi), 0) + n
+
     def record(self, row: Any) -> MtData2Frame:
         values = {}
-        for name in FIELDS.names:
+        for name in _VALUES:
             value = row[name]
-            if name in _SCALARS:
+            if name in _SCALAR_NAMES:
                 values[name] = None if value < 0 else int(value)
             else:
                 values[name] = None if np.isnan(value[0]) else tuple(value.tolist())
         return MtData2Frame(**values)
 
     def encode(self, record: MtData2Frame) -> bytes:
+        bits, size = PRECISIONS[self.precision]
         payload = bytearray()
-        for f in fields(record):
-            value = getattr(record, f.name)
+        for name in _VALUES:
+            value = getattr(record, name)
             if value is None:
                 continue
-            xdi, layout = _XDI_OF[f.name]
-            payload += struct.pack(">HB", xdi, layout.size)
-            payload += layout.pack(value) if f.name in _SCALARS else layout.pack(*value)
+            xdi = _XDI_OF[name]
+            if name in _SCALAR_NAMES:
+                payload += struct.pack(">HB", xdi, SCALARS[xdi][1].size) + SCALARS[xdi][1].pack(value)
+            else:
+                payload += struct.pack(">HB", xdi | bits, size * len(value)) + pack_numbers(value, bits)
         if len(payload) < 0xFF:
             message = PREAMBLE + bytes([len(payload)]) + payload
         else:
             message = PREAMBLE + b"\xff" + len(payload).to_bytes(2, "big") + payload
         return message + bytes([-sum(message[1:]) & 0xFF])
 
-    def sequence(self, record: MtData2Frame) -> int | None:
-        return record.packet_counter
-
     def sequences(self, rows: np.ndarray) -> np.ndarray:
         return rows["packet_counter"]
 
     def increments(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(dtheta (N, 3) rad, dv (N, 3) m/s, usable (N,)) of message rows: from DeltaQ and DeltaV where
-        present, else from the rates over one sample; unusable where a message has neither."""
+        present, else from the rates over one sample (rectangle rule, see docs/devices.md); unusable where a
+        message has neither."""
         dt = 1.0 / self.rate_hz
         q = rows["delta_q"]
         dtheta = np.where(np.isnan(q[:, :1]), rows["rate_of_turn"] * dt, rotation_vectors(q))
@@ -169,43 +246,33 @@ class XsensCodec(ByteCodec[MtData2Frame]):
         return dtheta, dv, ~(np.isnan(dtheta[:, 0]) | np.isnan(dv[:, 0]))
 
     def samples(self, frames: FrameBatch) -> ImuSamples:
-        """Messages with neither increments nor rates are left out (counted by the caller)."""
+        """Messages with neither increments nor rates are left out (counted by the caller); the status is the
+        StatusWord, else the StatusByte (its low byte), else 0."""
         dtheta, dv, usable = self.increments(frames.rows)
-        status = np.maximum(frames.rows["status_word"], 0)
+        word, byte = frames.rows["status_word"], frames.rows["status_byte"]
+        status = np.where(word >= 0, word, np.maximum(byte, 0))
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time), status).take(usable)
 
-    def to_sample(self, decoded: Decoded[MtData2Frame]) -> ImuSample:
-        r = decoded.record
-        row = np.array([tuple(_EMPTY_ROW[k] if getattr(r, name) is None else getattr(r, name)
-                              for k, name in enumerate(FIELDS.names))], dtype=FIELDS)
-        dtheta, dv, usable = self.increments(row)
-        if not usable[0]:
-            raise DecodeError("xsens-mtdata2: message has neither DeltaQ/DeltaV nor RateOfTurn/Acceleration")
-        device_time = None if r.sample_time_fine is None else r.sample_time_fine / SAMPLE_TIME_HZ
-        return ImuSample(decoded.sync_index, tuple(dtheta[0].tolist()), tuple(dv[0].tolist()), decoded.host_time,
-                         device_time, r.status_word or 0)
-
-    def from_sample(self, sample: ImuSample, outputs: str = "increments") -> MtData2Frame:
-        """The message for an SI sample: ``outputs`` "increments" (DeltaQ, DeltaV) or "rates"."""
+    def from_sample(self, sample: ImuSample) -> MtData2Frame:
+        """The message for an SI sample, with the items ``outputs`` names."""
         frame = MtData2Frame(
             packet_counter=sample.sync_index & 0xFFFF,
             sample_time_fine=None if sample.device_time is None
             else round(sample.device_time * SAMPLE_TIME_HZ) & 0xFFFFFFFF,
             status_word=sample.status)
-        if outputs == "increments":
+        if self.outputs == "increments":
             return replace(frame, delta_q=rotation_vector_to_quaternion(sample.dtheta), delta_v=sample.dv)
-        if outputs == "rates":
-            return replace(frame, rate_of_turn=tuple(x * self.rate_hz for x in sample.dtheta),
-                           acceleration=tuple(x * self.rate_hz for x in sample.dv))
-        raise ValueError(f"xsens-mtdata2: outputs must be 'increments' or 'rates', got {outputs!r}")
+        return replace(frame, rate_of_turn=tuple(x * self.rate_hz for x in sample.dtheta),
+                       acceleration=tuple(x * self.rate_hz for x in sample.dv))
 
     def csv_header(self) -> list[str]:
-        return (["packet_counter", "sample_time_fine_100us", "status_word"]
+        return (["packet_counter", "sample_time_fine_100us", "status_byte", "status_word"]
                 + [f"delta_q_{c}" for c in "wxyz"] + [f"delta_v_{c}_mps" for c in "xyz"]
                 + [f"acc_{c}_mps2" for c in "xyz"] + [f"gyr_{c}_rad_s" for c in "xyz"])
 
     def csv_row(self, record: MtData2Frame) -> list[Any]:
         row: list[Any] = [record.packet_counter, record.sample_time_fine,
+                          None if record.status_byte is None else f"0x{record.status_byte:02X}",
                           None if record.status_word is None else f"0x{record.status_word:08X}"]
         for value, n in ((record.delta_q, 4), (record.delta_v, 3), (record.acceleration, 3),
                          (record.rate_of_turn, 3)):

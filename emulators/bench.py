@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.acl import AclCommand
-from drivers.codec import check_baudrate, imu_frame_bytes
+from drivers.codec import check_baudrate
 from drivers.registry import imu_codec
 from emulators.acl_server import AclServer
 from emulators.clocks import device_clocks
@@ -91,8 +91,7 @@ def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, Devic
     imu_cfg = cfg.imu
     imu_clock, table_clock = device_clocks(cfg)
     seed = cfg.trial.seed
-    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors,
-                           device_time=imu_cfg.protocol == "xsens-mtdata2")
+    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors)
     table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
     streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
                                   max(1, round(CHUNK_S / source.clock.period)))
@@ -128,10 +127,10 @@ class Bench:
         try:
             if link_dir is not None:
                 link_dir.mkdir(parents=True, exist_ok=True)
-            if imu_cfg.protocol == "can-dbc":
+            if codec.link == "can":
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:
-                check_baudrate("imu", imu_frame_bytes(codec), rate, imu_cfg.baudrate)
+                check_baudrate("imu", codec.frame_bytes(), rate, imu_cfg.baudrate)
                 imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
             check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)

@@ -11,7 +11,7 @@ With ``--link-dir DIR`` the serial ports are published as stable symbolic links 
 ``DIR/imu`` and ``DIR/turntable_data`` (as udev's by-id names), and named so; a later emulator on the
 same DIR points them at its own ptys. Without it, a device configured to unplug
 (``faults.unplug_at_s``) is published so in a private ``/tmp/hil-emulate-XXXX``. A replug points the
-link at the new pty. The IMU speaks ``imu.protocol`` (kvh1750 and xsens-mtdata2 on a pty, can-dbc on
+link at the new pty. The IMU speaks ``imu.protocol`` (a serial protocol on a pty, can-dbc on
 the python-can bus of ``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP
 port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as one line a device
 at exit (:mod:`emulators.command`), and to ``--stats-file`` as JSON. The devices themselves are

@@ -27,9 +27,9 @@ def emulated_reads(cfg: Config, duration: float, read_s: float = 0.1, host_t0: f
                    ) -> Iterator[RawChunk]:
     """The frames of a ``duration`` s run of ``cfg``'s emulated devices in reads of ``read_s``, in the
     order of their host times."""
-    if cfg.imu.protocol == "can-dbc":
-        raise ValueError("emulated_reads: the IMU's frames are CAN frames, not a byte stream")
     servo, streams = device_streams(cfg, duration)
+    if streams["imu"].source.codec.link != "serial":
+        raise ValueError("emulated_reads: the IMU's frames are CAN frames, not a byte stream")
     buffers = {name: bytearray() for name in streams}
     phase = {"imu": READ_LATENCY_S, "turntable_data": 0.5 * read_s + READ_LATENCY_S}
     reads = dict.fromkeys(streams, 1)  # each stream's current read: it ends at reads * read_s + phase

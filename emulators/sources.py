@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from drivers.kvh1750 import STATUS_ALL_VALID
 from drivers.tts1 import FULL_TURN_UDEG, UDEG_PER_RAD, Status, Tts1Codec
 from emulators.clocks import DeviceClock
 from emulators.sensor_errors import SensorErrorModel
@@ -55,12 +54,10 @@ class FrameSource:
 class ImuSource(FrameSource):
     """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``."""
 
-    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
-                 device_time: bool) -> None:
+    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel) -> None:
         super().__init__(clock, seed, 0)
-        self.codec, self.device_time = codec, device_time
+        self.codec = codec
         self.state["errors"] = errors
-        self.status = STATUS_ALL_VALID if codec.name == "kvh1750" else 0
 
     def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
         s, codec = self.state, self.codec
@@ -69,9 +66,9 @@ class ImuSource(FrameSource):
         dtheta, dv = s["errors"].apply(latch, dtheta, dv)
         s["last"] = float(latch[-1])
         clock = self.clock
-        dev = clock.device_time(latch).tolist() if self.device_time else [None] * len(k)
+        dev = clock.device_time(latch).tolist() if codec.device_time else [None] * len(k)
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=self.status))), bool(on))
+                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=codec.healthy_status))), bool(on))
                 for i, c, t, end, a, b, d, on in zip(clock.pulses(k), clock.counters(k), clock.tick_times(k), latch,
                                                       dtheta.tolist(), dv.tolist(), dev, clock.powered(k))]
 

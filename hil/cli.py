@@ -139,9 +139,19 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_decode(args: argparse.Namespace) -> int:
     from drivers.capture import decode_capture, detect_capture
 
+    import yaml
+
+    from hil.inputs import InputError
+
+    options = {}
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(f"--option {item}: expected KEY=VALUE")
+        options[key] = yaml.safe_load(value)
     auto = args.protocol == "auto"
     protocol = detect_capture(args.file) if auto else args.protocol
-    counters = decode_capture(protocol, args.file, out_csv=args.out, dbc=args.dbc)
+    counters = decode_capture(protocol, args.file, out_csv=args.out, dbc=args.dbc, rate_hz=args.rate, **options)
     print(json.dumps({"protocol": protocol, **counters} if auto else counters))
     return 0
 
@@ -263,11 +273,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "
                                       "last line")
-    p.add_argument("protocol", help="kvh1750, xsens-mtdata2, tts1, can-dbc, or auto (named from a byte dump's first "
-                                    "64 kB; not for CAN logs)")
+    p.add_argument("protocol", help="a protocol's name (kvh1750, xsens-mtdata2, stim300, tts1, can-dbc, or an "
+                                    "installed plug-in's), or auto (named from a byte dump's first 64 kB; not for CAN "
+                                    "logs)")
     p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
     p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
     p.add_argument("--dbc", help="DBC file for can-dbc")
+    p.add_argument("--rate", type=float, default=200.0, help="the device's output rate, Hz (default 200; a STIM300 "
+                                                            "needs its sample rate)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="one of the device's output settings, as imu.options takes it (repeatable)")
     p.set_defaults(func=cmd_decode)
     return parser
 

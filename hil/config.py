@@ -8,19 +8,23 @@ converts at the edges through the ``*_si`` helpers below. Unknown keys and bad v
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from hil.config_types import ZERO3, Model, Vec2, Vec3, Vec6
+from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors
+from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.inputs import InputError
+from hil.plugins import imu_codec_class, imu_options
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 MIN_READ_S = 0.02  # the shortest time between a live trial's reads (Config.read_s)
 MAX_READ_FRAMES = 50  # IMU frames a live read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
+_log = logging.getLogger(__name__)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 class ConfigError(InputError, ValueError):
     """A configuration that cannot be used; the message names the key path and the reason."""
@@ -97,31 +101,6 @@ class LimitsConfig(Model):
     accel_dps2: Vec3 = (100.0, 100.0, 100.0)
 
 
-class DeviceTiming(Model):
-    """How a device latches on the sync pulse and keeps its own time (emulated devices)."""
-
-    latch_jitter_us: float = Field(0.0, ge=0)  # 1-sigma jitter of the latch instant about pulse + delay
-    clock_drift_ppm: float = 0.0  # rate error of the device's own clock (its timestamps)
-    free_running: bool = False  # no sync input: the device latches on its own (drifting) clock
-    counter_start: int | None = Field(None, ge=0)  # counter at trial time 0; None: from trial.seed (emulators.clocks)
-
-
-class FaultConfig(Model):
-    """Faults injected into one emulated device's output; all off by default. Rates are per frame."""
-
-    drop_rate: float = Field(0.0, ge=0, le=1)  # probability that a drop burst starts at a frame
-    drop_burst: int = Field(1, ge=1)  # frames lost per drop event
-    corrupt_byte_rate: float = Field(0.0, ge=0, le=1)  # probability per byte of a flipped bit
-    truncate_rate: float = Field(0.0, ge=0, le=1)  # frames cut short
-    duplicate_rate: float = Field(0.0, ge=0, le=1)  # frames sent twice
-    reorder_rate: float = Field(0.0, ge=0, le=1)  # frames swapped with the next one
-    jitter_ms: float = Field(0.0, ge=0)  # extra write latency, uniform in [0, jitter_ms]
-    unplug_at_s: float | None = Field(None, ge=0)  # trial time of an unplug (pty closed / CAN silent)
-    unplug_s: float = Field(0.0, ge=0)  # how long the device stays unplugged
-    power_cycle_at_s: float | None = Field(None, ge=0)  # trial time the device loses power (port stays open)
-    power_cycle_s: float = Field(0.0, ge=0)  # how long it is silent; then its counter restarts from 0
-
-
 class TurntableConfig(Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
@@ -143,28 +122,6 @@ class TurntableConfig(Model):
         if self.source == "serial" and not self.data_port:
             raise ValueError("source 'serial' needs data_port (a pyserial URL)")
         return self
-
-
-class ImuErrors(Model):
-    """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
-
-    accel_bias_ug: Vec3 = ZERO3
-    accel_noise_ug: Vec3 = ZERO3  # white, 1-sigma per sample
-    accel_drift_ug_per_h: Vec3 = ZERO3  # linear bias drift b = b_s + k t
-    accel_random_walk_ug_per_sqrt_h: Vec3 = ZERO3  # bias random walk
-    accel_bias_instability_ug: Vec3 = ZERO3  # flicker bias B (IEEE 952): Allan deviation floor 0.664 B
-    accel_scale_ppm: Vec3 = ZERO3
-    accel_misalignment_arcsec: Vec6 = (0.0,) * 6  # (xy, xz, yx, yz, zx, zy)
-    accel_nonlinearity_ug_per_g2: Vec3 = ZERO3  # quadratic scale factor term K_nl
-    gyro_bias_dph: Vec3 = ZERO3
-    gyro_noise_dph: Vec3 = ZERO3  # white, 1-sigma per sample
-    gyro_drift_dph_per_h: Vec3 = ZERO3
-    gyro_random_walk_dph_per_sqrt_h: Vec3 = ZERO3
-    gyro_bias_instability_dph: Vec3 = ZERO3
-    gyro_scale_ppm: Vec3 = ZERO3
-    gyro_misalignment_arcsec: Vec6 = (0.0,) * 6
-    dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
-    dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
 
 
 class CanSignals(Model):
@@ -196,21 +153,13 @@ class CanConfig(Model):
         return {"interface": self.interface, "channel": self.channel, "bitrate": self.bitrate}
 
 
-class Kvh1750Format(Model):
-    """How the KVH 1750 itself is configured to output (its own settings, mirrored here)."""
-
-    gyro_unit: Literal["rad", "deg"] = "rad"
-    gyro_output: Literal["delta", "rate"] = "delta"
-    accel_unit: Literal["g", "m/s^2"] = "g"
-
-
 class ImuConfig(Model):
     source: Literal["emulator", "serial", "can"] = "emulator"
-    protocol: Literal["kvh1750", "xsens-mtdata2", "can-dbc"] = "kvh1750"
+    protocol: str = "kvh1750"  # a codec's name (hil.plugins: the built-ins and the entry points)
+    options: dict[str, Any] = Field({}, validate_default=True)  # the device's own output settings (its codec's model)
     port: str | None = None
     baudrate: int = Field(921600, gt=0)
-    can: CanConfig | None = None  # can-dbc: the default bus when left out
-    kvh1750: Kvh1750Format = Kvh1750Format()
+    can: CanConfig | None = None  # a CAN protocol: the default bus when left out
     rate_hz: float | None = Field(None, gt=0)  # defaults to trial.rate_hz
     latch_delay_us: float = Field(0.0, ge=0)  # from the pulse edge to the end of the increment interval
     timing: DeviceTiming = DeviceTiming()
@@ -220,12 +169,35 @@ class ImuConfig(Model):
 
     @model_validator(mode="before")
     @classmethod
-    def _can_bus_for_can_dbc(cls, data: Any) -> Any:
-        """An emulated ``can-dbc`` IMU without a ``can`` block is on the default bus (:class:`CanConfig`)."""
-        if isinstance(data, dict) and data.get("protocol") == "can-dbc" and data.get("can") is None \
-                and data.get("source", "emulator") == "emulator":
-            return {**data, "can": {}}
-        return data
+    def _old_keys_and_default_bus(cls, data: Any) -> Any:
+        """The old ``imu.kvh1750`` block is taken as ``imu.options``, with a deprecation line; an emulated IMU
+        on CAN without a ``can`` block is on the default bus (:class:`CanConfig`)."""
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        if "kvh1750" in data:
+            if "options" in data:
+                raise ValueError("kvh1750: give the KVH 1750's settings in imu.options only")
+            _log.warning("hil: imu.kvh1750 is deprecated and will be removed: write its keys under imu.options")
+            data["options"] = data.pop("kvh1750")
+        try:
+            on_can = imu_codec_class(data.get("protocol", "kvh1750")).link == "can"
+        except (ValueError, TypeError):  # an unknown protocol: its field's check names it
+            on_can = False
+        return {**data, "can": {}} if on_can and data.get("can") is None and data.get("source", "emulator") == \
+            "emulator" else data
+
+    @field_validator("protocol")
+    @classmethod
+    def _known_protocol(cls, name: str) -> str:
+        imu_codec_class(name)  # raises naming the IMU protocols there are
+        return name
+
+    @field_validator("options")
+    @classmethod
+    def _codec_options(cls, options: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
+        name = info.data.get("protocol")  # None: the protocol failed its check
+        return options if name is None else imu_options(name, options)
 
     @model_validator(mode="after")
     def _transport_given(self) -> ImuConfig:
@@ -360,16 +332,6 @@ class Config(Model):
         """Counts per second of the ``tts1`` sync counter: the pulse train's rate, or the table's own latch
         rate when it is free-running."""
         return self.trial.rate_hz if self.turntable.timing.free_running else self.imu_rate_hz
-
-
-def describe_validation(error: ValidationError) -> str:
-    lines = []
-    for item in error.errors():
-        path = ".".join(str(p) for p in item["loc"])
-        msg = {"extra_forbidden": "unknown key", "missing": "required key is missing"}.get(
-            item["type"], item["msg"].removeprefix("Value error, "))
-        lines.append(f"{path}: {msg}" if path else msg)
-    return "; ".join(lines)
 
 
 def parse_config(data: Any, source: str = "config") -> Config:

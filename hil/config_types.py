@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
 
 
 def _vector(n: int):
@@ -33,3 +33,13 @@ ZERO3 = (0.0, 0.0, 0.0)
 
 class Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")  # an inf survives JSON
+
+
+def describe_validation(error: ValidationError) -> str:
+    lines = []
+    for item in error.errors():
+        path = ".".join(str(p) for p in item["loc"])
+        msg = {"extra_forbidden": "unknown key", "missing": "required key is missing"}.get(
+            item["type"], item["msg"].removeprefix("Value error, "))
+        lines.append(f"{path}: {msg}" if path else msg)
+    return "; ".join(lines)

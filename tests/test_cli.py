@@ -188,7 +188,7 @@ def bad_inputs(tmp_path):
         (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/missing.dbc"], "missing.dbc", "cannot read: No such file"),
         (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/bad.dbc"], "bad.dbc", "not a usable DBC"),
         (["decode", "can-dbc", "{d}/cap.asc", "--dbc", "{d}/other.dbc"], "other.dbc", "none of the shipped signal"),
-        (["decode", "kvh1750", "{d}/cap.bin", "--dbc", "{d}/other.dbc"], "--dbc", "only for protocol can-dbc"),
+        (["decode", "kvh1750", "{d}/cap.bin", "--dbc", "{d}/other.dbc"], "--dbc", "only for a CAN protocol"),
         (["decode", "kvh1750", "{d}/cap.bin", "--out", "{d}/no/out.csv"], "out.csv", "No such file"),
         (["decode", "auto", "{d}/cap.bin"], "cap.bin", "no run of kvh1750, tts1, xsens-mtdata2 frames in its first 64"),
         (["decode", "auto", "{d}/cap.asc"], "cap.asc", "a CAN log needs can-dbc (and --dbc)"),

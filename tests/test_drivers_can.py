@@ -74,11 +74,13 @@ def test_j1939_golden_frames_use_standard_scaling():
 def test_j1939_rates_become_increments_with_the_imu_rate():
     codec = CanDbcCodec.for_dbc(J1939, 100.0)
     framer = codec.framer()
-    out = framer.feed_chunk(RawChunk("imu", 1.0, bytes.fromhex("0082 007D 007D FFFF"), codec.messages[0].frame_id, True))
-    out += framer.feed_chunk(RawChunk("imu", 1.0, bytes.fromhex("007D 007D D580 FFFF"), codec.messages[1].frame_id, True))
-    imu = codec.to_sample(out[0])
-    assert imu.dtheta == pytest.approx((math.radians(10) / 100, 0.0, 0.0))
-    assert imu.dv == pytest.approx((0.0, 0.0, 9.81 / 100))
+    first = framer.feed_chunk(RawChunk("imu", 1.0, bytes.fromhex("0082 007D 007D FFFF"), codec.messages[0].frame_id,
+                                        True))
+    imu = codec.samples(framer.feed_chunk(RawChunk("imu", 1.0, bytes.fromhex("007D 007D D580 FFFF"),
+                                                   codec.messages[1].frame_id, True)))
+    assert len(first) == 0 and len(imu) == 1
+    assert imu.dtheta[0] == pytest.approx((math.radians(10) / 100, 0.0, 0.0))
+    assert imu.dv[0] == pytest.approx((0.0, 0.0, 9.81 / 100))
 
 
 def test_session_on_a_virtual_bus_decodes_samples_and_logs_what_python_can_reads(tmp_path):

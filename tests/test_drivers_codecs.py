@@ -10,13 +10,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.acl import AclCodec, AclCommand, AclError, AclReply
-from drivers.codec import Decoded, DecodeError
+from drivers.codec import DecodeError
 from drivers.crc import crc16_xmodem, crc32_mpeg2
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec, KvhFrame
-from drivers.registry import codec_class, imu_codec, make_codec
+from drivers.registry import imu_codec, make_codec
 from drivers.tts1 import Tts1Codec, Tts1Frame, wrap_udeg
 from drivers.xsens import XsensCodec
 from hil.config import parse_config
+from hil.plugins import codec_class
 from hil.samples import ImuSample, TableSample
 
 KVH_PUBLISHED = bytes.fromhex("FE81FF55 37A96A6E 38586C1F B75BF862 BF803E78 BB650D28 3B0A37AC 77 3D 0028 4BFA34D8")
@@ -63,20 +64,20 @@ def test_kvh_rejects_a_flipped_bit():
 def test_kvh_rate_output_in_degrees_becomes_increments_in_radians():
     codec = Kvh1750Codec(rate_hz=200, gyro_unit="deg", gyro_output="rate", accel_unit="g")
     record = KvhFrame((10.0, 0.0, -20.0), (0.0, 0.0, 1.0), 0x77, 3, 25)
-    sample = codec.to_sample(Decoded(record, 3, 1.5, 36))
-    assert sample.dtheta == pytest.approx((math.radians(10) / 200, 0.0, -math.radians(20) / 200))
-    assert sample.dv == pytest.approx((0.0, 0.0, 9.80665 / 200))
-    assert (sample.sync_index, sample.host_time, sample.status) == (3, 1.5, 0x77)
+    samples = codec.samples(codec.framer().feed_batch(codec.encode(record), 1.5))
+    assert samples.dtheta[0] == pytest.approx((math.radians(10) / 200, 0.0, -math.radians(20) / 200))
+    assert samples.dv[0] == pytest.approx((0.0, 0.0, 9.80665 / 200))
+    assert (samples.sync_index[0], samples.host_time[0], samples.status[0]) == (3, 1.5, 0x77)
 
 
 def test_kvh_from_sample_round_trips_through_the_wire():
     codec = Kvh1750Codec(rate_hz=1000)
     sample = ImuSample(300, (1e-5, -2e-5, 3e-6), (1e-3, 2e-3, -9.8e-3), status=STATUS_ALL_VALID)
-    decoded = codec.framer().feed(codec.encode(codec.from_sample(sample, temperature=31)))
-    assert decoded[0].record.sequence == 300 % 128 and decoded[0].record.temperature == 31
-    back = codec.to_sample(decoded[0])
-    assert back.dtheta == pytest.approx(sample.dtheta, rel=1e-7)
-    assert back.dv == pytest.approx(sample.dv, rel=1e-7)
+    frames = codec.framer().feed_batch(codec.encode(codec.from_sample(sample)))
+    assert codec.record(frames.rows[0]).sequence == 300 % 128 and codec.record(frames.rows[0]).temperature == 25
+    back = codec.samples(frames)
+    assert back.dtheta[0] == pytest.approx(sample.dtheta, rel=1e-7)
+    assert back.dv[0] == pytest.approx(sample.dv, rel=1e-7)
 
 
 TTS1_BODY = bytes.fromhex("5453 01 21 E8030000 804A5D05 A0B949FD FF94BA0A 3200")
@@ -86,9 +87,9 @@ def test_tts1_hand_written_frame():
     frame = TTS1_BODY + Crc16Xmodem.calc(TTS1_BODY[2:]).to_bytes(2, "big")
     record = Tts1Codec().decode(frame)
     assert record == Tts1Frame(0x21, 1000, (90_000_000, -45_500_000, 179_999_999), 50)
-    sample = Tts1Codec().to_sample(Decoded(record, 1000, 2.0, 24))
-    assert sample.angles == pytest.approx((math.pi / 2, math.radians(-45.5), math.radians(179.999999)))
-    assert sample.latch_delay == pytest.approx(50e-6)
+    sample = Tts1Codec().samples(Tts1Codec().framer().feed_batch(frame, 2.0))
+    assert sample.angles[0] == pytest.approx((math.pi / 2, math.radians(-45.5), math.radians(179.999999)))
+    assert sample.latch_delay[0] == pytest.approx(50e-6)
     assert Tts1Codec().encode(record) == frame
 
 
@@ -124,8 +125,8 @@ def test_xsens_hand_written_message():
     record = codec.decode(XSENS)
     assert (record.packet_counter, record.sample_time_fine) == (300, 100000)
     assert record.delta_q == (1.0, 0.0, 0.0, 0.0) and record.delta_v == (0.5, -0.25, 2.0)
-    sample = codec.to_sample(Decoded(record, 300, 0.0, len(XSENS)))
-    assert sample.dtheta == (0.0, 0.0, 0.0) and sample.device_time == 10.0
+    samples = codec.samples(codec.framer().feed_batch(XSENS))
+    assert samples.dtheta.tolist() == [[0.0, 0.0, 0.0]] and samples.sync_index.tolist() == [300]
     assert codec.encode(record) == XSENS
 
 
@@ -137,8 +138,8 @@ def test_xsens_extended_length_and_unknown_items_are_handled():
     codec = XsensCodec(rate_hz=50)
     record = codec.decode(message)
     assert record.packet_counter == 7 and record.rate_of_turn == (1.0, 0.0, 0.0)
-    sample = codec.to_sample(Decoded(record, 7, 0.0, len(message)))
-    assert sample.dtheta == pytest.approx((1 / 50, 0.0, 0.0)) and sample.dv == pytest.approx((0.0, 0.0, 1 / 50))
+    samples = codec.samples(codec.framer().feed_batch(message))
+    assert samples.dtheta[0] == pytest.approx((1 / 50, 0.0, 0.0)) and samples.dv[0] == pytest.approx((0.0, 0.0, 1 / 50))
 
 
 def test_xsens_rejects_a_bad_checksum_and_a_bad_item_size():
@@ -155,13 +156,12 @@ def test_xsens_rejects_a_bad_checksum_and_a_bad_item_size():
 @given(st.tuples(*[st.floats(-0.5, 0.5)] * 3), st.tuples(*[st.floats(-10, 10)] * 3),
        st.integers(0, 10**6), st.sampled_from(["increments", "rates"]))
 def test_xsens_from_sample_round_trips(dtheta, dv, index, outputs):
-    codec = XsensCodec(rate_hz=400)
+    codec = XsensCodec(rate_hz=400, outputs=outputs)
     sample = ImuSample(index, dtheta, dv, device_time=index / 400)
-    decoded = codec.framer().feed(codec.encode(codec.from_sample(sample, outputs=outputs)))
-    back = codec.to_sample(decoded[0])
-    assert back.sync_index == index % 65536
-    assert back.dtheta == pytest.approx(dtheta, rel=1e-6, abs=1e-7)
-    assert back.dv == pytest.approx(dv, rel=1e-6, abs=1e-6)
+    back = codec.samples(codec.framer().feed_batch(codec.encode(codec.from_sample(sample))))
+    assert back.sync_index.tolist() == [index % 65536]
+    assert back.dtheta[0] == pytest.approx(dtheta, rel=1e-6, abs=1e-7)
+    assert back.dv[0] == pytest.approx(dv, rel=1e-6, abs=1e-6)
 
 
 def test_acl_command_lines_follow_the_language():
@@ -193,7 +193,7 @@ def test_registry_finds_every_protocol_by_name():
 
 def test_imu_codec_follows_the_config():
     base = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
-    kvh = imu_codec(parse_config({**base, "imu": {"kvh1750": {"gyro_unit": "deg", "gyro_output": "rate"}}}).imu, 400)
+    kvh = imu_codec(parse_config({**base, "imu": {"options": {"gyro_unit": "deg", "gyro_output": "rate"}}}).imu, 400)
     assert (kvh.name, kvh.gyro_unit, kvh.gyro_output, kvh.rate_hz) == ("kvh1750", "deg", "rate", 400)
     can_cfg = parse_config({**base, "imu": {"source": "can", "protocol": "can-dbc", "can": {}}}).imu
     assert imu_codec(can_cfg, 200).sync_modulus == 1 << 24

@@ -110,14 +110,12 @@ def test_frames_pass_an_independent_checker_and_match_truth(zero_error_run):
 def test_zero_error_increments_equal_simulation_to_float32(zero_error_run):
     out, cfg = zero_error_run
     codec = Kvh1750Codec(RATE)
-    decoded = codec.framer().feed(out["imu"])
-    assert codec.framer().counters.corrupt == 0
-    samples = [codec.to_sample(d) for d in decoded]
+    framer = codec.framer()
+    samples = codec.samples(framer.feed_batch(out["imu"]))
+    assert framer.counters.corrupt == 0
     batch = next(Simulation.from_config(cfg).batches())
     assert len(samples) == len(batch)
-    dtheta = np.array([s.dtheta for s in samples])
-    dv = np.array([s.dv for s in samples])
-    np.testing.assert_allclose(dtheta, batch.dtheta, rtol=1.5e-7, atol=0)
-    np.testing.assert_allclose(dv, batch.dv, rtol=1.5e-7, atol=0)
-    table = Tts1Codec().framer().feed(out["turntable_data"])
-    assert [d.record.sync_counter for d in table] == list(range(1, len(batch) + 1))
+    np.testing.assert_allclose(samples.dtheta, batch.dtheta, rtol=1.5e-7, atol=0)
+    np.testing.assert_allclose(samples.dv, batch.dv, rtol=1.5e-7, atol=0)
+    table = Tts1Codec().framer().feed_batch(out["turntable_data"])
+    assert table.rows["sync_counter"].tolist() == list(range(1, len(batch) + 1))

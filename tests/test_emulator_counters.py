@@ -10,9 +10,9 @@ import yaml
 from test_faults import capture
 
 from drivers.can_dbc import CanDbcCodec
-from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec
-from drivers.xsens import XsensCodec
+from drivers.kvh1750 import Kvh1750Codec
+from drivers.registry import imu_codec
 from emulators.bench import device_streams
 from emulators.clocks import counter_starts, imu_counter_modulus
 from hil.config import ConfigError, parse_config
@@ -39,8 +39,9 @@ def emitted(cfg, name: str, duration: float) -> list:
 
 
 def imu_counters(cfg, duration: float) -> list[int]:
-    codec = {"kvh1750": Kvh1750Codec, "xsens-mtdata2": XsensCodec}[cfg.imu.protocol](cfg.imu_rate_hz)
-    return [codec.sequence(codec.decode(e.payload)) for e in emitted(cfg, "imu", duration) if e.powered]
+    codec = imu_codec(cfg.imu, cfg.imu_rate_hz)
+    return [int(codec.sequences(codec.framer().feed_batch(e.payload).rows)[0])  # each frame on its own
+            for e in emitted(cfg, "imu", duration) if e.powered]
 
 
 def table_counters(cfg, duration: float) -> list[int]:

@@ -55,14 +55,13 @@ def capture(cfg: dict | Config, speed: float | None = None, duration: float | No
 
 def framed(codec, data: bytes):
     framer = codec.framer()
-    decoded = framer.feed(data, math.nan)
-    return framer.counters, decoded
+    return framer.counters, framer.feed_batch(data, math.nan)
 
 
 def imu_counters(fault: dict):
     stats, out = capture(trial(imu={"faults": fault}))
     counters, decoded = framed(Kvh1750Codec(RATE), out["imu"])
-    ends = decoded[0].sync_index - 1 + N - decoded[-1].sync_index  # losses at either end leave no gap
+    ends = decoded.sync_index[0] - 1 + N - decoded.sync_index[-1]  # losses at either end leave no gap
     return stats.devices["imu"].faults, counters, ends
 
 
@@ -108,7 +107,7 @@ def test_table_faults_show_in_the_tts1_counters():
     stats, out = capture(trial(turntable={"faults": {"drop_rate": 0.01, "duplicate_rate": 0.02}}))
     injected = stats.devices["turntable_data"].faults
     counters, decoded = framed(Tts1Codec(), out["turntable_data"])
-    assert counters.missing + decoded[0].sync_index - 1 + N - decoded[-1].sync_index == injected["dropped"] > 0
+    assert counters.missing + decoded.sync_index[0] - 1 + N - decoded.sync_index[-1] == injected["dropped"] > 0
     assert counters.duplicates == injected["duplicated"] > 0
     assert stats.devices["imu"].faults["dropped"] == 0
 
@@ -191,15 +190,15 @@ def test_stats_go_to_stderr_and_the_stats_file(tmp_path):
 
 def test_unwrapper_tells_repeats_and_late_frames_from_wraps():
     unwrapper = SequenceUnwrapper(128, rate_hz=200.0)
-    assert unwrapper.next(5, 0.0) == (5, 0)
-    assert unwrapper.next(7, 0.01) == (7, 1)
-    assert unwrapper.next(6, 0.01) == (6, -1)  # late
-    assert unwrapper.next(7, 0.01) == (7, -1)  # repeated
-    assert unwrapper.next(7, 0.01 + 128 / 200.0) == (135, 127)  # a whole period later: a wrap
+    index, missing, repeated = unwrapper.next_many(np.array([5, 7, 6, 7, 7]),
+                                                   np.array([0.0, 0.01, 0.01, 0.01, 0.01 + 128 / 200.0]))
+    # then late, repeated, and a whole period later: a wrap
+    assert list(zip(index.tolist(), missing.tolist())) == [(5, 0), (7, 1), (6, -1), (7, -1), (135, 127)]
+    assert repeated.tolist() == [False, False, False, True, False]
     codec = Kvh1750Codec(RATE)
     frames = [codec.encode(KvhFrame((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0x77, i, 25)) for i in (1, 2, 2, 4, 3, 5)]
     counters, decoded = framed(codec, b"".join(frames))
-    assert [d.sync_index for d in decoded] == [1, 2, 4, 5]
+    assert decoded.sync_index.tolist() == [1, 2, 4, 5]
     assert (counters.duplicates, counters.out_of_order, counters.missing) == (1, 1, 1)
     assert counters.skipped_bytes == 72
 
@@ -229,7 +228,7 @@ def test_a_clock_latching_every_fifth_pulse_counts_the_pulses():
 def test_a_table_under_a_faster_imu_latches_every_nth_pulse_and_counts_them():
     stats, out = capture(trial(imu={"rate_hz": 5 * RATE}, turntable={"faults": {"drop_rate": 0.02}}))
     counters, decoded = framed(Tts1Codec(pulses_per_frame=5), out["turntable_data"])
-    sent = [d.sync_index for d in decoded]
+    sent = decoded.sync_index.tolist()
     assert set(sent) < set(range(5, 5 * N + 1, 5))  # the pulse count at every fifth pulse of 1 kHz
     ends = (sent[0] - 5 + 5 * N - sent[-1]) // 5  # frames lost at either end leave no gap
     assert counters.missing + ends == stats.devices["turntable_data"].faults["dropped"] > 0
@@ -239,7 +238,7 @@ def test_a_table_under_a_faster_imu_latches_every_nth_pulse_and_counts_them():
 def test_a_free_running_table_under_a_faster_imu_counts_its_own_latches():
     stats, out = capture(trial(imu={"rate_hz": 5 * RATE}, turntable={"timing": {"free_running": True}}))
     _, decoded = framed(Tts1Codec(), out["turntable_data"])
-    assert [d.sync_index for d in decoded] == list(range(1, N + 1))
+    assert decoded.sync_index.tolist() == list(range(1, N + 1))
     assert stats.devices["imu"].frames == stats.pulses == 5 * N
 
 
@@ -255,6 +254,6 @@ def test_a_free_running_table_ticks_on_its_own_drifting_clock():
     stats, out = capture(trial(turntable={"timing": {"free_running": True, "clock_drift_ppm": 5000.0}}))
     _, decoded = framed(Tts1Codec(), out["turntable_data"])
     # 2 s on a clock 0.5 % fast at 200 Hz: 402 frames, each flagged free-running; the IMU keeps the pulses
-    assert [d.sync_index for d in decoded] == list(range(1, 403))
-    assert all(d.record.status & Status.FREE_RUNNING for d in decoded)
+    assert decoded.sync_index.tolist() == list(range(1, 403))
+    assert all(decoded.rows["status"] & Status.FREE_RUNNING)
     assert stats.devices["imu"].frames == 400 and stats.pulses == 400

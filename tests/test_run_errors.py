@@ -72,11 +72,11 @@ def test_a_port_that_cannot_be_opened_is_one_line_with_its_url(tmp_path, capsys)
 
 
 def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_key(tmp_path, capsys):
-    device = _config(tmp_path, "device", imu={"kvh1750": {"accel_unit": "g"}})
+    device = _config(tmp_path, "device", imu={"options": {"accel_unit": "g"}})
     proc, ports = spawn_emulator(device, tmp_path / "ports.json", "max", 60.0)
     try:
         harness = _config(tmp_path, "harness", imu={"source": "serial", "port": ports["imu"],
-                                                     "kvh1750": {"accel_unit": "m/s^2"}},
+                                                     "options": {"accel_unit": "m/s^2"}},
                           turntable={"source": "serial", "data_port": ports["turntable_data"]})
         out = tmp_path / "out"
         assert main(["run", str(harness), "--duration", "60", *FAST, "--out", str(out)]) == 1
@@ -84,7 +84,7 @@ def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_k
         proc.kill()
         proc.wait()
     err = capsys.readouterr().err
-    assert "imu.kvh1750.accel_unit" in err and "rejected" in err
+    assert "imu.options.accel_unit" in err and "rejected" in err
     result = yaml.safe_load((out / "result.json").read_text())
     assert result["ended"].startswith("early: every IMU sample") and result["trial"]["duration_s"] < 10
 

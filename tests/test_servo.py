@@ -109,7 +109,7 @@ class Readers:
             t.start()
 
     def table_frames(self):
-        return Tts1Codec().framer().feed(bytes(self.table))
+        return Tts1Codec().framer().feed_batch(bytes(self.table))
 
     def wait_table_frames(self, n: int) -> None:
         deadline = time.monotonic() + 10
@@ -119,7 +119,7 @@ class Readers:
 
     def wait_swing_frames(self, n: int) -> None:
         deadline = time.monotonic() + 20
-        while sum(d.record.status >> 5 == Mode.SYNTHESIS for d in self.table_frames()) < n:
+        while np.count_nonzero(self.table_frames().rows["status"] >> 5 == Mode.SYNTHESIS) < n:
             assert time.monotonic() < deadline
             time.sleep(0.02)
 
@@ -149,19 +149,20 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
         emu.join()
         readers.join()
     frames = readers.table_frames()
-    modes = [d.record.status >> 5 for d in frames]
-    k_s = frames[modes.index(Mode.SYNTHESIS)].sync_index
-    k_off = next((d.sync_index for d, m in zip(frames, modes) if m == Mode.OFF), frames[-1].sync_index + 1)
+    modes = (frames.rows["status"] >> 5).tolist()
+    index = frames.sync_index.tolist()
+    k_s = index[modes.index(Mode.SYNTHESIS)]
+    k_off = next((k for k, m in zip(index, modes) if m == Mode.OFF), index[-1] + 1)
     assert k_s > 100 and k_off > k_s + 200 and all(m == Mode.POSITION for m in modes[:k_s - 1])
-    assert frames[0].sync_index == 1
-    frames = frames[:k_off - 1]
-    latch = np.array([d.sync_index for d in frames]) / RATE + 50e-6
+    assert index[0] == 1
+    rows = frames.rows[:k_off - 1]
+    latch = np.array(index[:k_off - 1]) / RATE + 50e-6
     t_s = k_s / RATE
     swing = 10.0 + 5.0 * np.sin(2 * math.pi * 0.25 * (latch - t_s))
     expected_inner = np.where(latch >= t_s, swing, 10.0)
-    inner = np.array([d.record.angles_udeg[2] for d in frames]) * 1e-6
+    inner = rows["angles_udeg"][:, 2] * 1e-6
     assert np.max(np.abs(inner - expected_inner)) <= 0.5e-6
-    assert all(d.record.angles_udeg[:2] == (5_000_000, 2_000_000) for d in frames)
+    assert (rows["angles_udeg"][:, :2] == (5_000_000, 2_000_000)).all()
 
     # The IMU senses that motion: its increments equal the truth of the same piecewise swing.
     def motion(t):
@@ -176,11 +177,11 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
 
     motion.breaks = lambda t0, t1: np.array([t_s]) if t0 < t_s < t1 else np.empty(0)
     codec = Kvh1750Codec(RATE)
-    imu = [codec.to_sample(d) for d in codec.framer().feed(bytes(readers.imu))][:k_off - 1]
+    imu = codec.samples(codec.framer().feed_batch(bytes(readers.imu))).dtheta[:k_off - 1]
     n = len(imu)
     truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(cfg.turntable), motion)
     dtheta, _ = truth.increments(0.0, np.arange(1, n + 1) / RATE)
-    np.testing.assert_allclose([s.dtheta for s in imu], dtheta, rtol=2e-7, atol=1e-13)
+    np.testing.assert_allclose(imu, dtheta, rtol=2e-7, atol=1e-13)
 
 
 def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
@@ -203,7 +204,8 @@ def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
             assert client.interlocks_closed("inner")
         emu.join()
         readers.join()
-    status = {d.sync_index: d.record.status for d in readers.table_frames()}
+    frames = readers.table_frames()
+    status = dict(zip(frames.sync_index.tolist(), frames.rows["status"].tolist()))
     assert status[199] == (Status.INTERLOCKS_CLOSED | Mode.POSITION << 5)
     assert status[200] == (Status.FAULT | Mode.OFF << 5)  # tripped at the pulse of t = 1 s
     assert status[max(status)] & Status.INTERLOCKS_CLOSED and not status[max(status)] & Status.FAULT

@@ -22,7 +22,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hil.campaign.task import RunTask, point_label
-from hil.config import Config, ConfigError, InputError, describe_validation, parse_config
+from hil.config import Config, ConfigError, InputError, parse_config
+from hil.config_types import describe_validation
 from hil.inputs import resolve_path
 
 

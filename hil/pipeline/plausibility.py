@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.config import ImuConfig
 from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.units import DEG, G0
 
@@ -64,17 +63,11 @@ class ImuPlausibility:
 
 @dataclass(frozen=True)
 class UnitKeys:
-    """The config keys that set the IMU's output units: the KVH 1750's own settings, else its protocol."""
+    """The config keys that set the IMU's output units (its codec's :meth:`~drivers.codec.Codec.unit_advice`)."""
 
     accel_unit: str
     gyro_unit: str
     gyro_output: str
-
-    @classmethod
-    def of(cls, imu: ImuConfig) -> UnitKeys:
-        if imu.protocol == "kvh1750":
-            return cls("imu.kvh1750.accel_unit", "imu.kvh1750.gyro_unit", "imu.kvh1750.gyro_output")
-        return cls(*(f"imu.protocol ({imu.protocol})",) * 3)
 
 
 def small_rotation_vectors(c: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent, imu_frame_bytes
+from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent
 from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec, make_codec
 from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
@@ -108,7 +108,7 @@ class TrialProcessor:
         """The sync pairing of the two streams' counters (docs/harness.md, "Sync pairing")."""
         codec = self.decoders[IMU].codec
         rate = cfg.imu_rate_hz
-        wire = (imu_frame_bytes(codec) * BITS_PER_BYTE / cfg.imu.baudrate,  # a CAN frame's bus time: negligible
+        wire = (codec.frame_bytes() * BITS_PER_BYTE / cfg.imu.baudrate,  # a CAN frame's bus time: negligible
                 TTS1_BYTES * BITS_PER_BYTE / cfg.turntable.baudrate)
 
         def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
@@ -193,7 +193,7 @@ class TrialProcessor:
         if not self.watch.stalled or self._stalled_by is None:
             return None
         return (f"every IMU sample for {self.watch.run / self.cfg.imu_rate_hz:.1f} s was rejected: "
-                f"{self._stalled_by.diagnosis(UnitKeys.of(self.cfg.imu))}")
+                f"{self._stalled_by.diagnosis(UnitKeys(*self.decoders[IMU].codec.unit_advice()))}")
 
     def _rejected(self, by: ImuPlausibility | GyroTableGate, n: int = 1) -> None:
         self.watch.rejected(n)

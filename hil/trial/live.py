@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.codec import RawChunk, StreamEvent, check_baudrate, imu_frame_bytes
+from drivers.codec import RawChunk, StreamEvent, check_baudrate
 from drivers.latency import LatencyHistogram
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
@@ -185,7 +185,7 @@ class LiveTrial:
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
-            frame_bytes = imu_frame_bytes(self.processor.decoders[IMU].codec)
+            frame_bytes = self.processor.decoders[IMU].codec.frame_bytes()
             check_baudrate("imu", frame_bytes, cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})

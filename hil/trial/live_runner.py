@@ -40,7 +40,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     duration = duration if duration is not None else cfg.trial.duration_s
     if is_emulated and duration is None:
         raise TrialSetupError("an emulated trial needs trial.duration_s or --duration")
-    if is_emulated and cfg.imu.protocol == "can-dbc" and cfg.imu.can is not None and cfg.imu.can.interface == "virtual":
+    if is_emulated and cfg.imu.can is not None and cfg.imu.can.interface == "virtual":
         raise TrialSetupError("imu.can.interface: 'virtual' reaches only its own process, and the emulated devices "
                               "run in theirs; use udp_multicast (the default without an imu.can block)")
     time_scale = parse_speed(speed) if is_emulated else 1.0
