@@ -125,6 +125,9 @@ class TurntableConfig(Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
     command_port: str | None = None
+    controller: str = "acutrol"  # a name of drivers/controllers.py (built-in or entry point)
+    controller_options: dict[str, Any] = {}  # validated by the controller's own model
+    data_protocol: str = "tts1"  # the codec registry's name of the table's data frames
     baudrate: int = Field(115200, gt=0)
     motion: MotionConfig = MotionConfig()
     azimuth_deg: float = 0.0  # azimuth of the outer axis zero, from north towards east

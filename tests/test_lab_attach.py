@@ -140,7 +140,7 @@ def test_a_trial_that_commands_the_table_of_a_running_emulator_completes_and_lea
         stats = json.loads(emulator.stats_file.read_text())
     doc = result(out)
     assert doc["ended"] == "completed" and doc["streams"]["sync"]["paired_by"] == "motion" and within_sigmas(doc)
-    assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "O,O,O"
+    assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "Off,Off,Off"
 
 
 def test_a_calibration_of_a_running_emulator_completes(tmp_path):

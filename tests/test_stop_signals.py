@@ -57,8 +57,8 @@ def test_a_signal_mid_trial_turns_the_table_off_and_keeps_replayable_outputs(tmp
     assert 0 < result["trial"]["duration_s"] < 300
     assert (out / "report.html").exists() and "trial_completed" in (out / "junit.xml").read_text()
     emulator = json.loads((out / "emulator.json").read_text())
-    assert emulator["table_modes_off"] == 1 and emulator["table_modes"] == "O,O,O"
-    assert "acl: :Mode ALL,Off -> OK" in (out / "emulator.log").read_text()
+    assert emulator["table_modes_off"] == 1 and emulator["table_modes"] == "Off,Off,Off"
+    assert "acutrol: :Mode:Off 3;:Mode:Off 2;:Mode:Off 1 -> OK" in (out / "emulator.log").read_text()
     assert "could not confirm" not in err
     # the recording holds everything the trial processed and says how it ended
     assert main(["replay", str(out), "--out", str(tmp_path / "replay"), "--viewer", "none", "--no-figures"]) == 1

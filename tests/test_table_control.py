@@ -57,7 +57,7 @@ def _commanded(tmp_path, **turntable):
     return path
 
 
-def test_run_arms_the_emulated_table_over_acl(tmp_path):
+def test_run_arms_the_emulated_acutrol(tmp_path):
     out = tmp_path / "out"
     code = main(["run", str(_commanded(tmp_path)), "--duration", "30", "--speed", "max", "--quiet",
                  "--viewer", "none", "--no-figures", "--out", str(out)])
@@ -66,8 +66,8 @@ def test_run_arms_the_emulated_table_over_acl(tmp_path):
     assert result["ended"] == "completed"
     assert result["trial"]["duration_s"] == pytest.approx(30.0) and result["estimate"]["gram_rank"] == 12
     table = json.loads((out / "emulator.json").read_text())
-    assert table["table_modes_off"] == 1 and table["table_modes"] == "O,O,O"
-    assert "acl: :Mode ALL,Off -> OK" in (out / "emulator.log").read_text()
+    assert table["table_modes_off"] == 1 and table["table_modes"] == "Off,Off,Off"
+    assert "acutrol: :Mode:Off 3;:Mode:Off 2;:Mode:Off 1 -> OK" in (out / "emulator.log").read_text()
 
 
 def test_an_interlock_trip_ends_the_trial_and_keeps_its_outputs(tmp_path, capsys):

@@ -32,7 +32,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
 
     schedule = checked_schedule(cfg, str(config_path))
     if not cfg.turntable.command_port:
-        raise TrialSetupError("turntable.command_port: hil calibrate commands the table over acl; set its port "
+        raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "
                               "('emulator' for the emulated table)")
     is_emulated = emulated(cfg)
     duration = emulated_length(cfg, schedule) if is_emulated else None
@@ -43,7 +43,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
         sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz,
                                        **sequence_views(viewer, schedule, cfg))
         sequence.start()
-        control.client.configure_sync(True)
+        control.client.sync_output(True)
         sequences.append(sequence)
         return sequence, {"on_samples": sequence.on_samples, "finished": lambda: sequence.done,
                           "queue_items": QUEUE_ITEMS}
