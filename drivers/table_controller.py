@@ -96,7 +96,7 @@ class TableController(ABC):
             self.port = None
 
     def __enter__(self) -> TableController:
-        return self.open()
+        return self if self.port is not None else self.open()
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -109,8 +109,9 @@ class TableController(ABC):
     # What a trial may ask
 
     @classmethod
-    def refusal(cls, modes: set[str], gimbals: set[str]) -> str | None:
-        """Why this controller cannot run a trial that needs ``modes`` on ``gimbals`` (None: it can)."""
+    def refusal(cls, modes: set[str], gimbals: set[str], options: BaseModel | None = None) -> str | None:
+        """Why this controller (with ``options``) cannot run a trial that needs ``modes`` on ``gimbals``
+        (None: it can)."""
         missing = [g for g in GIMBAL_AXES if g in gimbals and g not in cls.gimbals]
         if missing:
             return (f"turntable.controller {cls.name!r} commands the {', '.join(cls.gimbals)} axis only; the trial "

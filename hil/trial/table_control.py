@@ -31,21 +31,23 @@ RATE_TOLERANCE = 0.1
 
 
 def motion_needs(table: TurntableConfig) -> tuple[set[str], set[str]]:
-    """The modes and gimbals ``turntable.motion`` commands."""
+    """The modes ``turntable.motion`` commands, and the gimbals it moves off their zero (a table that
+    commands fewer axes leaves the others where they are)."""
     motion, modes, gimbals = table.motion, set(), set()
     for gimbal in GIMBAL_AXES:
         mode = _mode(table, gimbal)
-        moves = mode == "synthesis" or (mode == "rate" and getattr(motion.axes, gimbal).rate_dps)
+        axis = getattr(motion.axes, gimbal)
+        moves = axis.amplitude_deg if mode == "synthesis" else axis.rate_dps if mode == "rate" else axis.center_deg
         modes |= {mode} | ({"position"} if mode == "synthesis" else set())
-        gimbals |= {gimbal} if moves or mode == "position" else set()
+        gimbals |= {gimbal} if moves else set()
     return modes, gimbals
 
 
 def check_controller(table: TurntableConfig, modes: set[str], gimbals: set[str]) -> None:
     """Raise :class:`TableError` (one line) when ``turntable.controller`` cannot move ``gimbals`` in ``modes``,
     or a :class:`hil.config.ConfigError` when its options are not valid; nothing is sent."""
-    controller_options(table)
-    why = controller_class(table.controller).refusal(modes, gimbals)
+    options = controller_options(table)
+    why = controller_class(table.controller).refusal(modes, gimbals, options)
     if why is not None:
         raise TableError(f"{why}; nothing was sent")
 
