@@ -1,4 +1,5 @@
-"""Turntable controllers found by name, as the codecs are: one table plus the entry-point group
+"""The turntable's plug-ins by name: its data codec (``turntable.data_protocol``, from the codec registry) and
+its controller. Controllers are found as the codecs are: one table plus the entry-point group
 ``turntable_hil.table_controllers``, whose entries name a :class:`drivers.table_controller.TableController`
 subclass. A controller's class names its emulated table (``emulated_table = "module:Class"``) and its
 options model (``Options``), which validates ``turntable.controller_options``.
@@ -12,7 +13,9 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from drivers.registry import codec_class
 from hil.config import ConfigError, describe_validation
+from hil.samples import TableSample
 
 CONTROLLERS: dict[str, tuple[str, str]] = {
     "acutrol": ("drivers.acutrol_controller", "AcutrolController"),
@@ -51,3 +54,20 @@ def controller_options(table: Any) -> Any:
 def make_controller(table: Any, url: str) -> Any:
     """The controller a ``turntable`` config block asks for, on command port ``url`` (not yet open)."""
     return controller_class(table.controller)(url, table.limits, controller_options(table), table.baudrate)
+
+
+def data_codec(table: Any, pulses_per_frame: int = 1) -> Any:
+    """The codec of the table's data frames, ``turntable.data_protocol`` in the codec registry."""
+    try:
+        cls = codec_class(table.data_protocol)
+    except KeyError as exc:
+        raise ConfigError(f"turntable.data_protocol: {exc.args[0]}") from None
+    if getattr(cls, "kind", None) != "table":
+        raise ConfigError(f"turntable.data_protocol: {table.data_protocol!r} is not a turntable data protocol "
+                          f"(its kind is {getattr(cls, 'kind', None)!r})")
+    return cls(pulses_per_frame=pulses_per_frame)
+
+
+def frame_bytes(codec: Any) -> int:
+    """Bytes one table frame of ``codec`` takes on a serial line."""
+    return len(codec.encode(codec.from_sample(TableSample(0, (0.0, 0.0, 0.0)))))

@@ -113,3 +113,16 @@ def test_a_rate_test_on_the_emulated_rate_table_recovers_the_bias(tmp_path):
     stats = json.loads((out / "emulator.json").read_text())
     assert stats["table_modes"] == "Off" and stats["table_modes_off"] == 1
     assert [line for line, code in stats["table_log"]] == ["VEL60", "ACL30", "STA", "JOG10.000000", "STO", "STA"]
+
+
+@pytest.mark.parametrize(("protocol", "message"), [
+    ("kvh1750", "turntable.data_protocol: 'kvh1750' is not a turntable data protocol (its kind is 'imu')"),
+    ("tts9", "turntable.data_protocol: protocol 'tts9': unknown; known protocols:")])
+def test_the_table_data_protocol_is_a_table_codec_of_the_registry(tmp_path, capsys, protocol, message):
+    cfg = yaml.safe_load((ROOT / "configs" / "rate_table_aerosmith.yaml").read_text())
+    cfg["turntable"]["data_protocol"] = protocol
+    path = tmp_path / "rate.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--viewer", "none", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
