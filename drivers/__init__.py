@@ -3,8 +3,9 @@
 Modules, one job each:
 ``crc`` catalogue CRCs · ``codec`` the codec interface, decoded-frame and raw-chunk records ·
 ``framing`` byte-stream framer and counter unwrapping · ``kvh1750``, ``xsens``, ``tts1``, ``can_dbc``,
-``acl`` the protocols · ``registry`` codecs by name · ``tap`` raw and sample listeners ·
+``acl`` the protocols (``acl``: the Acutrol command language) · ``registry`` codecs by name · ``tap`` raw and sample listeners ·
 ``transport`` pyserial and python-can transports · ``pty_guard`` no reopen onto another program's pty ·
 ``reader`` reader threads that survive replugs ·
-``table_client`` turntable commands within limits · ``capture`` decoding of raw captures to CSV.
+``table_controller`` the turntable controller interface · ``controllers`` controllers and the table's
+data codec by name · ``acutrol_controller``, ``aerosmith_controller`` the shipped controllers · ``capture`` decoding of raw captures to CSV.
 """

@@ -58,8 +58,8 @@ class Node:
 
 
 AXIS, AXES, MODE, NUM, WORD, STATE, INT = "axis", "axis|ALL", "mode", "num", "word", "state", "int"
-_LIMIT = dict(args=(MODE, AXES, NUM), query=(MODE, AXIS))
-_READ = dict(query=(AXES,), bare_query=True)
+_LIMIT = {"args": (MODE, AXES, NUM), "query": (MODE, AXIS)}
+_READ = {"query": (AXES,), "bare_query": True}
 TREE = Node("", children=(
     Node("Read", children=(Node("Position", **_READ), Node("Rate", **_READ), Node("Acceleration", **_READ))),
     Node("Configure", children=(

@@ -27,7 +27,6 @@ from drivers.acl import (
     frame_reply,
     parse_message,
 )
-from drivers.table_controller import MODE_LETTER
 from emulators.servo import Refused, Servo
 from hil.samples import GIMBAL_AXES
 

@@ -18,13 +18,13 @@ import numpy as np
 
 from drivers.codec import BITS_PER_BYTE, imu_frame_bytes
 from drivers.registry import imu_codec
-from emulators.table_server import TableServer, emulated_table
 from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.ports import CanPort, PtyPort
 from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
+from emulators.table_server import TableServer, emulated_table
 from emulators.writer import DeviceWriter
 from hil.config import Config, ConfigError
 from hil.units import ARCSEC

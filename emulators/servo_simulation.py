@@ -21,11 +21,11 @@ import numpy as np
 
 from drivers.controllers import make_controller
 from drivers.table_controller import TableController
-from emulators.table_server import ServoPort, emulated_table
 from emulators.sensor_errors import SensorErrorModel
 from emulators.servo import Servo
 from emulators.simulation import emulated_world
 from emulators.sources import encoder_reading
+from emulators.table_server import ServoPort, emulated_table
 from emulators.truth import Truth
 from hil.config import Config
 from hil.samples import AlignedBatch

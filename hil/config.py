@@ -126,7 +126,7 @@ class TurntableConfig(Model):
     data_port: str | None = None
     command_port: str | None = None
     controller: str = "acutrol"  # a name of drivers/controllers.py (built-in or entry point)
-    controller_options: dict[str, Any] = {}  # validated by the controller's own model
+    controller_options: dict[str, Any] = Field(default_factory=dict)  # validated by the controller's own model
     data_protocol: str = "tts1"  # the codec registry's name of the table's data frames
     baudrate: int = Field(115200, gt=0)
     motion: MotionConfig = MotionConfig()

@@ -13,8 +13,8 @@ from collections.abc import Callable
 import numpy as np
 
 from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent, imu_frame_bytes
-from drivers.decoder import StreamDecoder
 from drivers.controllers import data_codec, frame_bytes
+from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec
 from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot

@@ -28,9 +28,8 @@ UNFINISHED = "the devices stopped before the schedule ended"
 def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
     """``calibration``'s schedule; raises :class:`TrialSetupError` (prefixed with ``where``) when a step lies
     outside ``turntable.limits`` or needs what ``turntable.controller`` cannot do."""
-    from hil.estimation.calibration_schedule import check_limits, schedule_from_config
-
     from drivers.table_controller import TableError
+    from hil.estimation.calibration_schedule import check_limits, schedule_from_config
     from hil.trial.table_control import check_controller
 
     schedule = schedule_from_config(cfg.calibration)

@@ -1,5 +1,5 @@
 """``hil calibrate``: a live trial in which the harness commands the table through the calibration schedule
-over ``acl`` (:mod:`hil.trial.calibration_sequence`), then fits the accelerometers and gyros on the
+through the controller interface (:mod:`hil.trial.calibration_sequence`), then fits the accelerometers and gyros on the
 windows; the outcome writes ``calibration.json`` and ``calibration.html`` beside the trial's usual outputs
 (:mod:`hil.trial.calibration_outcome`, shared with ``--simulate``, :mod:`hil.trial.calibration_simulation`).
 

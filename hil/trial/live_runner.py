@@ -1,5 +1,5 @@
 """The live trial of ``hil run``: the devices (or their emulators, in their own process), the viewer, the
-table under ``acl`` control and the :class:`~hil.trial.live.LiveTrial`; the table is sent Off, the
+table under its controller's control and the :class:`~hil.trial.live.LiveTrial`; the table is sent Off, the
 viewer closed and the emulator reaped on every way out, signals included."""
 
 from __future__ import annotations

@@ -87,11 +87,11 @@ class TableControl:
             axis, mode = getattr(motion.axes, gimbal), _mode(self.table, gimbal)
             if mode != "rate":
                 client.demand_position(gimbal, axis.center_deg)
+            if mode == "synthesis":  # loaded before the mode starts it (TM-8004 4.7.6)
+                client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
             client.set_mode(gimbal, mode)
             if mode == "rate":
                 client.demand_rate(gimbal, axis.rate_dps)
-            elif mode == "synthesis":
-                client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
         client.sync_output(True)
 
     def stop(self) -> None:
