@@ -270,6 +270,8 @@ class CalibrationConfig(Model):
     settle_s: float = Field(2.0, ge=0)  # after each move or rate change, before the window starts
     plateau_rate_dps: float = Field(10.0, gt=0)  # gyro plateaus: both signs about each axis
     plateau_s: float = Field(36.0, ge=0)  # 0: no plateaus (accelerometers only)
+    plateau_axes: list[Literal["outer", "middle", "inner"]] = Field(  # a rate table: its one axis
+        default_factory=lambda: ["outer", "middle", "inner"], min_length=1)
     accel_terms: list[Literal["bias", "scale", "misalignment", "nonlinearity", "zero_offset"]] = [
         "bias", "scale", "misalignment", "nonlinearity", "zero_offset"]
     gyro_terms: list[Literal["bias", "scale", "misalignment", "zero_offset"]] = [

@@ -126,3 +126,24 @@ def test_the_table_data_protocol_is_a_table_codec_of_the_registry(tmp_path, caps
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--viewer", "none", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
+
+
+def test_a_calibration_that_turns_three_axes_is_refused_on_the_rate_table(tmp_path, capsys):
+    cfg = yaml.safe_load((ROOT / "configs" / "calibration_short.yaml").read_text())
+    cfg["turntable"]["controller"] = "aerosmith"
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["calibrate", str(path), "--simulate", "--viewer", "none", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the trial moves the middle, inner axis too; nothing was sent" in err
+
+
+def test_the_gyro_rate_test_of_hil_calibrate_on_the_rate_table_is_within_3_sigma(tmp_path):
+    from hil.outputs.calibration_report import comparison
+
+    out = tmp_path / "out"
+    assert main(["calibrate", str(ROOT / "configs" / "calibration_rate_table.yaml"), "--simulate", "--viewer", "none",
+                 "--no-figures", "--quiet", "--out", str(out)]) == 0
+    judged = {r["term"]: r["error_sigma"] for r in comparison(json.loads((out / "calibration.json").read_text()))
+              if r["error_sigma"] is not None}
+    assert {"gyro.bias_dph.2", "gyro.scale_ppm.2"} <= set(judged) and all(abs(e) <= 3.0 for e in judged.values())
