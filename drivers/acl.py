@@ -27,7 +27,6 @@ from typing import ClassVar
 
 AXIS_NUMBER = {"inner": "1", "middle": "2", "outer": "3"}
 MODE_WORDS = ("Position", "Rate", "Synthesis", "Off", "Abort", "Arate", "Track")  # a one-letter A is Abort
-INTERLOCK_STATES = ("Close", "Open", "Fault")
 EOL = b"\n"
 MAX_LINE = 32768  # TM-8004 2.5: one message holds up to 32K characters
 HEADER = struct.Struct("<ii")  # error code, text length

@@ -16,6 +16,7 @@ import socket
 import threading
 
 from emulators.servo import Servo
+from hil.config import ConfigError
 
 POLL_S = 0.05
 
@@ -25,6 +26,9 @@ def emulated_table(cfg, servo: Servo, log: bool = False):
     from drivers.controllers import controller_class, controller_options
 
     cls = controller_class(cfg.turntable.controller)
+    if not cls.emulated_table:
+        raise ConfigError(f"turntable.controller: {cfg.turntable.controller!r} has no emulated table; "
+                          "with it the table is a real one (turntable.source: serial)")
     module, _, name = cls.emulated_table.partition(":")
     table = getattr(importlib.import_module(module), name)
     return table(servo, controller_options(cfg.turntable), log=log)
