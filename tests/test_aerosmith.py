@@ -71,6 +71,17 @@ def test_the_controller_drives_the_emulated_table_and_ends_off():
     assert [line for line, _ in table.log] == ["VEL60", "ACL30", "STA", "STA", "JOG10.000000", "PPO", "STO", "STA"]
 
 
+def test_ctrl_c_inside_a_session_still_stops_the_table():
+    table = emulated()
+    cfg = make_config(turntable={"limits": LIMITS})
+    with pytest.raises(KeyboardInterrupt), AerosmithController("emulated", cfg.turntable.limits).open(
+            ServoPort(table)) as client:
+        client.set_mode("outer", "rate")
+        client.demand_rate("outer", -20.0)
+        raise KeyboardInterrupt
+    assert [line for line, _ in table.log][-3:] == ["JOG-20.000000", "STO", "STA"] and table.modes() == "Off"
+
+
 def test_open_interlocks_keep_the_table_still():
     table = emulated(interlock_trip_at_s=0.0)
     table.servo.advance(0.0)
