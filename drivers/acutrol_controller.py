@@ -123,10 +123,10 @@ class AcutrolController(TableController):
         words = self.send(*(AclCommand("Mode", (a,), query=True) for a in axes)).text.split(";")
         if len(words) != len(axes):
             raise TableError(f"turntable: :Mode? answered {';'.join(words)!r} for {len(axes)} axes")
-        return {g: _mode_of(w) for g, w in zip(self.gimbals, words)}
+        return {g: mode_of(w) for g, w in zip(self.gimbals, words)}
 
 
-def _mode_of(word: str) -> str:
+def mode_of(answer: str) -> str:
     """The interface's mode for a ``:Mode?`` answer: a word, or its first letter as the manual's example shows."""
-    word = word.strip().lower()
-    return next((m for m in WORD if word and m.startswith(word[:1]) and WORD[m].lower().startswith(word)), word)
+    answer = answer.strip().lower()
+    return next((mode for mode, word in WORD.items() if answer and word.lower().startswith(answer)), answer)

@@ -11,7 +11,7 @@ import yaml
 from conftest import make_config
 
 from drivers.acl import AclCommand, AclError, AclReply, ReplyReader, format_message, frame_reply, parse_message
-from drivers.acutrol_controller import AcutrolController, AcutrolOptions
+from drivers.acutrol_controller import AcutrolController, AcutrolOptions, mode_of
 from drivers.table_controller import TableError
 from emulators.acutrol_table import AcutrolTable
 from emulators.motion import motion_from_config
@@ -107,6 +107,12 @@ def test_the_lines_public_clients_send_are_all_answered_as_the_manual_says():
                                                                                               ":R:R 1"))
     assert float(replies[":R:R 1"].text) == 0.0
     assert [m for m in emulated.modes().split(",")] == ["Off", "Off", "Off"]  # :M:O 1 and :M:O 2;O 3 at the end
+
+
+def test_a_mode_answer_is_read_as_a_word_or_its_letter():
+    assert [mode_of(a) for a in ("Position", "P", "Rate\n", "r", "Synthesis", "S", "Off", "O")] == [
+        "position", "position", "rate", "rate", "synthesis", "synthesis", "off", "off"]
+    assert mode_of("Track") == "track"  # a mode the harness never commands stays itself: not off
 
 
 def test_queries_only_mode_answers_queries_alone_and_flags_errors_in_the_status_byte():
