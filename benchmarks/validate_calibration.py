@@ -1,7 +1,7 @@
 """Consistency of the multi-position calibration's reported sigmas through the whole emulated pipeline.
 
 Each run is ``hil calibrate`` at ``--speed max`` (emulated IMU and table in their own process, the schedule
-commanded over acl, windows cut from the reported angles): configs/calibration.yaml's IMU errors with
+commanded over the Acutrol language, windows cut from the reported angles): configs/calibration.yaml's IMU errors with
 50 ug accelerometer noise and the shipped 0.01 deg/h gyro noise a sample, over ``--seeds`` seeds
 (``trial.seed`` 1..N), on a short schedule (18 positions, 4 s dwells, 10 s plateaus at 30 deg/s; the
 shipped one with ``--shipped-schedule``). Per term (calibration.json against ``truth.as_observed``):

@@ -21,7 +21,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("config", type=Path)
     add_options(parser)
     parser.add_argument("--hold", action="store_true",
-                        help="after the pulse train, keep the devices (the acl port) up until stopped")
+                        help="after the pulse train, keep the devices (the table's command port) up until stopped")
     args = parser.parse_args(argv)
     try:
         return emulate(load_config(args.config), args, hold=args.hold)

@@ -1,7 +1,7 @@
 """The pulse-train bench: the emulated IMU and table of one run, driven by one sync pulse train.
 
 :class:`Bench` assembles the devices from the config (servo, frame streams of :mod:`emulators.sources`,
-ports of :mod:`emulators.ports`, writers of :mod:`emulators.writer`, the ``acl`` command server);
+ports of :mod:`emulators.ports`, writers of :mod:`emulators.writer`, the emulated table's command server);
 :meth:`Bench.pulse_loop` emits every device's frames in time order, paced by a :class:`SyncClock`;
 :meth:`Bench.stats` sums the run up as :class:`EmulatorStats`. :mod:`emulators.process` runs it.
 """
@@ -16,16 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.acl import AclCommand
 from drivers.codec import check_baudrate
 from drivers.registry import imu_codec
-from emulators.acl_server import AclServer
 from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.ports import CanPort, PtyPort
 from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
+from emulators.table_server import TableServer, emulated_table
 from emulators.writer import DeviceWriter
 from hil.config import Config
 from hil.units import ARCSEC
@@ -53,10 +52,11 @@ class EmulatorStats:
     elapsed_s: float
     stopped: bool  # True when stopped by a signal or the stop event before the duration
     devices: dict[str, DeviceStats] = field(default_factory=dict)  # keys "imu", "turntable_data"
-    table_commands: dict[str, int] = field(default_factory=dict)  # acl commands received, by header
-    table_modes_off: int = 0  # ``:Mode ALL,Off`` commands the table accepted
-    table_modes: str = ""  # the table's modes at the end (``:Mode? ALL``: inner, middle, outer)
+    table_commands: dict[str, int] = field(default_factory=dict)  # commands received, by header
+    table_modes_off: int = 0  # Offs of every axis the table accepted
+    table_modes: str = ""  # the table's modes at the end, in its own words (Acutrol: axis 1 first)
     started: float | None = None  # time.monotonic() of trial time 0 when paced: trial time t was due at started + t / speed
+    table_log: list[tuple[str, int]] = field(default_factory=list)  # every command message and its error code
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -114,7 +114,7 @@ class Bench:
         self.synced = [n for n, s in self.streams.items() if not s.source.clock.timing.free_running] or ["imu"]
         self.ports: dict = {}
         self.writers: dict[str, DeviceWriter] = {}
-        self.server: AclServer | None = None
+        self.server: TableServer | None = None
         unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
         private = any(unplugging) and link_dir is None
         self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
@@ -135,7 +135,7 @@ class Bench:
             self.ports["imu"] = imu_port
             check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)
             self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
-            self.server = AclServer(self.servo)
+            self.server = TableServer(emulated_table(cfg, self.servo, log=True))
             for k, (name, damage, baud, faults) in enumerate((
                     ("imu", imu_damage, imu_baud, imu_cfg.faults),
                     ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
@@ -192,5 +192,5 @@ class Bench:
             name: DeviceStats(w.frames, dict(w.faults.counts), w.latency.percentile_ms(50),
                               w.latency.percentile_ms(99), w.lost_unread)
             for name, w in self.writers.items()},
-            dict(commands.received), commands.modes_off, self.servo.handle(AclCommand(":Mode?", ("ALL",))).text,
-            started)
+            dict(commands.received), commands.offs, commands.modes(),
+            started, list(commands.log))

@@ -12,8 +12,8 @@ With ``--link-dir DIR`` the serial ports are published as stable symbolic links 
 same DIR points them at its own ptys. Without it, a device configured to unplug
 (``faults.unplug_at_s``) is published so in a private ``/tmp/hil-emulate-XXXX``. A replug points the
 link at the new pty. The IMU speaks ``imu.protocol`` (a serial protocol on a pty, can-dbc on
-the python-can bus of ``imu.can``); the table sends ``tts1`` on a pty and answers ``acl`` on the TCP
-port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as one line a device
+the python-can bus of ``imu.can``); the table sends ``tts1`` on a pty and answers its controller's language on
+the TCP port. The run's statistics (:class:`emulators.bench.EmulatorStats`) go to stderr as one line a device
 at exit (:mod:`emulators.command`), and to ``--stats-file`` as JSON. The devices themselves are
 :class:`emulators.bench.Bench`.
 """
@@ -61,7 +61,7 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     unplug once a client has reopened the port; otherwise at once, and a port nobody reads loses its
     frames (counted). From the main thread, SIGTERM, SIGINT and SIGHUP set the stop event. The
     statistics go to ``stats_file`` at the end, stopped or not; with ``hold`` the devices stay powered
-    after the pulse train (the table answers ``acl``, the data ports are silent) until stopped, as a
+    after the pulse train (the table answers commands, the data ports are silent) until stopped, as a
     table stays on its base after a trial: the file is written when the train has ended and rewritten
     at exit with the commands received meanwhile. With
     ``link_dir`` the serial ports are published as links there (:class:`emulators.bench.Bench`). Ports,

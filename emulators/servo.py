@@ -1,4 +1,4 @@
-"""The emulated turntable servo: per-axis modes, demands, limits and interlocks, answering ``acl`` commands.
+"""The emulated turntable servo: per-axis modes, demands, limits and interlocks, in the controller interface's terms.
 
 The motion the table performs is a :class:`ServoMotion`: per axis, consecutive pieces of the analytic
 profiles of :mod:`emulators.motion`, so the truth model integrates it exactly. Until a command
@@ -15,14 +15,15 @@ at the first sync pulse after everything already emitted (:meth:`Servo.commit`);
   it arrives. The oscillation starts with a rate step of ``amplitude 2 pi f cos(phase)`` (an ideal
   velocity loop), which the demand checks keep within the rate limit.
 
-Demands and the planned motion are true gimbal angles; what the table reports (``:Read:Position?``
-here, the ``tts1`` frames in :mod:`emulators.sources`) is the encoder reading, the true angle minus
-``turntable.zero_offset_arcsec``.
+Demands and the planned motion are true gimbal angles; what the table reports (:meth:`Servo.reading`,
+the ``tts1`` frames in :mod:`emulators.sources`) is the encoder reading, the true angle minus
+``turntable.zero_offset_arcsec``. The emulated tables (:mod:`emulators.acutrol_table`,
+:mod:`emulators.aerosmith_table`) translate their command languages to its methods.
 
-A demand outside the limits is refused (``?200``), a mode other than Off with open interlocks too
-(``?201``). An interlock trip (``turntable.interlock_trip_at_s``) opens every axis' interlocks and
-latches a fault: the axes switch Off and brake; ``:Interlock:Reset`` clears the fault and
-``:Interlock:Close`` closes the interlocks again.
+Limits are kept per mode (the Acutrol's are); a demand outside those of the mode it serves is
+:class:`Refused`, a mode other than Off with open interlocks too. An interlock trip
+(``turntable.interlock_trip_at_s``) opens every axis' interlocks and latches a fault: the axes switch
+Off and brake; a reset clears the fault and closing the interlocks servoes the axes again.
 """
 
 from __future__ import annotations
@@ -34,17 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
-from drivers.acl import (
-    AXIS_NUMBER,
-    ERR_BAD_ARGUMENT,
-    ERR_INTERLOCK,
-    ERR_LIMIT,
-    MODES,
-    MOTION_MODES,
-    AclCommand,
-    AclError,
-    AclReply,
-)
+from drivers.table_controller import MODE_LETTER, MOTION_MODES
 from drivers.tts1 import Mode, Status, status_byte
 from emulators.motion import (
     ConstantRate,
@@ -58,8 +49,6 @@ from hil.config import LimitsConfig, MotionConfig, TurntableConfig
 from hil.samples import GIMBAL_AXES
 from hil.units import ARCSEC, DEG
 
-IDN = "turntable-hil,emulated three-axis table,0,1"
-_AXIS_INDEX = {AXIS_NUMBER[g]: k for k, g in enumerate(GIMBAL_AXES)}  # acl axis "1".."3" -> column
 _TTS1_MODE = {"O": Mode.OFF, "P": Mode.POSITION, "R": Mode.RATE, "S": Mode.SYNTHESIS}
 _RANK = "OPRS"  # the table's tts1 mode is the most active of its axes' modes
 _STILL = 1e-12  # rad/s; below this an axis counts as not moving
@@ -143,6 +132,18 @@ class ServoMotion:
         return out
 
 
+class Refused(ValueError):
+    """A command the table does not carry out; ``reason`` is ``limit``, ``interlock`` or ``argument``."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+def _names(axes: list[int]) -> str:
+    return ", ".join(GIMBAL_AXES[k] for k in axes)
+
+
 def _full(value: float) -> np.ndarray:
     return np.full(3, float(value))
 
@@ -158,22 +159,23 @@ class _Demand:
 
 
 class Servo:
-    """The table's controller: holds the demands and limits, plans the motion, answers ``acl`` commands.
+    """The table's controller: holds the demands and limits, plans the motion.
 
-    Thread-safe through :attr:`lock`: the command server calls :meth:`handle`, the emulator's pulse loop
+    Thread-safe through :attr:`lock`: the command server calls the commands, the emulator's pulse loop
     :meth:`commit` and reads :attr:`motion` and :attr:`revision` (bumped by every change of the plan).
     """
 
     def __init__(self, table: TurntableConfig, rate_hz: float, initial: MotionProfile) -> None:
         self.rate_hz = rate_hz
-        self.limits = table.limits
+        self.limits = table.limits  # the configured ones: where the tts1 status reports "limit reached"
+        self.mode_limits = {mode: table.limits for mode in "PRSO"}  # what the table was told, per mode
         self.lock = threading.RLock()
         self.revision = 0
         self.sync_output = True
         self.horizon = -1.0 / rate_hz  # latest trial time already emitted
         self.trip_at = table.interlock_trip_at_s
         self.zero_offset_deg = np.array(table.zero_offset_arcsec) * ARCSEC / DEG
-        mode = MODES[MOTION_MODES[table.motion.kind]]
+        mode = MODE_LETTER[MOTION_MODES[table.motion.kind]]
         self.demands = [_configured_demand(table.motion, axis) for axis in GIMBAL_AXES]
         self.motion = ServoMotion(tuple((Piece(0.0, 0.0, initial, k, mode),) for k in range(3)))
 
@@ -194,121 +196,112 @@ class Servo:
             self.trip_at = None
             self._change(range(3), trip, interlocks_closed=False, fault=True, mode="O")
 
-    # Commands
+    # Commands (the controller interface's vocabulary; the emulated tables translate their dialects to it)
 
-    def handle(self, command: AclCommand) -> AclReply:
-        """The controller's reply to one command (applying it when valid)."""
+    def set_mode(self, axes: list[int], mode: str) -> None:
+        """Mode P, R, S or O on columns ``axes``; any but O needs closed interlocks."""
         with self.lock:
-            try:
-                return AclReply(self._handle(command))
-            except AclError as exc:
-                return AclReply(str(exc), exc.code)
-
-    def _axes(self, command: AclCommand) -> list[int]:
-        axis = command.args[0]
-        return [2, 1, 0] if axis == "ALL" else [_AXIS_INDEX[axis]]  # acl order: 1 inner, 2 middle, 3 outer
-
-    def _handle(self, c: AclCommand) -> str:
-        h, args = c.header, c.args
-        if h == "*IDN?":
-            return IDN
-        if h == "*STB?":
-            return str(self.status_now())
-        if h == ":Configure:Sync":
-            self.sync_output = args[0] == "ON"
-            return "OK"
-        axes = self._axes(c)
-        t = self.next_pulse_time()
-        if h.endswith("?"):
-            return ",".join(self._query(h, k, t) for k in axes)
-        if h == ":Mode":
-            mode = MODES[args[1]]
+            t = self.next_pulse_time()
             if mode != "O" and not all(self._state(k, t).interlocks_closed for k in axes):
-                raise AclError(f"interlock open on axis {args[0]}: close it before mode {args[1]}", ERR_INTERLOCK)
-            for k in axes:
-                self.demands[k].mode = mode
+                raise Refused(f"interlock open on the {_names(axes)} axis: close it before mode {mode}", "interlock")
             self._change(axes, t, mode=mode)
-        elif h.startswith(":Demand:"):
+
+    def demand(self, axes: list[int], kind: str, values: tuple[float, ...]) -> None:
+        """A demand (``position`` deg, ``delta`` deg, ``rate`` deg/s, ``oscillator`` amplitude deg, Hz,
+        phase deg), checked against the limits of the mode it serves, then applied."""
+        with self.lock:
+            if kind == "delta":
+                kind, values = "position", (self.demands[axes[0]].position + values[0],)
             for k in axes:
-                self._check_demand(k, h, args[1:])
+                self._check_demand(k, kind, values)
             for k in axes:
                 d = self.demands[k]
-                if h == ":Demand:Position":
-                    d.position = args[1]
-                elif h == ":Demand:Rate":
-                    d.rate = args[1]
+                if kind == "position":
+                    d.position = values[0]
+                elif kind == "rate":
+                    d.rate = values[0]
                 else:
-                    d.oscillator = tuple(args[1:])
-            self._change(axes, t)
-        elif h.startswith(":Interlock:"):
-            self._interlock(h, axes, t)
-        else:
-            self._set_limit(h, axes, args[1:])
-        return "OK"
+                    d.oscillator = tuple(values)
+            self._change(axes, self.next_pulse_time())
 
-    def _query(self, header: str, k: int, t: float) -> str:
-        lim = self.limits
-        if header == ":Mode?":
-            return self.demands[k].mode
-        if header == ":Read:Position?":
-            true = math.degrees(float(self.motion(np.array([max(self.horizon, 0.0)]))[0][0, k]))
-            return f"{true - self.zero_offset_deg[k]:.6f}"
-        if header == ":Interlock?":
-            return "Closed" if self._state(k, t).interlocks_closed else "Open"
-        if header == ":Limit:Position?":
-            return f"{lim.position_min_deg[k]:g},{lim.position_max_deg[k]:g}"
-        return f"{(lim.rate_dps if header == ':Limit:Rate?' else lim.accel_dps2)[k]:g}"
+    def interlock(self, axes: list[int], action: str) -> None:
+        """``close``, ``open`` or ``reset`` (the latched fault, every axis) the interlocks."""
+        with self.lock:
+            t = self.next_pulse_time()
+            if action == "reset":
+                self._change([k for k in range(3) if self._state(k, t).fault], t, fault=False)
+            elif action == "close":
+                if any(self._state(k, t).fault for k in axes):
+                    raise Refused("interlock fault latched: reset it first", "interlock")
+                self._change(axes, t, interlocks_closed=True)
+            else:
+                self._change(axes, t, interlocks_closed=False, mode="O")
 
-    def _interlock(self, header: str, axes: list[int], t: float) -> None:
-        states = [self._state(k, t) for k in axes]
-        if header == ":Interlock:Close":
-            if any(p.fault for p in states):
-                raise AclError("interlock fault latched: :Interlock:Reset first", ERR_INTERLOCK)
-            self._change(axes, t, interlocks_closed=True)
-        elif header == ":Interlock:Open":
-            for k in axes:
-                self.demands[k].mode = "O"
-            self._change(axes, t, interlocks_closed=False, mode="O")
-        else:
-            self._change(axes, t, fault=False)
+    def set_limit(self, mode: str, axes: list[int], kind: str, value: float) -> None:
+        """The ``rate`` (deg/s), ``accel`` (deg/s^2), ``low`` or ``high`` (deg) limit of one mode."""
+        with self.lock:
+            lim = self.mode_limits[mode]
+            if kind in ("low", "high"):
+                low = _put(lim.position_min_deg, axes, value) if kind == "low" else lim.position_min_deg
+                high = _put(lim.position_max_deg, axes, value) if kind == "high" else lim.position_max_deg
+                if not all(lo < hi for lo, hi in zip(low, high)):
+                    raise Refused(f"position limits need low < high, got {value:g}", "argument")
+                update = {"position_min_deg": low, "position_max_deg": high}
+            else:
+                if not value > 0:
+                    raise Refused(f"the {kind} limit must be positive, got {value:g}", "argument")
+                key = "rate_dps" if kind == "rate" else "accel_dps2"
+                update = {key: _put(getattr(lim, key), axes, value)}
+            self.mode_limits[mode] = lim.model_copy(update=update)
 
-    def _set_limit(self, header: str, axes: list[int], values: tuple) -> None:
-        lim = self.limits
-        if header == ":Limit:Position":
-            low, high = values
-            if not low < high:
-                raise AclError(f"position limits need min < max, got {low:g}, {high:g}", ERR_BAD_ARGUMENT)
-            update = {"position_min_deg": _put(lim.position_min_deg, axes, low),
-                      "position_max_deg": _put(lim.position_max_deg, axes, high)}
-        else:
-            if not values[0] > 0:
-                raise AclError(f"{header} needs a positive value, got {values[0]:g}", ERR_BAD_ARGUMENT)
-            key = "rate_dps" if header == ":Limit:Rate" else "accel_dps2"
-            update = {key: _put(getattr(lim, key), axes, values[0])}
-        self.limits = lim.model_copy(update=update)
+    # Queries
 
-    def _check_demand(self, k: int, header: str, values: tuple) -> None:
-        lim, name = self.limits, GIMBAL_AXES[k]
+    def mode(self, k: int) -> str:
+        return self.demands[k].mode
+
+    def interlock_state(self, k: int) -> str:
+        """``closed``, ``open`` or ``fault`` (latched) for column k."""
+        piece = self._state(k, self.next_pulse_time())
+        return "fault" if piece.fault else "closed" if piece.interlocks_closed else "open"
+
+    def reading(self, k: int) -> tuple[float, float, float]:
+        """Encoder position (deg), rate (deg/s) and acceleration (deg/s^2, the rate's change over the last
+        pulse period) of column k at the latest instant emitted."""
+        with self.lock:
+            t = max(self.horizon, 0.0)
+            angles, rates = self.motion(np.array([t - 1.0 / self.rate_hz, t]))
+        rate = math.degrees(float(rates[1, k]))
+        return (math.degrees(float(angles[1, k])) - self.zero_offset_deg[k], rate,
+                (rate - math.degrees(float(rates[0, k]))) * self.rate_hz)
+
+    def limit(self, mode: str, k: int, kind: str) -> float:
+        lim = self.mode_limits[mode]
+        return {"rate": lim.rate_dps, "accel": lim.accel_dps2, "low": lim.position_min_deg,
+                "high": lim.position_max_deg}[kind][k]
+
+    def _check_demand(self, k: int, kind: str, values: tuple) -> None:
+        name = GIMBAL_AXES[k]
+        lim = self.mode_limits[{"rate": "R", "oscillator": "S"}.get(kind, "P")]
         low, high = lim.position_min_deg[k], lim.position_max_deg[k]
-        if header == ":Demand:Position":
+        if kind == "position":
             spans = (values[0], values[0])
-        elif header == ":Demand:Rate":
+        elif kind == "rate":
             if abs(values[0]) > lim.rate_dps[k]:
-                raise AclError(f"rate {values[0]:g} deg/s exceeds the {name} limit {lim.rate_dps[k]:g}", ERR_LIMIT)
+                raise Refused(f"rate {values[0]:g} deg/s exceeds the {name} limit {lim.rate_dps[k]:g}", "limit")
             return
         else:
             amplitude, frequency, _ = values
             if amplitude < 0 or frequency < 0:
-                raise AclError("oscillator amplitude and frequency must be >= 0", ERR_BAD_ARGUMENT)
+                raise Refused("oscillator amplitude and frequency must be >= 0", "argument")
             omega = 2.0 * math.pi * frequency
             if amplitude * omega > lim.rate_dps[k] or amplitude * omega**2 > lim.accel_dps2[k]:
-                raise AclError(f"oscillation {amplitude:g} deg at {frequency:g} Hz exceeds the {name} rate or "
-                               "acceleration limit", ERR_LIMIT)
+                raise Refused(f"oscillation {amplitude:g} deg at {frequency:g} Hz exceeds the {name} rate or "
+                              "acceleration limit", "limit")
             center = self.demands[k].position
             spans = (center - amplitude, center + amplitude)
         if high - low < 360.0 and not (low <= spans[0] and spans[1] <= high):
-            raise AclError(f"position {spans[0]:g}..{spans[1]:g} deg is outside the {name} limits "
-                           f"[{low:g}, {high:g}]", ERR_LIMIT)
+            raise Refused(f"position {spans[0]:g}..{spans[1]:g} deg is outside the {name} limits "
+                          f"[{low:g}, {high:g}]", "limit")
 
     # Planning
 
@@ -330,7 +323,7 @@ class Servo:
         """The pieces of axis k from t: brake or ramp, move, then hold, rotate or oscillate."""
         angles, rates = self.motion(np.array([t]))
         p0, v0 = float(angles[0, k]), float(rates[0, k])
-        d, lim = self.demands[k], self.limits
+        d, lim = self.demands[k], self.mode_limits[flags.mode]
         accel = lim.accel_dps2[k] * DEG
         pieces: list[Piece] = []
 
@@ -366,7 +359,8 @@ class Servo:
 
     def _stop_at_limit(self, k: int, t1: float, p1: float, v1: float, accel: float, add) -> None:
         """Rate mode on an axis with limited travel: decelerate so that it halts exactly at the limit."""
-        low, high = self.limits.position_min_deg[k] * DEG, self.limits.position_max_deg[k] * DEG
+        lim = self.mode_limits["R"]
+        low, high = lim.position_min_deg[k] * DEG, lim.position_max_deg[k] * DEG
         if high - low >= 2.0 * math.pi or abs(v1) <= _STILL:
             return
         end = high if v1 > 0 else low
@@ -387,7 +381,7 @@ def _configured_demand(motion: MotionConfig, axis: str) -> _Demand:
     if motion.kind == "positions":
         return _Demand("P", getattr(motion.positions[0], f"{axis}_deg"))
     frequency = 0.0 if a.period_s is None else 1.0 / a.period_s
-    return _Demand(MODES[MOTION_MODES[motion.kind]], a.center_deg, a.rate_dps,
+    return _Demand(MODE_LETTER[MOTION_MODES[motion.kind]], a.center_deg, a.rate_dps,
                    (a.amplitude_deg, frequency, a.phase_deg))
 
 

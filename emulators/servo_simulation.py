@@ -1,8 +1,8 @@
 """The emulated IMU and the commanded table in the caller's process, without transports (``hil calibrate
 --simulate``).
 
-The harness commands the servo (:mod:`emulators.servo`) through the drivers' table client on a
-:class:`~emulators.acl_server.ServoPort` (:meth:`ServoSimulation.command_client`), and :meth:`ServoSimulation.step`
+The harness commands the servo (:mod:`emulators.servo`) through the configured controller on a
+:class:`~emulators.table_server.ServoPort` (:meth:`ServoSimulation.command_client`), and :meth:`ServoSimulation.step`
 advances simulated time: the samples up to a time under the servo's plan so far, which it then commits, so a
 command sent after a step takes effect at the next sync pulse, as the emulator's pulse loop makes it.
 
@@ -19,12 +19,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drivers.table_client import TableCommandClient
-from emulators.acl_server import ServoPort
+from drivers.controllers import make_controller
+from drivers.table_controller import TableController
 from emulators.sensor_errors import SensorErrorModel
 from emulators.servo import Servo
 from emulators.simulation import emulated_world
 from emulators.sources import encoder_reading
+from emulators.table_server import ServoPort, emulated_table
 from emulators.truth import Truth
 from hil.config import Config
 from hil.samples import AlignedBatch
@@ -40,6 +41,7 @@ class ServoSimulation:
     truth: Truth
     errors: SensorErrorModel
     servo: Servo
+    table: object  # the emulated table of turntable.controller, on the servo
     zero_offset: np.ndarray  # rad (outer, middle, inner): true angle minus encoder reading
     rate_hz: float
     samples: int = 0
@@ -48,14 +50,14 @@ class ServoSimulation:
     def from_config(cls, cfg: Config) -> ServoSimulation:
         truth, errors = emulated_world(cfg)
         servo = Servo(cfg.turntable, cfg.imu_rate_hz, truth.motion)
-        return cls(truth, errors, servo, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC, cfg.imu_rate_hz)
+        return cls(truth, errors, servo, emulated_table(cfg, servo), np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC, cfg.imu_rate_hz)
 
     def __post_init__(self) -> None:
-        self.port = ServoPort(self.servo)
+        self.port = ServoPort(self.table)
 
-    def command_client(self, limits, baudrate: int = 115200) -> TableCommandClient:
-        """The drivers' table client, open on :attr:`port` (limits: :class:`hil.config.LimitsConfig`)."""
-        return TableCommandClient(IN_PROCESS, limits, baudrate).open(self.port)
+    def command_client(self, turntable) -> TableController:
+        """The configured controller (``turntable``: :class:`hil.config.TurntableConfig`), open on :attr:`port`."""
+        return make_controller(turntable, IN_PROCESS).open(self.port)
 
     def step(self, t_end: float) -> AlignedBatch:
         """The samples after those emitted that end at or before ``t_end`` (s), under the servo's plan; the

@@ -105,6 +105,9 @@ class TurntableConfig(Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
     command_port: str | None = None
+    controller: str = "acutrol"  # a name of drivers/controllers.py (built-in or entry point)
+    controller_options: dict[str, Any] = Field(default_factory=dict)  # validated by the controller's own model
+    data_protocol: str = "tts1"  # the codec registry's name of the table's data frames
     baudrate: int = Field(115200, gt=0)
     motion: MotionConfig = MotionConfig()
     azimuth_deg: float = 0.0  # azimuth of the outer axis zero, from north towards east
@@ -240,6 +243,8 @@ class CalibrationConfig(Model):
     settle_s: float = Field(2.0, ge=0)  # after each move or rate change, before the window starts
     plateau_rate_dps: float = Field(10.0, gt=0)  # gyro plateaus: both signs about each axis
     plateau_s: float = Field(36.0, ge=0)  # 0: no plateaus (accelerometers only)
+    plateau_axes: list[Literal["outer", "middle", "inner"]] = Field(  # a rate table: its one axis
+        default_factory=lambda: ["outer", "middle", "inner"], min_length=1)
     accel_terms: list[Literal["bias", "scale", "misalignment", "nonlinearity", "zero_offset"]] = [
         "bias", "scale", "misalignment", "nonlinearity", "zero_offset"]
     gyro_terms: list[Literal["bias", "scale", "misalignment", "zero_offset"]] = [

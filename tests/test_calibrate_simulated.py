@@ -10,7 +10,7 @@ import yaml
 from test_calibrate_trial import calibration_config
 
 from drivers.acl import AclCommand
-from drivers.table_client import TableError
+from drivers.table_controller import TableError
 from drivers.tts1 import UDEG_PER_RAD, Tts1Codec
 from emulators.clocks import DeviceClock
 from emulators.motion import Swing
@@ -65,9 +65,9 @@ def test_a_simulated_calibration_recovers_every_term_and_leaves_the_table_off(tm
     assert result["ended"] == "completed" and result["calibration"]["residual_max_ug"] < 30
     assert (out / "calibration.html").exists() and not (out / "recording.mcap").exists()
     (sim,) = servos
-    assert sim.port.responder.modes_off == 1  # sent Off at the end, once
-    assert sim.servo.handle(AclCommand(":Mode?", ("ALL",))).text == "O,O,O"
-    assert sim.port.responder.received[":Demand:Rate"] == 6  # both signs about each axis
+    assert sim.table.offs == 1  # sent Off at the end, once
+    assert sim.table.modes() == "Off,Off,Off"
+    assert sim.table.received[":Demand:Rate"] == 6  # both signs about each axis
 
 
 def test_the_same_seed_gives_the_same_calibration_and_nothing_is_written_until_asked(tmp_path):
@@ -110,14 +110,15 @@ def test_a_table_that_stops_following_ends_the_trial_early_and_off(tmp_path, cap
     result = json.loads((tmp_path / "out" / "result.json").read_text())
     assert result["ended"].endswith("(step 2 of 2: moving)") and "calibration" not in result
     assert not (tmp_path / "out" / "calibration.json").exists()
-    assert servos[0].servo.handle(AclCommand(":Mode?", ("ALL",))).text == "O,O,O"
+    assert servos[0].table.modes() == "Off,Off,Off"
 
 
 def test_the_in_process_table_refuses_as_the_wire_does(tmp_path):
     cfg = load_config(calibration_config(tmp_path))
-    client = ServoSimulation.from_config(cfg).command_client(cfg.turntable.limits)
-    with pytest.raises(TableError, match=r"refused :Demand:Rate 1,1000: \?200 rate 1000 deg/s exceeds"):
-        client.send(AclCommand(":Demand:Rate", ("1", 1000.0)))
+    client = ServoSimulation.from_config(cfg).command_client(cfg.turntable)
+    with pytest.raises(TableError, match=r"refused :Demand:Rate 1,1000: error 3 \(parameter out of range\): rate "
+                                         "1000 deg/s exceeds"):
+        client.send(AclCommand("Demand:Rate", ("1", 1000.0)))
     assert client.identify().startswith("turntable-hil")
     client.close()  # Off, read back
 

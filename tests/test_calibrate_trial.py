@@ -59,7 +59,7 @@ def test_an_emulated_calibration_recovers_every_term_and_removes_the_bias_of_a_l
     assert result["ended"] == "completed" and result["calibration"]["residual_max_ug"] < 30
     assert (out / "calibration.html").exists() and (out / "junit.xml").exists()
     stats = json.loads((out / "emulator.json").read_text())
-    assert stats["table_modes"] == "O,O,O"  # sent Off at the end
+    assert stats["table_modes"] == "Off,Off,Off"  # sent Off at the end
     # the positions' specific force after the calibration matches gravity to the noise: 50 ug over each
     # window's samples (and the accelerometers' share of the fit's own uncertainty)
     residuals = np.array([p["residual_ug"] for p in doc["positions"]])

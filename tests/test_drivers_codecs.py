@@ -9,7 +9,6 @@ from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.acl import AclCodec, AclCommand, AclError, AclReply
 from drivers.codec import DecodeError
 from drivers.crc import crc16_xmodem, crc32_mpeg2
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec, KvhFrame
@@ -162,25 +161,6 @@ def test_xsens_from_sample_round_trips(dtheta, dv, index, outputs):
     assert back.sync_index.tolist() == [index % 65536]
     assert back.dtheta[0] == pytest.approx(dtheta, rel=1e-6, abs=1e-7)
     assert back.dv[0] == pytest.approx(dv, rel=1e-6, abs=1e-6)
-
-
-def test_acl_command_lines_follow_the_language():
-    codec = AclCodec()
-    assert codec.format_command(AclCommand(":Demand:Position", ("2", 12.5))) == b":Demand:Position 2,12.5\r\n"
-    assert codec.format_command(AclCommand(":Mode", ("ALL", "Off"))) == b":Mode ALL,Off\r\n"
-    assert codec.format_command(AclCommand("*IDN?")) == b"*IDN?\r\n"
-    parsed = codec.parse_command(b":demand:oscillator 1, 10, 0.125, -90\r\n")
-    assert parsed == AclCommand(":Demand:Oscillator", ("1", 10.0, 0.125, -90.0)) and parsed.axis == "1"
-    assert codec.parse_reply(b"?200 position limit\r\n") == AclReply("position limit", 200)
-    assert codec.parse_reply(b"Closed\r\n").ok
-    assert codec.format_reply(AclReply("rate limit", 200)) == b"?200 rate limit\r\n"
-
-
-@pytest.mark.parametrize("line", [":Demand:Position 4,1", ":Demand:Rate 1", ":Mode 1,Fast", ":Jump 1",
-                                  ":Demand:Position 1,nan", ":Configure:Sync MAYBE"])
-def test_acl_rejects_malformed_commands(line):
-    with pytest.raises(AclError):
-        AclCodec().parse_command(line)
 
 
 def test_registry_finds_every_protocol_by_name():

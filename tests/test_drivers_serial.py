@@ -13,15 +13,11 @@ from pathlib import Path
 import pytest
 from conftest import Decoding
 
-from drivers.acl import AclCodec, AclReply, LineFramer
+from drivers.acl import AclReply, LineFramer, frame_reply, parse_message
+from drivers.acutrol_controller import AcutrolController
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec
 from drivers.reader import DeviceReader, next_tick
-from drivers.table_client import (
-    InterlockError,
-    LimitError,
-    TableCommandClient,
-    TableError,
-)
+from drivers.table_controller import InterlockError, LimitError, TableError
 from drivers.transport import SerialTransport
 from hil.config import LimitsConfig
 from hil.samples import ImuSample
@@ -111,32 +107,35 @@ def test_session_survives_unplug_and_replug_and_counts_the_gap(link):
 
 
 class FakeTable:
-    """The far end of the command port: answers every line and records what it received."""
+    """The far end of an Acutrol's command port: answers every message with a framed reply and records
+    what it received."""
 
-    def __init__(self, link: Path, interlocks: str = "Closed", obeys_off: bool = True) -> None:
+    def __init__(self, link: Path, interlocks: str = "Close", obeys_off: bool = True) -> None:
         self.pty = Pty(link)
         self.interlocks = interlocks
         self.obeys_off = obeys_off
-        self.modes = "P,P,P"  # inner, middle, outer, as ``:Mode? ALL`` reports them
+        self.mode = "Position"
         self.lines: list[str] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        codec, framer = AclCodec(), LineFramer()
+        framer = LineFramer()
         while not self._stop.is_set():
             ready, _, _ = select.select([self.pty.master], [], [], 0.02)
             if not ready:
                 continue
             for line in framer.feed(os.read(self.pty.master, 4096)):
-                command = codec.parse_command(line)
                 self.lines.append(line.decode())
-                if command.header == ":Mode" and command.args == ("ALL", "Off") and self.obeys_off:
-                    self.modes = "O,O,O"
-                text = {"*IDN?": "Emulated table", ":Interlock?": self.interlocks,
-                        ":Mode?": self.modes}.get(command.header, "OK")
-                os.write(self.pty.master, codec.format_reply(AclReply(text)))
+                answers = []
+                for command in parse_message(line):
+                    if command.path == "Mode:Off" and self.obeys_off:
+                        self.mode = "Off"
+                    answers.append({"*IDN?": "Emulated table", ":Interlock?": self.interlocks,
+                                    ":Mode?": self.mode}.get(command.header))
+                text = ";".join(a for a in answers if a is not None)
+                os.write(self.pty.master, frame_reply(AclReply(text)))
 
     def close(self) -> None:
         self._stop.set()
@@ -156,7 +155,7 @@ LIMITS = LimitsConfig(position_min_deg=(-170, -60, -170), position_max_deg=(170,
 
 
 def test_demand_beyond_a_limit_raises_and_nothing_is_written(table):
-    client = TableCommandClient(table_link(table), LIMITS).open()
+    client = AcutrolController(table_link(table), LIMITS).open()
     with pytest.raises(LimitError, match=r"position 95 deg on the middle axis is outside .*\[-60, 60\]"):
         client.demand_position("middle", 95.0)
     with pytest.raises(LimitError, match="rate 25 deg/s on the middle axis exceeds the configured limit 20"):
@@ -167,7 +166,7 @@ def test_demand_beyond_a_limit_raises_and_nothing_is_written(table):
     time.sleep(0.1)
     assert table.lines == [":Demand:Position 1,10"]
     client.close()
-    assert table.lines[-2:] == [":Mode ALL,Off", ":Mode? ALL"]
+    assert table.lines[-2:] == [":Mode:Off 3;:Mode:Off 2;:Mode:Off 1", ":Mode? 3;:Mode? 2;:Mode? 1"]
 
 
 def table_link(table: FakeTable) -> str:
@@ -177,10 +176,10 @@ def table_link(table: FakeTable) -> str:
 def test_motion_needs_closed_interlocks(tmp_path):
     table = FakeTable(tmp_path / "ttyTABLE", interlocks="Open")
     try:
-        with TableCommandClient(table_link(table), LIMITS) as client:
+        with AcutrolController(table_link(table), LIMITS) as client:
             with pytest.raises(InterlockError, match="interlocks of the outer axis are open"):
-                client.set_mode("outer", "Position")
-        assert table.lines == [":Interlock? 3", ":Mode ALL,Off", ":Mode? ALL"]
+                client.set_mode("outer", "position")
+        assert table.lines == [":Interlock? 3", ":Mode:Off 3;:Mode:Off 2;:Mode:Off 1", ":Mode? 3;:Mode? 2;:Mode? 1"]
     finally:
         table.close()
 
@@ -188,23 +187,25 @@ def test_motion_needs_closed_interlocks(tmp_path):
 def test_a_table_that_does_not_confirm_off_is_reported(tmp_path):
     table = FakeTable(tmp_path / "ttyTABLE", obeys_off=False)
     try:
-        client = TableCommandClient(table_link(table), LIMITS).open()
+        client = AcutrolController(table_link(table), LIMITS).open()
         with pytest.raises(TableError, match="not all off"):
             client.close()
-        assert table.lines == [":Mode ALL,Off", ":Mode? ALL"] and client.port is None
+        assert table.lines == [":Mode:Off 3;:Mode:Off 2;:Mode:Off 1", ":Mode? 3;:Mode? 2;:Mode? 1"] and client.port is None
     finally:
         table.close()
 
 
 def test_ctrl_c_inside_a_session_still_switches_the_table_off(table):
     with pytest.raises(KeyboardInterrupt):
-        with TableCommandClient(table_link(table), LIMITS) as client:
+        with AcutrolController(table_link(table), LIMITS) as client:
             assert client.identify() == "Emulated table"
             client.apply_limits()
-            client.set_mode("inner", "Synthesis")
+            client.set_mode("inner", "synthesis")
             raise KeyboardInterrupt
-    assert table.lines[0] == "*IDN?" and ":Limit:Rate 2,20" in table.lines
-    assert table.lines[-3:] == [":Mode 1,Synthesis", ":Mode ALL,Off", ":Mode? ALL"]
+    assert table.lines[0] == "*IDN?"
+    assert (":Limit:Lowposition Rate,2,-60;:Limit:Highposition Rate,2,60;:Limit:Rate Rate,2,20;"
+            ":Limit:Acceleration Rate,2,50") in table.lines
+    assert table.lines[-4:] == [":Interlock? 1", ":Mode:Synthesis 1", ":Mode:Off 3;:Mode:Off 2;:Mode:Off 1", ":Mode? 3;:Mode? 2;:Mode? 1"]
 
 
 def test_a_second_reader_cannot_open_a_port_already_in_use():

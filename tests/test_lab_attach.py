@@ -13,7 +13,10 @@ from pathlib import Path
 import pytest
 from lab_form import Emulator, emulated, lab_config, result, within_sigmas
 
+from drivers.acl import parse_message
 from hil.cli import main
+from hil.config import parse_config
+from hil.outputs.calibration_report import comparison, observed_truth
 
 TRIAL_S = 10.0
 # real-time trials of devices in their own processes, at up to 2 kHz: their receive times are the host's, so they
@@ -140,22 +143,51 @@ def test_a_trial_that_commands_the_table_of_a_running_emulator_completes_and_lea
         stats = json.loads(emulator.stats_file.read_text())
     doc = result(out)
     assert doc["ended"] == "completed" and doc["streams"]["sync"]["paired_by"] == "motion" and within_sigmas(doc)
-    assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "O,O,O"
+    assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "Off,Off,Off"
 
 
 def test_a_calibration_of_a_running_emulator_completes(tmp_path):
     import yaml
 
     cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_short.yaml").read_text())
-    cfg["calibration"].update(positions=6, plateau_s=3)
     with Emulator(tmp_path, cfg, duration=300.0) as emulator:
         lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
         time.sleep(1.0)
         out = tmp_path / "cal"
         assert main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"]) == 0
+        emulator.stop()
+        stats = json.loads(emulator.stats_file.read_text())
     doc = json.loads((out / "calibration.json").read_text())
-    assert len(doc["positions"]) == 6 and result(out)["streams"]["sync"]["repairs"] == []
-    assert abs(doc["accel"]["bias_ug"][2] - 260.0) < 10.0  # the emulator's truth, to its noise
+    assert len(doc["positions"]) == 18 and result(out)["streams"]["sync"]["repairs"] == []
+    emulator_cfg = parse_config(cfg)  # the lab config knows no truth: the emulator's
+    doc["truth"] = {"as_observed": observed_truth(emulator_cfg.imu.errors, emulator_cfg.turntable.zero_offset_arcsec)}
+    judged = [(r["term"], r["error_sigma"]) for r in comparison(doc) if r["error_sigma"] is not None]
+    assert len(judged) >= 28 and all(abs(e) <= 3.0 for _, e in judged), judged
+    # every message the harness sent is in the Acutrol language, and none was refused
+    assert stats["table_log"] and all(code == 0 and parse_message(line) for line, code in stats["table_log"])
+    assert stats["table_modes"] == "Off,Off,Off"
+
+
+def test_a_gyro_rate_test_on_a_running_emulated_rate_table_completes_within_3_sigma(tmp_path):
+    import yaml
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_rate_table.yaml").read_text())
+    with Emulator(tmp_path, cfg, duration=200.0) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
+        time.sleep(1.0)
+        out = tmp_path / "rate"
+        assert main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"]) == 0
+        emulator.stop()
+        stats = json.loads(emulator.stats_file.read_text())
+    doc = json.loads((out / "calibration.json").read_text())
+    emulator_cfg = parse_config(cfg)  # the lab config knows no truth: the emulator's
+    doc["truth"] = {"as_observed": observed_truth(emulator_cfg.imu.errors, emulator_cfg.turntable.zero_offset_arcsec)}
+    judged = [(r["term"], r["error_sigma"]) for r in comparison(doc) if r["error_sigma"] is not None]
+    assert {"gyro.bias_dph.2", "gyro.scale_ppm.2"} <= {t for t, _ in judged}
+    assert all(abs(e) <= 3.0 for _, e in judged), judged
+    assert [line for line, _ in stats["table_log"]][:2] == ["VEL60", "ACL120"]
+    assert {"JOG30.000000", "JOG-30.000000", "STO"} <= {line for line, _ in stats["table_log"]}
+    assert stats["table_modes"] == "Off" and all(code == 0 for _, code in stats["table_log"])
 
 
 @pytest.mark.parametrize("faults", [

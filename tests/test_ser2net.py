@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from drivers.table_client import TableCommandClient, TableError
+from drivers.acutrol_controller import AcutrolController
+from drivers.table_controller import TableError
 from drivers.transport import SerialTransport, TransportError, serial_url
 from emulators.process import spawn_emulator
 from hil.cli import main
@@ -159,7 +160,7 @@ def test_a_port_nobody_serves_is_a_one_line_error_naming_the_url(unserved_port, 
     with pytest.raises(TransportError) as stream:
         SerialTransport(url, 921600, "imu").open()
     with pytest.raises(TableError) as command:
-        TableCommandClient(url, limits=None).open()
+        AcutrolController(url, limits=None).open()
     assert str(stream.value) == f"imu: cannot open {url}: connection refused"
     assert str(command.value) == f"turntable command port: cannot open {url}: connection refused"
 

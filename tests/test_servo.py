@@ -1,4 +1,4 @@
-"""The emulated table's servo and its acl port, driven by the turntable command client over TCP."""
+"""The emulated table's servo and the emulated Acutrol on it, driven by the Acutrol controller over TCP."""
 
 from __future__ import annotations
 
@@ -12,15 +12,12 @@ import pytest
 from conftest import from_zero
 from test_emulated_devices import read_raw
 
-from drivers.acl import MODES, MOTION_MODES, AclCommand
+from drivers.acl import AclCommand, ReplyReader
+from drivers.acutrol_controller import AcutrolController, AcutrolOptions
 from drivers.kvh1750 import Kvh1750Codec
-from drivers.table_client import (
-    InterlockError,
-    LimitError,
-    TableCommandClient,
-    TableError,
-)
+from drivers.table_controller import MOTION_MODES, InterlockError, LimitError, TableError
 from drivers.tts1 import Mode, Status, Tts1Codec
+from emulators.acutrol_table import AcutrolTable
 from emulators.clocks import DeviceClock
 from emulators.in_process import EmulatorThread
 from emulators.motion import motion_from_config
@@ -54,6 +51,12 @@ def servo_at_rest() -> Servo:
     return Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
 
 
+def ask(servo: Servo, line: str):
+    """The emulated Acutrol's framed reply to one message, decoded."""
+    (reply,) = ReplyReader().feed(AcutrolTable(servo, AcutrolOptions()).answer(line.encode()))
+    return reply
+
+
 def at(servo: Servo, t: float, column: int) -> tuple[float, float]:
     angles, rates = servo.motion(np.array([t]))
     return angles[0, column] / DEG, rates[0, column] / DEG
@@ -62,7 +65,7 @@ def at(servo: Servo, t: float, column: int) -> tuple[float, float]:
 def test_position_move_is_a_trapezoid_at_the_limits():
     servo = servo_at_rest()
     servo.commit(1.0)  # frames up to t = 1 s are out: the change starts at the next pulse
-    assert servo.handle(AclCommand(":Demand:Position", ("2", 30.0))).ok
+    assert ask(servo, ":Demand:Position 2,30").ok
     t0 = 1.0 + 1 / RATE
     # middle: 2 -> 30 deg at 20 deg/s and 50 deg/s^2: 0.4 s ramps cover 4 deg each, 20 deg cruise take 1 s.
     assert at(servo, t0 - 1e-9, 1) == pytest.approx((2.0, 0.0))
@@ -75,8 +78,7 @@ def test_position_move_is_a_trapezoid_at_the_limits():
 
 def test_rate_mode_halts_exactly_at_a_position_limit():
     servo = servo_at_rest()
-    for command in (AclCommand(":Demand:Rate", ("2", 20.0)), AclCommand(":Mode", ("2", "Rate"))):
-        assert servo.handle(command).ok
+    assert ask(servo, ":D:R 2,20;:M:R 2").ok
     # From 2 deg at rest: 4 deg ramping up, 4 deg braking, so 50 deg cruising at 20 deg/s; halts at 60.
     assert at(servo, 0.4, 1) == pytest.approx((6.0, 20.0))
     assert at(servo, 2.9, 1) == pytest.approx((56.0, 20.0))
@@ -88,13 +90,13 @@ def test_rate_mode_halts_exactly_at_a_position_limit():
 
 def test_commands_outside_the_limits_or_with_open_interlocks_are_refused():
     servo = servo_at_rest()
-    refused = servo.handle(AclCommand(":Demand:Position", ("2", 95.0)))
-    assert refused.error == 200 and "outside the middle limits" in refused.text
-    assert servo.handle(AclCommand(":Demand:Rate", ("1", -41.0))).error == 200
-    assert servo.handle(AclCommand(":Demand:Oscillator", ("1", 5.0, 1.0, 0.0))).error == 200  # 197 deg/s^2
-    assert servo.handle(AclCommand(":Interlock:Open", ("3",))).ok
-    assert servo.handle(AclCommand(":Mode", ("3", "Position"))).error == 201
-    assert servo.handle(AclCommand(":Interlock?", ("ALL",))).text == "Closed,Closed,Open"
+    refused = ask(servo, ":Demand:Position 2,95")
+    assert refused.error == 3 and "outside the middle limits" in refused.text
+    assert ask(servo, ":Demand:Rate 1,-41").error == 3
+    assert ask(servo, ":Demand:Oscillator 1,5,1,0").error == 3  # 197 deg/s^2
+    assert ask(servo, ":Interlock:Open 3").ok
+    assert ask(servo, ":Mode 3,Position").error == 4
+    assert ask(servo, ":Interlock? 1;:Interlock? 2;:Interlock? 3").text == "Close;Close;Open"
     assert servo.revision == 1  # only the interlock change re-planned the motion
 
 
@@ -133,18 +135,18 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
     with EmulatorThread(cfg, speed=5.0) as emu:
         readers = Readers(emu.ports)
         readers.wait_table_frames(100)
-        with TableCommandClient(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
+        with AcutrolController(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
             assert client.identify().startswith("turntable-hil")
             client.apply_limits()
             client.demand_position("inner", 10.0)
             client.demand_oscillator("inner", 5.0, 0.25, 0.0)
-            client.set_mode("inner", "Synthesis")
+            client.set_mode("inner", "synthesis")
             with pytest.raises(LimitError):
                 client.demand_position("middle", 61.0)
-            with pytest.raises(TableError, match=r"\?200"):  # the table refuses it too
-                client.send(AclCommand(":Demand:Position", ("2", 61.0)))
+            with pytest.raises(TableError, match=r"error 3 \(parameter out of range\)"):  # the table refuses it too
+                client.send(AclCommand("Demand:Position", ("2", 61.0)))
             readers.wait_swing_frames(200)
-            assert client.send(AclCommand(":Mode?", ("1",))).text == "S"
+            assert client.query("Mode", "1") == "Synthesis"
         # closing the client switched the table Off: it brakes from the next pulse on
         emu.join()
         readers.join()
@@ -189,18 +191,17 @@ def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
     with EmulatorThread(cfg, speed=2.0) as emu:
         readers = Readers(emu.ports)
         readers.wait_table_frames(260)
-        with TableCommandClient(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
+        with AcutrolController(emu.ports["turntable_cmd"], cfg.turntable.limits) as client:
             assert not client.interlocks_closed("inner")
-            status = int(client.send(AclCommand("*STB?")).text)
-            assert status & Status.FAULT and not status & Status.INTERLOCKS_CLOSED
+            assert client.query("Interlock", "1") == "Fault"
+            assert client.identify() and int(client.query("*STB")) == 0x41  # MSS and the interlock summary bit
             with pytest.raises(InterlockError):
-                client.set_mode("inner", "Position")
-            with pytest.raises(TableError, match=r"\?201"):
-                client.send(AclCommand(":Mode", ("1", "Position")))
-            with pytest.raises(TableError, match=r"\?201 interlock fault latched"):
-                client.send(AclCommand(":Interlock:Close", ("ALL",)))
-            client.send(AclCommand(":Interlock:Reset", ("ALL",)))
-            client.send(AclCommand(":Interlock:Close", ("ALL",)))
+                client.set_mode("inner", "position")
+            with pytest.raises(TableError, match=r"error 4 "):
+                client.send(AclCommand("Mode", ("1", "Position")))
+            with pytest.raises(TableError, match=r"error 4 .*interlock fault latched"):
+                client.send(AclCommand("Interlock:Close", ("ALL",)))
+            client.send(AclCommand("Interlock:Reset"), AclCommand("Interlock:Close", ("ALL",)))
             assert client.interlocks_closed("inner")
         emu.join()
         readers.join()
@@ -211,35 +212,37 @@ def test_an_interlock_trip_shows_in_tts1_and_in_the_acl_replies():
     assert status[max(status)] & Status.INTERLOCKS_CLOSED and not status[max(status)] & Status.FAULT
 
 
-def test_the_acl_port_answers_bad_commands_with_errors_and_is_loopback_only():
+def test_the_command_port_answers_bad_commands_with_framed_errors_and_is_loopback_only():
     cfg = static_config(duration=2.0)
     # at real time: as fast as possible, the emulated trial can end (and close its port) before the replies
     with EmulatorThread(cfg, speed=1.0, wait_readers=False) as emu:
         host, port = emu.ports["turntable_cmd"].removeprefix("socket://").split(":")
         assert host == "127.0.0.1"
         with socket.create_connection((host, int(port)), timeout=2) as conn:
-            conn.sendall(b":Spin 1\r\n:Mode 4,Position\r\n:Mode? ALL\r\n")
-            replies = b""
-            while replies.count(b"\r\n") < 3:
-                replies += conn.recv(4096)
-        assert replies.split(b"\r\n")[:3] == [b"?100 acl: unknown command ':Spin'",
-                                              b"?101 acl: bad axis argument '4' in ':Mode 4,Position'",
-                                              b"P,P,P"]
+            conn.sendall(b":Spin 1\r\n:Mode 4,Position\n:Mode? ALL\n:mode? 1;:M? 2;:MODE? 3\n")
+            reader, replies = ReplyReader(), []
+            while len(replies) < 4:
+                replies += reader.feed(conn.recv(4096))
+        assert [(r.error, r.text) for r in replies[:3]] == [
+            (2, "unknown command ':Spin 1' ('Spin' is not under the root)"),
+            (3, "axis '4' in ':Mode 4,Position': the table has axes 1..3"),
+            (3, "axis 'ALL' in ':Mode? ALL': the table has axes 1..3, ALL only in commands")]
+        assert replies[3].ok and replies[3].text == "Position;Position;Position"
         emu.join()
 
 
 @pytest.mark.parametrize("kind, axis", [("static", {"center_deg": 1.0}),
                                          ("swing", {"amplitude_deg": 5.0, "period_s": 8.0, "center_deg": 1.0}),
                                          ("rate", {"rate_dps": 2.0})])
-def test_the_table_performs_each_motion_kind_in_the_acl_mode_named_for_it(kind, axis):
+def test_the_table_performs_each_motion_kind_in_the_mode_named_for_it(kind, axis):
     cfg = parse_config({
         "trial": {"name": "servo", "duration_s": 4.0, "rate_hz": RATE, "seed": 2},
         "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
         "turntable": {"limits": LIMITS, "motion": {"kind": kind, "axes": dict.fromkeys(CENTERS, axis)}},
     })
     servo = Servo(cfg.turntable, RATE, motion_from_config(cfg.turntable.motion))
-    letter = MODES[MOTION_MODES[kind]]
-    assert servo.handle(AclCommand(":Mode?", ("ALL",))).text == ",".join([letter] * 3)
+    word = MOTION_MODES[kind].capitalize()
+    assert ask(servo, ":Mode? 1;:Mode? 2;:Mode? 3").text == ";".join([word] * 3)
 
 
 def test_the_table_reports_the_true_angles_minus_the_zero_offsets():
@@ -254,8 +257,8 @@ def test_the_table_reports_the_true_angles_minus_the_zero_offsets():
     frames = [codec.decode(e.payload) for e in source.compute(np.arange(1, 6), truth, servo)]
     assert {f.angles_udeg for f in frames} == {(4_990_000, 2_020_000, 9_995_000)}
     assert np.allclose(truth.angles(np.array([0.1]))[0] / DEG, [5.0, 2.0, 10.0])  # the IMU moves with the truth
-    replies = servo.handle(AclCommand(":Read:Position?", ("ALL",))).text  # acl order: inner, middle, outer
-    assert [float(v) for v in replies.split(",")] == [9.995, 2.02, 4.99]
+    replies = ask(servo, ":read:pos? 1;pos? 2;pos? 3").text  # axis 1 inner, 2 middle, 3 outer
+    assert [float(v) for v in replies.split(";")] == [9.995, 2.02, 4.99]
 
 
 def test_the_servo_performs_a_calibration_schedule_commanded_live_within_its_limits():
@@ -269,17 +272,15 @@ def test_the_servo_performs_a_calibration_schedule_commanded_live_within_its_lim
     t, holds, plateaus = 0.0, [], []
     for step in list(schedule.dwells) + list(schedule.plateaus):
         target = np.clip(np.array(step.angles) / DEG, [-180, -60, -180], [180, 60, 180])
-        for k, gimbal in enumerate(("3", "2", "1")):  # acl numbers: outer 3, middle 2, inner 1
-            assert servo.handle(AclCommand(":Demand:Position", (gimbal, float(target[k])))).ok
-            assert servo.handle(AclCommand(":Mode", (gimbal, "Position"))).ok
+        for k, gimbal in enumerate(("3", "2", "1")):  # axis numbers: outer 3, middle 2, inner 1
+            assert ask(servo, f":Demand:Position {gimbal},{float(target[k])!r};:Mode:Position {gimbal}").ok
         start = servo.next_pulse_time()
         t = start + 8.0  # every move of this schedule ends within 8 s at 30/20/40 deg/s
         holds.append((t, target))
         servo.commit(t + 1.0)  # a dwell emitted
         if hasattr(step, "rate"):
             axis = ("3", "2", "1")[step.axis]
-            assert servo.handle(AclCommand(":Mode", (axis, "Rate"))).ok
-            assert servo.handle(AclCommand(":Demand:Rate", (axis, step.rate / DEG))).ok
+            assert ask(servo, f":Mode {axis},Rate;:Demand:Rate {axis},{step.rate / DEG!r}").ok
             begin = servo.next_pulse_time()
             plateaus.append((begin + 0.5, step.axis, step.rate / DEG))  # 10 deg/s at 50 deg/s^2: 0.2 s
             servo.commit(begin + 0.5 + step.duration_s)

@@ -49,15 +49,15 @@ def test_a_static_table_off_its_position_fails():
     assert "away from its commanded" in check.failure
 
 
-def _commanded(tmp_path, **turntable):
-    cfg = yaml.safe_load(open(ROOT_CONFIG))
+def _commanded(tmp_path, config=ROOT_CONFIG, **turntable):
+    cfg = yaml.safe_load(open(config))
     cfg["turntable"].update(command_port="emulator", **turntable)
     path = tmp_path / "cmd.yaml"
     path.write_text(yaml.safe_dump(cfg))
     return path
 
 
-def test_run_arms_the_emulated_table_over_acl(tmp_path):
+def test_run_arms_the_emulated_acutrol(tmp_path):
     out = tmp_path / "out"
     code = main(["run", str(_commanded(tmp_path)), "--duration", "30", "--speed", "max", "--quiet",
                  "--viewer", "none", "--no-figures", "--out", str(out)])
@@ -66,15 +66,19 @@ def test_run_arms_the_emulated_table_over_acl(tmp_path):
     assert result["ended"] == "completed"
     assert result["trial"]["duration_s"] == pytest.approx(30.0) and result["estimate"]["gram_rank"] == 12
     table = json.loads((out / "emulator.json").read_text())
-    assert table["table_modes_off"] == 1 and table["table_modes"] == "O,O,O"
-    assert "acl: :Mode ALL,Off -> OK" in (out / "emulator.log").read_text()
+    assert table["table_modes_off"] == 1 and table["table_modes"] == "Off,Off,Off"
+    assert "acutrol: :Mode:Off 3;:Mode:Off 2;:Mode:Off 1 -> OK" in (out / "emulator.log").read_text()
 
 
-def test_an_interlock_trip_ends_the_trial_and_keeps_its_outputs(tmp_path, capsys):
+@pytest.mark.parametrize(("config", "modes"), [(ROOT_CONFIG, "Off,Off,Off"),
+                                              ("configs/rate_table_aerosmith.yaml", "Off")])
+def test_an_interlock_trip_ends_the_trial_and_keeps_its_outputs(tmp_path, capsys, config, modes):
     out = tmp_path / "out"
-    code = main(["run", str(_commanded(tmp_path, interlock_trip_at_s=20.0)), "--duration", "60", "--speed", "max",
-                 "--quiet", "--viewer", "none", "--no-figures", "--out", str(out)])
+    code = main(["run", str(_commanded(tmp_path, config, interlock_trip_at_s=20.0)), "--duration", "60", "--speed",
+                 "max", "--quiet", "--viewer", "none", "--no-figures", "--out", str(out)])
     assert code == 1
     assert "not moving as commanded" in capsys.readouterr().err
     result = json.loads((out / "result.json").read_text())
     assert result["trial"]["duration_s"] > 20.0  # at --speed max the devices run ahead of the check
+    table = json.loads((out / "emulator.json").read_text())
+    assert table["table_modes"] == modes and table["table_modes_off"] == 1

@@ -78,12 +78,13 @@ def position_angles(count: int = 18, outer: float = 0.0) -> np.ndarray:
 
 
 def default_schedule(positions: int = 18, dwell_s: float = 20.0, settle_s: float = 2.0,
-                     rate: float = 10.0 * DEG, plateau_s: float = 36.0) -> Schedule:
-    """The positions (dwell each) and plateaus of both signs about each axis (the outer and inner axes turn
-    from the zero position; the middle axis sweeps across its range); ``plateau_s = 0``: no plateaus."""
+                     rate: float = 10.0 * DEG, plateau_s: float = 36.0, axes: tuple[int, ...] = (0, 1, 2)) -> Schedule:
+    """The positions (dwell each) and plateaus of both signs about each of ``axes`` (0 outer, 1 middle, 2 inner;
+    the outer and inner axes turn from the zero position; the middle axis sweeps across its range);
+    ``plateau_s = 0``: no plateaus."""
     dwells = tuple(Dwell(tuple(a), dwell_s, settle_s) for a in position_angles(positions))
     plateaus = []
-    for axis in range(3) if plateau_s > 0 else ():
+    for axis in axes if plateau_s > 0 else ():
         for sign in (1.0, -1.0):
             if axis == 1:  # the middle gimbal cannot turn through a full circle: sweep it across its range
                 start, duration = -sign * MIDDLE_SWEEP / 2.0, min(plateau_s, MIDDLE_SWEEP / rate)
@@ -98,7 +99,7 @@ def schedule_from_config(config: CalibrationConfig) -> Schedule:
     """The schedule a ``calibration:`` block describes (angles converted to rad)."""
     count = config.positions if isinstance(config.positions, int) else 6
     schedule = default_schedule(count, config.dwell_s, config.settle_s, config.plateau_rate_dps * DEG,
-                                config.plateau_s)
+                                config.plateau_s, tuple(GIMBAL_AXES.index(a) for a in config.plateau_axes))
     if isinstance(config.positions, int):
         return schedule
     return replace(schedule, dwells=tuple(Dwell(tuple(a * DEG for a in angles), config.dwell_s, config.settle_s)

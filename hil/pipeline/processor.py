@@ -13,9 +13,9 @@ from collections.abc import Callable
 import numpy as np
 
 from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent
+from drivers.controllers import data_codec
 from drivers.decoder import StreamDecoder
-from drivers.registry import imu_codec, make_codec
-from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
+from drivers.registry import imu_codec
 from hil.config import Config
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.frames import Earth, TableGeometry
@@ -73,8 +73,8 @@ class TrialProcessor:
         self.earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         self.geometry = TableGeometry.from_config(cfg.turntable)
         self.decoders = {IMU: StreamDecoder(imu_codec(cfg.imu, cfg.imu_rate_hz), time_scale, cfg.read_s),
-                         TABLE: StreamDecoder(make_codec("tts1", pulses_per_frame=cfg.table_counts_per_frame),
-                                              time_scale, cfg.read_s)}
+                         TABLE: StreamDecoder(data_codec(cfg.turntable, cfg.table_counts_per_frame), time_scale,
+                                              cfg.read_s)}
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self.aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
                                table_wait_s=table_wait(time_scale), free_running=free_running)
@@ -109,7 +109,7 @@ class TrialProcessor:
         codec = self.decoders[IMU].codec
         rate = cfg.imu_rate_hz
         wire = (codec.frame_bytes() * BITS_PER_BYTE / cfg.imu.baudrate,  # a CAN frame's bus time: negligible
-                TTS1_BYTES * BITS_PER_BYTE / cfg.turntable.baudrate)
+                self.decoders[TABLE].codec.frame_bytes() * BITS_PER_BYTE / cfg.turntable.baudrate)
 
         def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
             return TableRotations(self.geometry, self.earth, rate, cfg.table_counts_per_frame, counts, angles)

@@ -36,7 +36,7 @@ class Expected:
         check = ("imu.can.dbc and imu.can.signals" if codec_class(imu.protocol).link == "can"
                  else "imu.baudrate and imu.protocol")
         return {IMU: cls("imu port", "imu", imu.protocol, "imu.protocol", check),
-                TABLE: cls("turntable data port", "table", "tts1", "turntable.data_port",
+                TABLE: cls("turntable data port", "table", cfg.turntable.data_protocol, "turntable.data_protocol",
                            "turntable.baudrate and turntable.data_port")}
 
 

@@ -15,6 +15,7 @@ from hil.estimation.calibration_schedule import Schedule
 from hil.outputs.calibration_report import Residuals
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import COMPLETED
+from hil.samples import GIMBAL_AXES
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 
 # The emulated devices run for this many times the schedule's nominal length (+ 120 s), and the trial ends when
@@ -26,15 +27,24 @@ UNFINISHED = "the devices stopped before the schedule ended"
 
 def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
     """``calibration``'s schedule; raises :class:`TrialSetupError` (prefixed with ``where``) when a step lies
-    outside ``turntable.limits``."""
+    outside ``turntable.limits`` or needs what ``turntable.controller`` cannot do."""
+    from drivers.table_controller import TableError
     from hil.estimation.calibration_schedule import check_limits, schedule_from_config
+    from hil.trial.table_control import check_controller
 
     schedule = schedule_from_config(cfg.calibration)
+    prefix = f"{where}: " if where else ""
     try:
         check_limits(schedule, cfg.turntable.limits)
     except ValueError as exc:
-        prefix = f"{where}: " if where else ""
         raise TrialSetupError(f"{prefix}{exc} (turntable.limits); nothing was sent") from None
+    steps = list(schedule.dwells) + list(schedule.plateaus)
+    gimbals = {g for k, g in enumerate(GIMBAL_AXES) if any(s.angles[k] for s in steps)}
+    gimbals |= {GIMBAL_AXES[p.axis] for p in schedule.plateaus}
+    try:
+        check_controller(cfg.turntable, {"position"} | ({"rate"} if schedule.plateaus else set()), gimbals)
+    except TableError as exc:
+        raise TrialSetupError(f"{prefix}{exc}") from None
     return schedule
 
 

@@ -1,5 +1,5 @@
 """``hil calibrate``: a live trial in which the harness commands the table through the calibration schedule
-over ``acl`` (:mod:`hil.trial.calibration_sequence`), then fits the accelerometers and gyros on the
+through the controller interface (:mod:`hil.trial.calibration_sequence`), then fits the accelerometers and gyros on the
 windows; the outcome writes ``calibration.json`` and ``calibration.html`` beside the trial's usual outputs
 (:mod:`hil.trial.calibration_outcome`, shared with ``--simulate``, :mod:`hil.trial.calibration_simulation`).
 
@@ -32,7 +32,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
 
     schedule = checked_schedule(cfg, str(config_path))
     if not cfg.turntable.command_port:
-        raise TrialSetupError("turntable.command_port: hil calibrate commands the table over acl; set its port "
+        raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "
                               "('emulator' for the emulated table)")
     is_emulated = emulated(cfg)
     duration = emulated_length(cfg, schedule) if is_emulated else None
@@ -45,7 +45,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
         sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz,
                                        **sequence_views(viewer, schedule, cfg), lacking_max=lacking)
         sequence.start()
-        control.client.configure_sync(True)
+        control.client.sync_output(True)
         sequences.append(sequence)
         return sequence, {"on_samples": sequence.on_samples, "finished": lambda: sequence.done,
                           "queue_items": QUEUE_ITEMS}

@@ -1,4 +1,5 @@
-"""The calibration schedule commanded live over ``acl``, its windows cut from the table's reported angles.
+"""The calibration schedule commanded live through the controller interface, its windows cut from the table's
+reported angles.
 
 :class:`CalibrationSequence` follows the angles the table reports (the processor's ``on_table``, trial
 times and angles) step by step: it commands a step's position on every axis, waits until the table
@@ -49,7 +50,7 @@ class StepWindow:
 
 
 class CalibrationSequence:
-    """Commands the schedule through ``client`` (a :class:`drivers.table_client.TableCommandClient`) and
+    """Commands the schedule through ``client`` (a :class:`drivers.table_controller.TableController`) and
     finds each step's window; :attr:`done` once every step has its window, :attr:`failure` says what
     went wrong. ``sample_period`` is the IMU's interval (s); ``on_step`` and ``on_window`` as in the module
     docstring."""
@@ -147,7 +148,7 @@ class CalibrationSequence:
                 return
             if self._phase == "moving" and plateau:
                 gimbal = GIMBAL_AXES[step.axis]
-                self.client.set_mode(gimbal, "Rate")
+                self.client.set_mode(gimbal, "rate")
                 self.client.demand_rate(gimbal, step.rate / DEG)
                 self._phase, self._since = "ramping", None
                 return
@@ -182,8 +183,9 @@ class CalibrationSequence:
             return
         step = self.steps[self._index]
         for k, gimbal in enumerate(GIMBAL_AXES):
-            self.client.demand_position(gimbal, step.angles[k] / DEG)
-            self.client.set_mode(gimbal, "Position")
+            if gimbal in self.client.gimbals:
+                self.client.demand_position(gimbal, step.angles[k] / DEG)
+                self.client.set_mode(gimbal, "position")
         if self.on_step is not None:
             self.on_step(t, self._index)
 

@@ -34,7 +34,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
                                ) -> tuple[CalibrationOutcome, Viewer | None]:
     """The simulated calibration trial (module docstring); its outcome (with the calibration when the
     schedule completed) and the viewer ``options`` ask for (none by default)."""
-    from drivers.table_client import InterlockError, LimitError, TableError
+    from drivers.table_controller import InterlockError, LimitError, TableError
     from emulators.servo_simulation import ServoSimulation
     from hil.trial.calibration_feed import sequence_views
     from hil.trial.calibration_sequence import CalibrationSequence
@@ -45,7 +45,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     end = round(emulated_length(cfg, schedule) * rate)  # samples
     step = cfg.block_samples
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
-    client = sim.command_client(cfg.turntable.limits, cfg.turntable.baudrate)
+    client = sim.command_client(cfg.turntable)
     sequence = CalibrationSequence(schedule, client, 1.0 / rate, **sequence_views(viewer, schedule, cfg))
     on_table = ViewerFeed(viewer).on_table
 
@@ -57,7 +57,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     try:
         client.apply_limits()
         sequence.start()
-        client.configure_sync(True)
+        client.sync_output(True)
         while not sequence.done and sequence.failure is None and sim.samples < end:
             processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
     except (TableError, LimitError, InterlockError) as exc:
@@ -66,7 +66,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         raise TrialSetupError(str(exc)) from None
     finally:
         try:
-            client.close()  # :Mode ALL,Off, and the modes read back
+            client.close()  # every axis Off, and the modes read back
         except TableError as exc:
             print(f"hil: WARNING: could not confirm the turntable is off: {exc}", file=sys.stderr)
     processor.finish()

@@ -1,5 +1,5 @@
 """The live trial of ``hil run``: the devices (or their emulators, in their own process), the viewer, the
-table under ``acl`` control and the :class:`~hil.trial.live.LiveTrial`; the table is sent Off, the
+table under its controller's control and the :class:`~hil.trial.live.LiveTrial`; the table is sent Off, the
 viewer closed and the emulator reaped on every way out, signals included."""
 
 from __future__ import annotations
@@ -37,6 +37,8 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     from hil.trial.stop_signals import StopSignals
 
     is_emulated = emulated(cfg)
+    if commanded is None and cfg.turntable.command_port:
+        _check_motion(cfg)
     duration = duration if duration is not None else cfg.trial.duration_s
     if is_emulated and duration is None:
         raise TrialSetupError("an emulated trial needs trial.duration_s or --duration")
@@ -56,7 +58,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
 def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
              time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested, commanded: Commanded):
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
-    from drivers.table_client import InterlockError, LimitError, TableError
+    from drivers.table_controller import InterlockError, LimitError, TableError
     from emulators.process import EmulatorError, spawn_emulator, stop_emulator
     from hil.trial.live import LiveTrial
     from hil.trial.table_control import TableControl
@@ -98,6 +100,17 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
             stop_emulator(emulator)
 
 
+def _check_motion(cfg: Config) -> None:
+    """Refuse, before anything starts, a configured motion the controller cannot perform."""
+    from drivers.table_controller import TableError
+    from hil.trial.table_control import check_controller, motion_needs
+
+    try:
+        check_controller(cfg.turntable, *motion_needs(cfg.turntable))
+    except TableError as exc:
+        raise TrialSetupError(str(exc)) from None
+
+
 def _arm(control, cfg: Config, viewer) -> tuple[object, dict]:
     """``hil run``: the configured motion, checked against what the table reports."""
     from hil.trial.table_control import MotionCheck
@@ -107,7 +120,7 @@ def _arm(control, cfg: Config, viewer) -> tuple[object, dict]:
 
 
 def _command_url(cfg: Config, ports: dict | None) -> str | None:
-    """The table's acl port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
+    """The table's command port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
     url = cfg.turntable.command_port
     if url == "emulator":
         if ports is None or "turntable_cmd" not in ports:

@@ -1,12 +1,14 @@
-"""Turntable control during a trial: arm the configured motion over ``acl``, check it, always stop.
+"""Turntable control during a trial: arm the configured motion through the controller interface, check it,
+always stop.
 
-:class:`TableControl` loads the limits, checks the interlocks, commands ``turntable.motion`` (swing:
-Synthesis mode, an oscillator about the centre position; static: Position; rate: Rate) and turns the
-sync output on. :class:`MotionCheck` then watches the gimbal angles the table reports: after one
+:class:`TableControl` opens ``turntable.controller`` (:mod:`drivers.controllers`), loads the limits, checks
+the interlocks, commands ``turntable.motion`` (swing: synthesis mode, an oscillator about the centre
+position; static: position; rate: rate) and turns the sync output on where the controller has a command
+for it. :func:`refusal` says, before anything moves, why a controller cannot run a trial. :class:`MotionCheck` then watches the gimbal angles the table reports: after one
 period of settling, each swinging axis must cover 80-120 % of its commanded peak-to-peak range over
 the last period, a static axis must hold its position within 0.5 deg, a rate axis must turn within
-10 % of its rate. ``stop`` sends ``:Mode ALL,Off`` whatever happened, and keeps the error if that
-cannot be confirmed.
+10 % of its rate. ``stop`` turns every axis Off whatever happened, and keeps the error if that cannot
+be confirmed.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from collections import deque
 
 import numpy as np
 
-from drivers.acl import MOTION_MODES
-from drivers.table_client import TableCommandClient, TableError
+from drivers.controllers import controller_class, controller_options, make_controller
+from drivers.table_controller import MOTION_MODES, TableError
 from hil.config import TurntableConfig
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
@@ -28,15 +30,42 @@ RANGE_TOLERANCE = 0.2  # swing: peak-to-peak within +-20 % of the commanded
 RATE_TOLERANCE = 0.1
 
 
+def motion_needs(table: TurntableConfig) -> tuple[set[str], set[str]]:
+    """The modes ``turntable.motion`` commands, and the gimbals it moves off their zero (a table that
+    commands fewer axes leaves the others where they are)."""
+    motion, modes, gimbals = table.motion, set(), set()
+    for gimbal in GIMBAL_AXES:
+        mode = _mode(table, gimbal)
+        axis = getattr(motion.axes, gimbal)
+        moves = axis.amplitude_deg if mode == "synthesis" else axis.rate_dps if mode == "rate" else axis.center_deg
+        modes |= {mode} | ({"position"} if mode == "synthesis" else set())
+        gimbals |= {gimbal} if moves else set()
+    return modes, gimbals
+
+
+def check_controller(table: TurntableConfig, modes: set[str], gimbals: set[str]) -> None:
+    """Raise :class:`TableError` (one line) when ``turntable.controller`` cannot move ``gimbals`` in ``modes``,
+    or a :class:`hil.config.ConfigError` when its options are not valid; nothing is sent."""
+    options = controller_options(table)
+    why = controller_class(table.controller).refusal(modes, gimbals, options)
+    if why is not None:
+        raise TableError(f"{why}; nothing was sent")
+
+
+def _mode(table: TurntableConfig, gimbal: str) -> str:
+    kind, axis = table.motion.kind, getattr(table.motion.axes, gimbal)
+    return MOTION_MODES[kind] if kind != "swing" or axis.amplitude_deg else "position"
+
+
 class TableControl:
-    """The ``acl`` side of a trial; use as a context manager so the table is always turned off."""
+    """The controller side of a trial; use as a context manager so the table is always turned off."""
 
     def __init__(self, url: str, table: TurntableConfig) -> None:
         if table.motion.kind == "positions":
             raise TableError("turntable.motion: kind 'positions' is not commanded by the harness; "
                              "run the sequence from the table's console or use swing, static or rate")
         self.table = table
-        self.client = TableCommandClient(url, table.limits, table.baudrate)
+        self.client = make_controller(table, url)
         self.stop_error: str | None = None
 
     def open(self) -> TableControl:
@@ -51,23 +80,22 @@ class TableControl:
         self.stop()
 
     def arm(self) -> None:
-        """Limits, interlock check, the configured motion on every axis, sync output on."""
+        """Limits, interlock check, the configured motion on every axis the controller commands, sync output on."""
         client, motion = self.client, self.table.motion
         client.apply_limits()
-        for gimbal in GIMBAL_AXES:
-            axis = getattr(motion.axes, gimbal)
-            mode = MOTION_MODES[motion.kind] if motion.kind != "swing" or axis.amplitude_deg else "Position"
-            if mode != "Rate":
+        for gimbal in client.gimbals:
+            axis, mode = getattr(motion.axes, gimbal), _mode(self.table, gimbal)
+            if mode != "rate":
                 client.demand_position(gimbal, axis.center_deg)
-            client.set_mode(gimbal, mode)
-            if mode == "Rate":
-                client.demand_rate(gimbal, axis.rate_dps)
-            elif mode == "Synthesis":
+            if mode == "synthesis":  # loaded before the mode starts it (TM-8004 4.7.6)
                 client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
-        client.configure_sync(True)
+            client.set_mode(gimbal, mode)
+            if mode == "rate":
+                client.demand_rate(gimbal, axis.rate_dps)
+        client.sync_output(True)
 
     def stop(self) -> None:
-        """``:Mode ALL,Off`` and close the port (safe to call twice); a failure is kept in :attr:`stop_error`."""
+        """Every axis Off and the port closed (safe to call twice); a failure is kept in :attr:`stop_error`."""
         try:
             self.client.close()
         except TableError as exc:
