@@ -146,17 +146,28 @@ def test_a_trial_that_commands_the_table_of_a_running_emulator_completes_and_lea
     assert stats["table_modes_off"] >= 1 and stats["table_modes"] == "Off,Off,Off"
 
 
-def test_a_calibration_of_a_running_emulator_completes(tmp_path):
+def _calibrated(tmp_path: Path, config: str, duration: float, **change: dict) -> tuple[int, Path, Path, dict]:
+    """``hil calibrate`` on a running ``hil emulate`` of ``configs/CONFIG`` (its blocks updated by ``change``):
+    the exit code, the output directory, the lab config and the emulator's statistics."""
     import yaml
 
-    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_short.yaml").read_text())
-    with Emulator(tmp_path, cfg, duration=300.0) as emulator:
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / config).read_text())
+    for block, values in change.items():
+        cfg[block].update(values)
+    with Emulator(tmp_path, cfg, duration=duration) as emulator:
         lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
         time.sleep(1.0)
         out = tmp_path / "cal"
-        assert main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"]) == 0
+        code = main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"])
         emulator.stop()
         stats = json.loads(emulator.stats_file.read_text())
+    return code, out, lab, {**stats, "config": cfg}
+
+
+def test_a_calibration_of_a_running_emulator_completes(tmp_path):
+    code, out, _, stats = _calibrated(tmp_path, "calibration_short.yaml", 300.0)
+    assert code == 0
+    cfg = stats["config"]
     doc = json.loads((out / "calibration.json").read_text())
     assert len(doc["positions"]) == 18 and result(out)["streams"]["sync"]["repairs"] == []
     emulator_cfg = parse_config(cfg)  # the lab config knows no truth: the emulator's
@@ -169,16 +180,9 @@ def test_a_calibration_of_a_running_emulator_completes(tmp_path):
 
 
 def test_a_gyro_rate_test_on_a_running_emulated_rate_table_completes_within_3_sigma(tmp_path):
-    import yaml
-
-    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_rate_table.yaml").read_text())
-    with Emulator(tmp_path, cfg, duration=200.0) as emulator:
-        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
-        time.sleep(1.0)
-        out = tmp_path / "rate"
-        assert main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"]) == 0
-        emulator.stop()
-        stats = json.loads(emulator.stats_file.read_text())
+    code, out, _, stats = _calibrated(tmp_path, "calibration_rate_table.yaml", 200.0)
+    assert code == 0
+    cfg = stats["config"]
     doc = json.loads((out / "calibration.json").read_text())
     emulator_cfg = parse_config(cfg)  # the lab config knows no truth: the emulator's
     doc["truth"] = {"as_observed": observed_truth(emulator_cfg.imu.errors, emulator_cfg.turntable.zero_offset_arcsec)}
@@ -196,19 +200,11 @@ def test_a_gyro_rate_test_on_a_running_emulated_rate_table_completes_within_3_si
 ])
 def test_a_calibration_whose_imu_loses_samples_is_not_filed_as_pass(tmp_path, faults):
     """Ended early naming the window that lacks samples, or completed and FAILed on the samples missing."""
-    import yaml
-
     from hil.config import load_config
     from hil.outputs.measurements import FAIL, measurements
 
-    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "calibration_short.yaml").read_text())
-    cfg["calibration"].update(positions=6, plateau_s=3)
-    cfg["imu"]["faults"] = faults
-    with Emulator(tmp_path, cfg, duration=300.0) as emulator:
-        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
-        time.sleep(1.0)
-        out = tmp_path / "cal"
-        code = main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"])
+    code, out, lab, _ = _calibrated(tmp_path, "calibration_short.yaml", 300.0,
+                                    calibration={"positions": 6, "plateau_s": 3}, imu={"faults": faults})
     doc = result(out)
     failed = {m.name for m in measurements(doc, load_config(lab).limits) if m.outcome == FAIL}
     if code == 1:
