@@ -37,6 +37,16 @@ def test_worker_refuses_no_workers_in_one_line_exit_2(capsys):
     assert err == "hil: error: --nworkers: expected at least 1, got 0\n"
 
 
+def test_worker_without_a_scheduler_is_one_line_exit_2(tmp_path):
+    env = {**_env(), "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "1s"}
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "worker", "tcp://127.0.0.1:1", "--host", "127.0.0.1"],
+                          check=False, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    last = proc.stderr.splitlines()[-1]
+    assert last.startswith("hil: error: tcp://127.0.0.1:1: cannot start the workers: Timed out trying to connect")
+    assert "Traceback" not in proc.stderr
+
+
 def _start(args: list[str], cwd: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, *args], cwd=cwd, env=_env(), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)

@@ -49,7 +49,8 @@ def worker_arguments(scheduler: str, nworkers: int, host: str | None) -> list[st
 
 def run_workers(scheduler: str, nworkers: int, host: str | None = None) -> int:
     """Run ``dask worker`` in this process with :data:`WORKER_CONFIG` (its nannies hand it to the worker
-    processes) until it ends (a signal); its exit code."""
+    processes) until it ends (a signal); its exit code. Workers that cannot start (the scheduler not reached
+    within dask's connect timeout, an address taken) are an :class:`InputError` naming the cause."""
     import dask
     from distributed.cli.dask_worker import main
 
@@ -58,4 +59,7 @@ def run_workers(scheduler: str, nworkers: int, host: str | None = None) -> int:
             main(worker_arguments(scheduler, nworkers, host), prog_name="hil worker", standalone_mode=False)
         except SystemExit as exc:
             return exc.code if isinstance(exc.code, int) else 1
+        except RuntimeError as exc:  # dask's "Nanny failed to start.", from the cause
+            cause = exc.__cause__ or exc
+            raise InputError(f"{scheduler}: cannot start the workers: {' '.join(str(cause).split())}") from None
     return 0
