@@ -129,6 +129,12 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     return run_campaign(args.spec, out, args.scheduler, args.workers, args.resume)
 
 
+def cmd_worker(args: argparse.Namespace) -> int:
+    from hil.campaign.workers import run_workers
+
+    return run_workers(args.scheduler, args.nworkers, args.host)
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from hil.outputs.report import write_report
 
@@ -260,6 +266,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default: runs/campaign-SPEC)")
     p.add_argument("--resume", action="store_true", help="go on with OUT/runs.parquet: skip the runs done there")
     p.set_defaults(func=cmd_campaign)
+
+    p = sub.add_parser("worker", help="dask workers for an existing cluster, with the campaign's worker settings "
+                                      "(profiler off, no malloc trim, one thread each); runs until a signal")
+    p.add_argument("scheduler", help="the cluster's scheduler, tcp://host:8786")
+    p.add_argument("--nworkers", type=int, default=1, metavar="N", help="worker processes (default 1)")
+    p.add_argument("--host", help="the address the workers listen on (default: dask's choice)")
+    p.set_defaults(func=cmd_worker)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports; "
                                        "their statistics on stderr at the end and on a signal")

@@ -9,17 +9,12 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+from hil.campaign.workers import WORKER_CONFIG
 from hil.config import InputError
 
 LOOPBACK = "127.0.0.1"
 CONNECT_TIMEOUT_S = 20.0
 WORKERS_TIMEOUT_S = 120.0  # an existing cluster: how long to wait for --workers N to join
-# A LocalCluster's workers go without two of dask's defaults that cost a short numpy-bound run dearly
-# (benchmarks/campaign_speed.py): the statistical profiler (every thread's stack every 10 ms) and
-# MALLOC_TRIM_THRESHOLD_=65536, which hands every freed sample chunk back to the OS (5x the page faults,
-# 1.7x the run time); the memory a run takes is bounded by the simulation's chunk.
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
-                 "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 class ClusterError(InputError, ValueError):
@@ -70,7 +65,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client.wait_for_workers(workers or 1, timeout=WORKERS_TIMEOUT_S)
         except TimeoutError:
             raise ClusterError(f"--scheduler {scheduler}: fewer than {workers or 1} workers joined in "
-                               f"{WORKERS_TIMEOUT_S:g} s (start them with `dask worker {scheduler}`)") from None
+                               f"{WORKERS_TIMEOUT_S:g} s (start them with `hil worker {scheduler}`)") from None
         yield client, _info(client)
 
 

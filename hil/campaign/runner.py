@@ -120,6 +120,7 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
     from hil.campaign.cluster import open_client
     from hil.campaign.report import write_campaign_report
     from hil.campaign.summary import summarise, write_summary
+    from hil.campaign.workers import costly_defaults
 
     campaign = load_campaign(spec)
     kind = KINDS[campaign.spec.kind]
@@ -133,6 +134,8 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
         shutil.copyfile(campaign.path, out / SPEC_COPY)
         print(f"hil: campaign of {len(campaign.tasks)} runs ({len(pending)} to do) on {info.scheduler}, "
               f"{info.workers} workers, dashboard {info.dashboard}", file=sys.stderr)
+        if scheduler and (warning := costly_defaults(client)):
+            print(warning, file=sys.stderr)
         interrupted = None
         try:
             with stop_signals():
