@@ -30,6 +30,18 @@ TRIALS = {
 FILES = ("result.json", "series.csv")
 
 
+def _without_record(path: Path) -> bytes:
+    """The file's bytes; result.json's as written without its ``record`` (who, when, where: a run's own)."""
+    if path.name != "result.json":
+        return path.read_bytes()
+    from hil.outputs.result import write_result
+
+    doc = json.loads(path.read_text())
+    doc.pop("record", None)
+    write_result(path.parent, doc)
+    return path.read_bytes()
+
+
 def digests() -> dict[str, dict[str, str]]:
     out: dict[str, dict[str, str]] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -37,7 +49,7 @@ def digests() -> dict[str, dict[str, str]]:
             run_dir = Path(tmp) / name
             subprocess.run([sys.executable, "-m", "hil.cli", *args, "--out", str(run_dir)], check=False,
                            cwd=HERE.parent, stdout=subprocess.DEVNULL)
-            out[name] = {f: hashlib.sha256((run_dir / f).read_bytes()).hexdigest() for f in FILES}
+            out[name] = {f: hashlib.sha256(_without_record(run_dir / f)).hexdigest() for f in FILES}
     return out
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from datetime import datetime, timezone
 from pathlib import Path
 
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
@@ -36,9 +37,12 @@ def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
     when given), close the viewer of a completed trial; the exit code of the outcome."""
     from hil.outputs.figures import write_figures
+    from hil.outputs.record import trial_record
     from hil.trial.viewer_feed import finish_viewer
 
     draw = write_figures if figures is None else figures.draw
+    outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
+                                            outcome.out)
     code = outcome.exit_code(outcome.write(figures=not args.no_figures, draw=draw))
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
@@ -53,6 +57,11 @@ def _trial_config(args: argparse.Namespace):
     from hil.trial.outcome import output_dir
 
     cfg = load_config(args.config)
+    record = {key: value for key, value in (("dut_serial", getattr(args, "dut", None)),
+                                            ("operator", getattr(args, "operator", None)),
+                                            ("station", getattr(args, "station", None))) if value is not None}
+    if record:
+        cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record)})
     return cfg, output_dir(args.out, cfg)
 
 
@@ -198,6 +207,12 @@ def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or
     p.add_argument("--bind", default="127.0.0.1", help="address the web viewer listens on (default 127.0.0.1)")
 
 
+def _record_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dut", help="the unit's serial number (record.dut_serial)")
+    p.add_argument("--operator", help="who runs the trial (record.operator)")
+    p.add_argument("--station", help="the test station (record.station)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
 
@@ -208,6 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
     _config_argument(p)
     _trial_options(p)
+    _record_options(p)
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
     _live_options(p)
     p.set_defaults(func=cmd_run)
@@ -216,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
                                          "schedule; OUT/calibration.json")
     _config_argument(p, CALIBRATION_CONFIG)
     _trial_options(p)
+    _record_options(p)
     _live_options(p)
     p.add_argument("--simulate", action="store_true",
                    help="the emulated table and IMU in this process, as fast as the CPU allows (no ports, no "
@@ -230,6 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
     _config_argument(p)
     _trial_options(p, viewer_default="none")
+    _record_options(p)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
@@ -237,6 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", required=True, type=_config_path, help="trial YAML (trial and site are enough)")
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    _record_options(p)
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (its devices read, or "
@@ -302,6 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.started = datetime.now(timezone.utc)
     from hil.inputs import InputError  # no schema yet: a command that starts a child does so first
 
     try:

@@ -266,6 +266,16 @@ class OutputConfig(Model):
     stream_timeout_s: float = Field(5.0, gt=0)  # live: a stream's bytes without a frame this long end the trial
 
 
+class RecordConfig(Model):
+    """Who tested which unit where (all optional; ``--dut``, ``--operator``, ``--station`` override)."""
+
+    dut_part: str | None = None
+    dut_serial: str | None = None
+    station: str | None = None
+    operator: str | None = None
+    notes: str | None = None
+
+
 class Config(Model):
     trial: TrialConfig
     site: SiteConfig
@@ -274,6 +284,7 @@ class Config(Model):
     estimator: EstimatorConfig = EstimatorConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     output: OutputConfig = OutputConfig()
+    record: RecordConfig = RecordConfig()
 
     @model_validator(mode="after")
     def _imu_rate_divides_into_table_latches(self) -> Config:

@@ -114,3 +114,14 @@ def interruptible() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def processed(run_dir) -> dict:
+    """A run directory's result.json without its ``record`` (who ran it, when: a replay has its own): what a replay
+    of the recording reproduces bit for bit."""
+    import json
+    from pathlib import Path
+
+    doc = json.loads((Path(run_dir) / "result.json").read_text())
+    doc.pop("record", None)
+    return doc

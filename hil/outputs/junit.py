@@ -7,7 +7,8 @@ A limit that does not apply to this trial (the bias error without truth) is ``<s
 skipped as a test that exists but was not run. A measurement without a limit is informational, not a
 test, and is left out: reported as skipped, the dozens of them would bury the few judged cases (and
 CI would flag every run as having skipped tests). A trial that did not complete (``ended`` early or
-interrupted) adds a ``trial_completed`` case with an ``<error>`` holding the reason.
+interrupted) adds a ``trial_completed`` case with an ``<error>`` holding the reason. The trial's record (the
+unit, operator, station, software, config digest, times, host) is the suite's ``<properties>``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement
+from hil.outputs.record import PROPERTIES
 from hil.outputs.result import COMPLETED
 
 JUNIT_NAME = "junit.xml"
@@ -37,6 +39,12 @@ def write_junit(out_dir: Path, result: dict, results: list[Measurement]) -> Path
     attrs = {"name": name, **{k: str(v) for k, v in counts.items()}}
     root = ET.Element("testsuites", attrs)
     suite = ET.SubElement(root, "testsuite", attrs)
+    record = result.get("record") or {}
+    if record:
+        properties = ET.SubElement(suite, "properties")
+        for key in PROPERTIES:
+            if record.get(key) is not None:
+                ET.SubElement(properties, "property", name=key, value=str(record[key]))
     if ended != COMPLETED:
         case = ET.SubElement(suite, "testcase", name="trial_completed", classname=f"hil.{name}")
         ET.SubElement(case, "error", message=f"trial {ended}", type="ended")

@@ -29,6 +29,7 @@ from hil.outputs.measurements import (
 )
 from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
+from hil.outputs.record import PROPERTIES
 from hil.outputs.result import calibration_applied_text
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
@@ -184,6 +185,7 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
 <p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
+{_record_table(result.get("record"))}
 <div class="verdict {verdict}">{verdict}</div>
 <p>{e(summary)}.</p>
 {"".join(f'<p class="note">{e(n)}</p>' for n in notes)}
@@ -197,6 +199,16 @@ Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 <p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
 (recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
     return html_page(f"Trial report: {name}", f"{name}: {verdict}", body)
+
+
+def _record_table(record: dict | None) -> str:
+    """The trial's record as a two-column table (who, which unit, where, which software, when)."""
+    if not record:
+        return ""
+    rows = "".join(f"<tr><th>{html.escape(key)}</th><td>{html.escape(str(record[key]))}</td></tr>" for key in PROPERTIES
+                   if record.get(key) is not None)
+    return f'<table class="record"><tbody>{rows}</tbody></table>'
+
 
 
 def _figure_html(figures: list[tuple[str, bytes]]) -> str:

@@ -1,0 +1,46 @@
+"""result.json's ``record``: who tested which unit, where, with which software and config, when, on which ports
+(docs/contracts.md, "result.json"). Filed with every trial's outputs, in report.html's header and junit.xml's
+``<properties>``."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import socket
+import subprocess
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from hil.config import Config
+from hil.recording.recorder import package_version
+
+PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
+              "started_utc", "ended_utc", "host", "controller")  # what junit.xml and the report's header show
+
+
+def source_commit() -> str | None:
+    """The git commit of the checkout the package runs from (``-dirty`` when changed), None outside one."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        run = subprocess.run(["git", "-C", str(root), "describe", "--always", "--dirty", "--abbrev=40"],
+                             capture_output=True, text=True, timeout=5, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return run.stdout.strip() or None if run.returncode == 0 else None
+
+
+def trial_record(cfg: Config, config_text: str, started: datetime, ended: datetime, out: Path) -> dict[str, Any]:
+    """The record of a trial of ``cfg`` (its YAML ``config_text``) that ran from ``started`` to ``ended`` (aware
+    datetimes, UTC) into ``out`` (its ports.json, when the devices were emulated, names the ports)."""
+    ports_file = out / "ports.json"
+    if ports_file.exists():
+        ports = json.loads(ports_file.read_text())
+    else:
+        imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
+        ports = {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+    return {**cfg.record.model_dump(), "software_version": package_version(), "commit": source_commit(),
+            "config_sha256": hashlib.sha256(config_text.encode()).hexdigest(),
+            "started_utc": started.isoformat(timespec="seconds"), "ended_utc": ended.isoformat(timespec="seconds"),
+            "host": socket.gethostname(), "ports": ports,
+            "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
