@@ -196,9 +196,7 @@ def receive_buffer(sock: socket.socket, size: int) -> int:
     bookkeeping, and caps a plain request at twice ``rmem_max``)."""
     force = getattr(socket, "SO_RCVBUFFORCE", SO_RCVBUFFORCE_LINUX if sys.platform == "linux" else None)
     try:
-        if force is None:
-            raise PermissionError
-        sock.setsockopt(socket.SOL_SOCKET, force, size)
+        sock.setsockopt(socket.SOL_SOCKET, force if force is not None else socket.SO_RCVBUF, size)
     except PermissionError:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
     return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)

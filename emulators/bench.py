@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.codec import check_baudrate
+from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from drivers.registry import imu_codec
 from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
@@ -133,7 +134,7 @@ class Bench:
                 check_baudrate("imu", codec.frame_bytes(), rate, imu_cfg.baudrate)
                 imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
-            check_baudrate("turntable", 24, cfg.trial.rate_hz, cfg.turntable.baudrate)
+            check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)  # it sends tts1
             self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
             self.server = TableServer(emulated_table(cfg, self.servo, log=True))
             for k, (name, damage, baud, faults) in enumerate((

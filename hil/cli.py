@@ -57,9 +57,8 @@ def _trial_config(args: argparse.Namespace):
     from hil.trial.outcome import output_dir
 
     cfg = load_config(args.config)
-    record = {key: value for key, value in (("dut_serial", getattr(args, "dut", None)),
-                                            ("operator", getattr(args, "operator", None)),
-                                            ("station", getattr(args, "station", None))) if value is not None}
+    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}  # _record_options
+    record = {key: value for key, value in given.items() if value is not None}
     if record:
         cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record)})
     return cfg, output_dir(args.out, cfg)

@@ -100,7 +100,7 @@ class CalibrationSequence:
             samples = self._joined()
             while self._reported < len(self.windows_found) and t[-1] >= self.windows_found[self._reported].end:
                 try:
-                    window = self._cut(self.windows_found[self._reported], *samples)
+                    window = self._cut(self._reported, *samples)
                 except ValueError as exc:
                     self.failure = self.failure or str(exc)
                     return
@@ -202,7 +202,7 @@ class CalibrationSequence:
         if not self._samples:
             return []
         samples = self._joined()
-        return [self._cut(found, *samples) for found in self.windows_found]
+        return [self._cut(index, *samples) for index in range(len(self.windows_found))]
 
     def _joined(self) -> tuple[np.ndarray, ...]:
         """The samples kept as (t, dtheta, dv, angles, contiguous): contiguous marks a sample that follows
@@ -213,12 +213,14 @@ class CalibrationSequence:
                                                                                              axis=1)))
         return t, dtheta, dv, angles, contiguous
 
-    def _cut(self, found: StepWindow, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray,
+    def _cut(self, index: int, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray,
              contiguous: np.ndarray) -> Window:
+        """The window of step ``index`` (its window is ``windows_found[index]``) from the samples kept."""
+        found = self.windows_found[index]
         sel = np.flatnonzero(contiguous & (t - self.period >= found.start - 1e-9) & (t <= found.end + 1e-9))
         expected = round((found.end - found.start) / self.period)
         if expected - len(sel) > max(1.0, self.lacking_max * expected):
-            raise ValueError(f"calibration {self._name(self.steps.index(found.step))}: {expected - len(sel)} of the "
+            raise ValueError(f"calibration {self._name(index)}: {expected - len(sel)} of the "
                              f"{expected} samples of its window {found.start:.2f}..{found.end:.2f} s were rejected or "
                              f"lost (more than {self.lacking_max:.2%}): no fit on it")
         turn = wrapped(angles[sel] - angles[sel - 1])  # each interval's encoder turn

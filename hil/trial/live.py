@@ -28,7 +28,6 @@ from drivers.latency import LatencyHistogram
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
-from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.result import COMPLETED
@@ -184,10 +183,10 @@ class LiveTrial:
         self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
+        codecs = {stream: decoder.codec for stream, decoder in self.processor.decoders.items()}
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
-            frame_bytes = self.processor.decoders[IMU].codec.frame_bytes()
-            check_baudrate("imu", frame_bytes, cfg.imu_rate_hz, cfg.imu.baudrate)
-        check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)
+            check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
+        check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
 

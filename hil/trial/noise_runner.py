@@ -1,7 +1,7 @@
 """``hil noise``: the Allan deviation and the IEEE noise terms of a trial's increments.
 
-The source is a trial config (its devices read, or simulated as ``hil simulate``), a run directory or recording (replayed
-through the same decoding, alignment and gates as the live run) or a CSV of increments. A static trial
+The source is a trial config (its devices read, or simulated as ``hil simulate``), a run directory or
+recording (replayed through the same decoding, alignment and gates as the live run) or a CSV of increments. A static trial
 is analysed as it is (earth rate and gravity are constants, invisible to the Allan variance); on a
 moving one the table's motion is first taken out with its angles (:mod:`hil.pipeline.table_motion`).
 """
@@ -9,7 +9,7 @@ moving one the table's motion is first taken out with its angles (:mod:`hil.pipe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +37,11 @@ class NoiseRecord:
     cfg: Config | None  # the trial's config (site, table): --config, else the recorded or simulated one
 
 
-def read_source(source: str | Path, config: str | Path | None = None) -> NoiseRecord:
-    """The increments of ``source``: a config, a run directory or recording, or a CSV (with ``config`` for
-    its site and table, needed when it moves)."""
+def read_source(source: str | Path, out: Path, config: str | Path | None = None, duration: float | None = None,
+                quiet: bool = False) -> NoiseRecord:
+    """The increments of ``source``: a run directory or recording, a CSV (with ``config`` for its site and table,
+    needed when it moves), or a config: simulated, or, when its devices are read from ports, acquired from them
+    for ``duration`` s into ``out`` (:mod:`hil.trial.noise_acquisition`)."""
     path = Path(source)
     given = None if config is None else load_config(config)
     if path.is_dir() or path.suffix == ".mcap":
@@ -47,16 +49,12 @@ def read_source(source: str | Path, config: str | Path | None = None) -> NoiseRe
         return NoiseRecord(batch, "recording", given or recorded)
     if path.suffix == ".csv":
         return NoiseRecord(read_increments_csv(path), "csv", given)
-    return simulated(load_config(resolve_path(path)))
-
-
-def reads_devices(source: str | Path) -> Config | None:
-    """The config ``source`` names when its devices are read from ports (not emulated), else None."""
-    path = Path(source)
-    if path.is_dir() or path.suffix in (".mcap", ".csv"):
-        return None
     cfg = load_config(resolve_path(path))
-    return None if cfg.imu.source == cfg.turntable.source == "emulator" else cfg
+    if cfg.imu.source == cfg.turntable.source == "emulator":
+        return simulated(cfg)
+    from hil.trial.noise_acquisition import acquire
+
+    return NoiseRecord(_replayed(acquire(cfg, path, out, duration, quiet))[0], "devices", cfg)
 
 
 def simulated(cfg: Config) -> NoiseRecord:
@@ -195,14 +193,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
         grid = parse_taus(taus)
     except ValueError as exc:
         raise DataError(str(exc)) from None
-    cfg = reads_devices(source)
-    if cfg is not None:
-        from hil.trial.noise_acquisition import acquire
-
-        recorded = acquire(cfg, Path(source), out, duration, quiet)
-        record = replace(read_source(recorded, config or source), source="devices")
-    else:
-        record = read_source(source, config)
+    record = read_source(source, out, config, duration, quiet)
     if export is not None:
         write_increments_csv(export, record.batch)
     analysis = analyse_record(record, str(source), level, grid)
