@@ -24,10 +24,23 @@ def gimbal_matrices(geometry: TableGeometry, angles: np.ndarray) -> tuple[np.nda
     cos, sin = np.cos(angles.T), np.sin(angles.T)
     cz, cx, cy = cos
     sz, sx, sy = sin
-    zero = np.zeros_like(cx)
-    middle_inner = np.array([[cy, zero, sy], [sx * sy, cx, -sx * cy], [-cx * sy, sx, cx * cy]])
+    middle_inner = np.empty((3, 3, len(angles)))  # filled row by row: no temporaries to stack
+    middle_inner[0, 0], middle_inner[0, 1], middle_inner[0, 2] = cy, 0.0, sy
+    np.multiply(sx, sy, out=middle_inner[1, 0])
+    middle_inner[1, 1] = cx
+    np.negative(sx, out=middle_inner[1, 2])
+    middle_inner[1, 2] *= cy
+    np.negative(cx, out=middle_inner[2, 0])
+    middle_inner[2, 0] *= sy
+    middle_inner[2, 1] = sx
+    np.multiply(cx, cy, out=middle_inner[2, 2])
     p0, p1 = middle_inner[0], middle_inner[1]
-    c = np.array([cz * p0 - sz * p1, sz * p0 + cz * p1, middle_inner[2]])
+    c = np.empty_like(middle_inner)
+    np.multiply(cz, p0, out=c[0])
+    c[0] -= sz * p1
+    np.multiply(sz, p0, out=c[1])
+    c[1] += cz * p1
+    c[2] = middle_inner[2]
     table, mount = geometry.table_to_n_matrix, geometry.body_to_mount_matrix
     if not np.array_equal(table, np.eye(3)):
         c = (table @ c.reshape(3, -1)).reshape(c.shape)
