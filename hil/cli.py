@@ -35,7 +35,7 @@ def _viewer(args: argparse.Namespace):
 
 def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
-    when given), close the viewer of a completed trial; the exit code of the outcome."""
+    when given), file the trial in the history, close the viewer of a completed trial; the exit code."""
     from hil.outputs.figures import write_figures
     from hil.outputs.record import trial_record
     from hil.trial.viewer_feed import finish_viewer
@@ -43,7 +43,16 @@ def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int
     draw = write_figures if figures is None else figures.draw
     outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
                                             outcome.out)
-    code = outcome.exit_code(outcome.write(figures=not args.no_figures, draw=draw))
+    verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    if not args.no_history:
+        from hil.history.entry import CALIBRATION, SWING, calibration_figures, swing_figures, trial_row
+        from hil.history.filing import file_trial
+
+        calibration = getattr(outcome, "calibration", None)  # a calibration trial's document, once fitted
+        kind, figures_of = (CALIBRATION, calibration_figures(calibration or {})) if args.func is cmd_calibrate \
+            else (SWING, swing_figures(outcome.result))
+        file_trial(args.history, trial_row(kind, outcome.out, outcome.result, verdict, figures_of))
+    code = outcome.exit_code(verdict)
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
     else:
@@ -116,18 +125,33 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 def cmd_noise(args: argparse.Namespace) -> int:
     from hil.outputs.noise import noise_summary
+    from hil.outputs.record import noise_record
     from hil.trial.noise_acquisition import AcquisitionFailed
     from hil.trial.noise_runner import run_noise
 
     out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
+    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
-                        rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet)
+                        rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet,
+                        record=lambda: noise_record(given, args.source, args.started, datetime.now(timezone.utc)))
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code
     print(noise_summary(doc, out))
+    if not args.no_history:
+        from hil.history.entry import NOISE, noise_figures, trial_row
+        from hil.history.filing import file_trial
+
+        result = {"trial": {"name": Path(args.source).stem}, "ended": "completed", "record": doc["record"]}
+        file_trial(args.history, trial_row(NOISE, out, result, None, noise_figures(doc)))
     return 0
+
+
+def cmd_history(args: argparse.Namespace) -> int:
+    from hil.history.filing import show_history
+
+    return show_history(args.history, args.dut, args.since, args.json, Path(args.out) if args.out else None)
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
@@ -212,6 +236,12 @@ def _record_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--station", help="the test station (record.station)")
 
 
+def _history_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--history", metavar="URL", help="the trial history: a SQLite file or a SQLAlchemy URL "
+                   "(default $HIL_HISTORY, else history.sqlite under the user's data directory; docs/history.md)")
+    p.add_argument("--no-history", action="store_true", help="do not file the trial in the history")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
 
@@ -223,6 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p)
     _trial_options(p)
     _record_options(p)
+    _history_options(p)
     p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
     _live_options(p)
     p.set_defaults(func=cmd_run)
@@ -232,6 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p, CALIBRATION_CONFIG)
     _trial_options(p)
     _record_options(p)
+    _history_options(p)
     _live_options(p)
     p.add_argument("--simulate", action="store_true",
                    help="the emulated table and IMU in this process, as fast as the CPU allows (no ports, no "
@@ -241,12 +273,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
     p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")
     _trial_options(p, out_default="RUN_DIR/replay")
+    _history_options(p)
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
     _config_argument(p)
     _trial_options(p, viewer_default="none")
     _record_options(p)
+    _history_options(p)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
@@ -255,6 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     _record_options(p)
+    _history_options(p)
     p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (its devices read, or "
@@ -271,7 +306,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
                                                     "10^k s), all (every multiple of the period: n^2/2 operations), "
                                                     "or taus in s such as 1,10,100,3600")
+    _record_options(p)
+    _history_options(p)
     p.set_defaults(func=cmd_noise)
+
+    p = sub.add_parser("history", help="a unit's trials from the trial history: bias repeatability, drift, "
+                                       "calibration and noise terms over time")
+    p.add_argument("--dut", help="the unit's serial number (record.dut_serial); default every unit")
+    p.add_argument("--since", help="only trials started on or after this date (ISO 8601, UTC)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON (docs/contracts.md)")
+    p.add_argument("--out", help="write history.html with the plots into this directory")
+    p.add_argument("--history", metavar="URL", help="the history database (default $HIL_HISTORY, else the "
+                   "user's data directory)")
+    p.set_defaults(func=cmd_history)
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
                                         "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")

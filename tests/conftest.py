@@ -44,6 +44,15 @@ def run_estimator(cfg: Config, solve_period=10.0, geometry=None) -> OnlineEstima
     return est
 
 
+@pytest.fixture(autouse=True)
+def history_in_tmp(tmp_path_factory, monkeypatch):
+    """Every test files its trials in a history of its own (HIL_HISTORY, inherited by the hil processes it
+    starts), never the user's."""
+    path = tmp_path_factory.mktemp("history") / "history.sqlite"
+    monkeypatch.setenv("HIL_HISTORY", str(path))
+    return path
+
+
 @pytest.fixture
 def udp_multicast_alone():
     """Holds a host-wide lock for the test: python-can's logger (a third-party process) hears every

@@ -19,7 +19,7 @@ LAYERS = (
     ("hil.pipeline", "hil.recording"),
     ("hil.outputs", "hil.viewer"),
     ("hil.trial",),
-    ("hil.campaign",),
+    ("hil.campaign", "hil.history"),
     ("hil.cli",),
 )
 

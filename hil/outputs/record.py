@@ -12,7 +12,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from hil.config import Config
+from hil.config import Config, RecordConfig, load_config
 from hil.recording.recorder import package_version
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
@@ -30,6 +30,14 @@ def source_commit() -> str | None:
     return run.stdout.strip() or None if run.returncode == 0 else None
 
 
+def run_record(fields: dict[str, Any], config_text: str | None, started: datetime, ended: datetime) -> dict[str, Any]:
+    """The record of a run: ``fields`` (``record``'s config keys) and the software, config digest, times and host."""
+    return {**fields, "software_version": package_version(), "commit": source_commit(),
+            "config_sha256": None if config_text is None else hashlib.sha256(config_text.encode()).hexdigest(),
+            "started_utc": started.isoformat(timespec="seconds"), "ended_utc": ended.isoformat(timespec="seconds"),
+            "host": socket.gethostname()}
+
+
 def trial_record(cfg: Config, config_text: str, started: datetime, ended: datetime, out: Path) -> dict[str, Any]:
     """The record of a trial of ``cfg`` (its YAML ``config_text``) that ran from ``started`` to ``ended`` (aware
     datetimes, UTC) into ``out`` (its ports.json, when the devices were emulated, names the ports)."""
@@ -39,8 +47,16 @@ def trial_record(cfg: Config, config_text: str, started: datetime, ended: dateti
     else:
         imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
         ports = {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
-    return {**cfg.record.model_dump(), "software_version": package_version(), "commit": source_commit(),
-            "config_sha256": hashlib.sha256(config_text.encode()).hexdigest(),
-            "started_utc": started.isoformat(timespec="seconds"), "ended_utc": ended.isoformat(timespec="seconds"),
-            "host": socket.gethostname(), "ports": ports,
+    return {**run_record(cfg.record.model_dump(), config_text, started, ended), "ports": ports,
             "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
+
+
+def noise_record(given: dict[str, str | None], source: str | Path, started: datetime,
+                 ended: datetime) -> dict[str, Any]:
+    """noise.json's record: a config source's ``record`` block overridden by the options ``given`` (dut_serial,
+    operator, station), the source's digest when it is a file (a config, a CSV; None for a run directory), no ports or controller of its own."""
+    path = Path(source)
+    config = load_config(path).record if path.suffix in (".yaml", ".yml") else RecordConfig()
+    fields = config.model_dump() | {key: value for key, value in given.items() if value is not None}
+    text = path.read_text(errors="replace") if path.is_file() and path.suffix in (".yaml", ".yml", ".csv") else None
+    return {**run_record(fields, text, started, ended), "source": str(source), "ports": None, "controller": None}

@@ -9,6 +9,7 @@ moving one the table's motion is first taken out with its angles (:mod:`hil.pipe
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -180,11 +181,11 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
               figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
-              duration: float | None = None, quiet: bool = False) -> dict:
+              duration: float | None = None, quiet: bool = False, record: Callable[[], dict] | None = None) -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
     separated) and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
-    :mod:`hil.trial.noise_acquisition`)."""
+    :mod:`hil.trial.noise_acquisition`). ``record`` gives noise.json's ``record`` once the analysis is done."""
     from hil.estimation.allan_taus import parse_taus
     from hil.outputs.noise import write_noise
     from hil.outputs.report import write_noise_report
@@ -193,10 +194,12 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
         grid = parse_taus(taus)
     except ValueError as exc:
         raise DataError(str(exc)) from None
-    record = read_source(source, out, config, duration, quiet)
+    samples = read_source(source, out, config, duration, quiet)
     if export is not None:
-        write_increments_csv(export, record.batch)
-    analysis = analyse_record(record, str(source), level, grid)
+        write_increments_csv(export, samples.batch)
+    analysis = analyse_record(samples, str(source), level, grid)
+    if record is not None:
+        analysis.doc["record"] = record()
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
     if rerun:

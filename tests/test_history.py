@@ -1,0 +1,168 @@
+"""The trial history (docs/history.md): trials filed after their outputs, a unit's bias repeatability
+computed here independently from its result.json files, history.html in a browser, the schema migrated, and a
+history that cannot be written costing one warning line, never the trial."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy.stats import chi2
+
+from hil.history.entry import calibration_figures, noise_figures
+from hil.history.store import MIGRATIONS, History, HistoryError
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = shutil.which("chromium")
+
+
+def hil(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "hil.cli", *args], cwd=ROOT, capture_output=True, text=True,
+                          check=False)
+
+
+def short_swing(tmp_path: Path, seed: int) -> Path:
+    cfg = yaml.safe_load((ROOT / "configs" / "liu2019_sim.yaml").read_text())
+    cfg["trial"].update(seed=seed, duration_s=200)
+    path = tmp_path / f"seed{seed}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.fixture(scope="module")
+def unit_a(tmp_path_factory):
+    """Three trials of unit A (seeds 1-3) and one of unit B in one history; the run directories of A."""
+    tmp = tmp_path_factory.mktemp("unit")
+    history = str(tmp / "history.sqlite")
+    runs = []
+    for seed, dut in ((1, "A"), (2, "A"), (3, "A"), (4, "B")):
+        out = tmp / f"run{seed}"
+        done = hil("simulate", str(short_swing(tmp, seed)), "--dut", dut, "--out", str(out), "--no-figures",
+                   "--history", history)
+        assert done.returncode == 0, done.stderr
+        if dut == "A":
+            runs.append(out)
+    return history, runs
+
+
+def test_history_json_reports_the_units_runs_and_a_repeatability_computed_from_its_result_files(unit_a):
+    history, runs = unit_a
+    done = hil("history", "--dut", "A", "--json", "--history", history)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(done.stdout)
+    biases = np.array([json.loads((run / "result.json").read_text())["estimate"]["accel_bias_ug"] for run in runs])
+    s = biases.std(axis=0, ddof=1)
+    lo, hi = s * np.sqrt(2 / chi2.ppf(0.975, 2)), s * np.sqrt(2 / chi2.ppf(0.025, 2))
+    assert doc["dut_serial"] == "A" and doc["runs"] == 3 and len(doc["trials"]) == 3
+    np.testing.assert_allclose(doc["accel_bias_repeatability_ug"], s, rtol=1e-12)
+    np.testing.assert_allclose(doc["accel_bias_repeatability_ci_ug"], np.stack([lo, hi], axis=1), rtol=1e-12)
+    assert {t["out_dir"] for t in doc["trials"]} == {str(run.resolve()) for run in runs}
+    everyone = json.loads(hil("history", "--json", "--history", history).stdout)
+    assert everyone["runs"] == 4
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="needs chromium (apt-get install chromium; .ci/run installs it)")
+def test_history_html_renders_its_parts_in_headless_chromium(unit_a, tmp_path):
+    history, _ = unit_a
+    assert hil("history", "--dut", "A", "--out", str(tmp_path), "--history", history).returncode == 0
+    page = (tmp_path / "history.html").as_uri()
+    browser = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000"]
+    dom = subprocess.run([*browser, "--dump-dom", page], capture_output=True, text=True, timeout=120).stdout
+    assert "Trial history: A" in dom and "Accelerometer bias repeatability" in dom
+    assert dom.count("<tr>") >= 3 + 3 and dom.count("data:image/png;base64") >= 1
+    shot = tmp_path / "shot.png"
+    subprocess.run([*browser, f"--screenshot={shot}", page], capture_output=True, timeout=120)
+    from matplotlib.image import imread
+
+    pixels = imread(shot)
+    assert pixels.shape[1] == 1400 and pixels[..., :3].std() > 0.05  # drawn, not blank
+
+
+def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the_trial(tmp_path):
+    locked = tmp_path / "locked.sqlite"
+    History(str(locked)).trials()  # created
+    holder = sqlite3.connect(locked)
+    holder.execute("BEGIN EXCLUSIVE")
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    try:
+        for url in (str(locked), f"sqlite:///{blocker}/history.sqlite"):
+            out = tmp_path / f"out-{len(url)}"
+            done = hil("simulate", str(short_swing(tmp_path, 1)), "--out", str(out), "--no-figures", "--history", url)
+            assert done.returncode == 0
+            assert (out / "result.json").exists() and (out / "report.html").exists()
+            warnings = [line for line in done.stderr.splitlines() if "warning" in line]
+            assert len(warnings) == 1 and "not filed in the history" in warnings[0] and url.split("/")[-1] in warnings[0]
+    finally:
+        holder.rollback()
+        holder.close()
+    assert History(str(locked)).trials() == []
+
+
+def test_no_history_files_nothing(tmp_path, history_in_tmp):
+    out = tmp_path / "out"
+    assert hil("simulate", str(short_swing(tmp_path, 1)), "--out", str(out), "--no-figures",
+               "--no-history").returncode == 0
+    assert not history_in_tmp.exists()
+
+
+def test_an_older_schema_is_migrated_keeping_its_rows(tmp_path):
+    path = tmp_path / "v1.sqlite"
+    with sqlite3.connect(path) as db:
+        db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+        db.execute("INSERT INTO schema_version VALUES (1)")
+        for statement in MIGRATIONS[0]:
+            db.execute(statement)
+        db.execute("INSERT INTO trials (kind, dut_serial, started_utc, figures) VALUES ('swing', 'A', '2026', '{}')")
+    history = History(str(path))
+    assert history.version() == len(MIGRATIONS) == 2
+    assert [(t["dut_serial"], t["notes"]) for t in history.trials("A")] == [("A", None)]
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE schema_version SET version = 99")
+    with pytest.raises(HistoryError, match="newer"):
+        history.trials()
+
+
+def test_sqlalchemy_urls_reach_the_same_store(tmp_path):
+    pytest.importorskip("sqlalchemy")
+    history = History(f"sqlite+pysqlite:///{tmp_path / 'h.sqlite'}")
+    history.append({"kind": "swing", "dut_serial": "A", "started_utc": "2026-01-01", "figures": {"a": [1.0]}})
+    assert [t["figures"] for t in History(str(tmp_path / "h.sqlite")).trials("A")] == [{"a": [1.0]}]
+
+
+def test_calibration_and_noise_rows_hold_every_term_by_block_and_key():
+    calibration = {"accel": {"bias_ug": [1.0, 2.0, 3.0]}, "gyro": {"bias_dph": [0.1, None, 0.3]},
+                   "sigma": {"accel": {"bias_ug": [0.5, 0.5, 0.5]}, "gyro": {"bias_dph": [0.01, None, 0.01]}},
+                   "turntable": {"zero_offset_arcsec": [1.0, 2.0, 3.0]}}
+    assert calibration_figures(calibration) == {
+        "accel.bias_ug": [1.0, 2.0, 3.0], "accel.bias_ug.sigma": [0.5, 0.5, 0.5], "gyro.bias_dph": [0.1, None, 0.3],
+        "gyro.bias_dph.sigma": [0.01, None, 0.01], "turntable.zero_offset_arcsec": [1.0, 2.0, 3.0]}
+    noise = {"gyro": {"arw_deg_per_sqrt_h": [1, 2, 3]}, "accel": {"vrw_m_per_s_per_sqrt_h": [4, 5, 6]}, "tau_s": []}
+    assert noise_figures(noise) == {"gyro.arw_deg_per_sqrt_h": [1, 2, 3], "accel.vrw_m_per_s_per_sqrt_h": [4, 5, 6]}
+
+
+def test_a_noise_run_carries_its_record_and_is_filed_with_its_terms(tmp_path):
+    cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
+    cfg["trial"].update(duration_s=400, rate_hz=50, name="static-noise")
+    cfg["turntable"]["motion"] = {"kind": "static"}
+    cfg["output"] = {}
+    cfg["record"] = {"dut_part": "KVH-1750"}
+    config = tmp_path / "static.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    history = str(tmp_path / "h.sqlite")
+    done = hil("noise", str(config), "--out", str(tmp_path / "n"), "--no-figures", "--dut", "N7", "--history", history)
+    assert done.returncode == 0, done.stderr
+    noise = json.loads((tmp_path / "n" / "noise.json").read_text())
+    assert noise["record"]["dut_serial"] == "N7" and noise["record"]["dut_part"] == "KVH-1750"
+    assert noise["record"]["config_sha256"] == hashlib.sha256(config.read_bytes()).hexdigest()
+    (row,) = History(history).trials("N7")
+    assert row["kind"] == "noise" and row["dut_part"] == "KVH-1750"
+    assert row["figures"]["gyro.arw_deg_per_sqrt_h"] == noise["gyro"]["arw_deg_per_sqrt_h"]
