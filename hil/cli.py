@@ -149,7 +149,7 @@ def cmd_noise(args: argparse.Namespace) -> int:
 
 
 def cmd_history(args: argparse.Namespace) -> int:
-    from hil.history.filing import show_history
+    from hil.history.show import show_history
 
     return show_history(args.history, args.dut, args.since, args.json, Path(args.out) if args.out else None)
 
