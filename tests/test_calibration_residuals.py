@@ -66,13 +66,15 @@ def test_the_report_embeds_the_accelerometer_and_gyro_figure(tmp_path):
 
     windows, acc, gyr = run(default_schedule(plateau_s=20.0), seed=3)
     doc = calibration_document(acc, gyr, windows)
-    write_calibration_report(tmp_path, doc, window_residuals(windows, acc, gyr, EARTH, GEOMETRY))
+    result = {"trial": {"name": "six-position"}, "ended": "completed", "record": {"dut_serial": "SN 9"}}
+    write_calibration_report(tmp_path, doc, window_residuals(windows, acc, gyr, EARTH, GEOMETRY), result, "PASS")
     page = (tmp_path / "calibration.html").read_text()
     assert page.count("<img") == 1 and "data:image/png;base64," in page
+    assert "<h1>six-position</h1>" in page and "SN 9" in page and 'class="verdict PASS"' in page
     image = matplotlib.image.imread(io.BytesIO((tmp_path / "calibration_residuals.png").read_bytes()))
     assert image.shape[1] == 2 * 9 * 90  # two columns of panels: specific force and angular rate
     without = tmp_path / "accel-only"
     without.mkdir()
-    write_calibration_report(without, doc, window_residuals(windows, acc, None, EARTH, GEOMETRY))
+    write_calibration_report(without, doc, window_residuals(windows, acc, None, EARTH, GEOMETRY), result, "PASS")
     image = matplotlib.image.imread(io.BytesIO((without / "calibration_residuals.png").read_bytes()))
     assert image.shape[1] == 9 * 90

@@ -111,7 +111,8 @@ def test_a_calibration_that_ends_without_its_terms_is_a_failed_run_saying_why():
     config["calibration"].update(positions=[[0, 0, 0], [0, 90, 0]], dwell_s=1, plateau_s=0)
     config["turntable"]["interlock_trip_at_s"] = 3.0  # during the move to the second position: the axes brake
     row = run_calibration(RunTask("p000-r0000", 0, 0, 7, {}, config))
-    assert set(row) == {"id", "point", "run", "seed", "error"}  # the task's columns and why, no terms
+    assert set(row) == {"id", "point", "run", "seed", "record.dut_part", "record.dut_serial", "record.config_sha256",
+                        "error"}  # the task's columns (its record's part among them) and why, no terms
     assert row["error"].startswith("trial early: the schedule did not end") and "(step 2 of 2: moving)" in row["error"]
 
 

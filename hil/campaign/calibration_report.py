@@ -59,7 +59,7 @@ def _table(summary: dict) -> str:
                       _num(s.get("z_rms"), ".2f")]
             body.append(f"<tr{flag}><td>{html.escape(point_label(p['values']))}</td><td>{html.escape(term)}</td>"
                         + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
-    return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
+    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
 
 
 def _families(summary: dict) -> str:
@@ -69,7 +69,7 @@ def _families(summary: dict) -> str:
             f"<td class='num'>{f['terms']}</td><td class='num'>{f['ratio_min']:.3f}–{f['ratio_max']:.3f}</td>"
             f"<td class='num'>{f['within_3sigma']:.2f}</td><td class='num'>{f['z_rms']:.2f}</td></tr>"
             for p in summary["points"] for family, f in p.get("families", {}).items()]
-    return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
+    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
 
 
 def _headlines(summary: dict) -> str:

@@ -88,7 +88,7 @@ def _table(summary: dict, terms: list[str]) -> str:
                         f"<td class='num'>{_cells(per_axis, 'relative_error_mean', '+.1%')}</td>"
                         f"<td class='num'>{_cells(per_axis, 'unresolved', 'd')}</td>"
                         f"<td class='num'>{_cells(per_axis, 'coverage', '.2f')}</td><td class='num'>{bands}</td></tr>")
-    return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
+    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
 
 
 def noise_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:

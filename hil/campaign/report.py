@@ -17,6 +17,7 @@ import numpy as np
 
 from hil.campaign.summary import SIGMA, bias_error
 from hil.campaign.task import point_label
+from hil.outputs.page_header import page_header
 from hil.outputs.report import html_page
 from hil.outputs.figures import pyplot
 
@@ -172,7 +173,7 @@ def _table(summary: dict) -> str:
                     f"<td class='num'>{_vec(p, 'ratio')}</td><td class='num'>{_band(p, 'ratio_band')}</td>"
                     f"<td class='num'>{_num(p.get('nees_mean'))}</td><td class='num'>{_band(p, 'nees_band')}</td>"
                     f"<td class='num'>{conv}</td></tr>")
-    return f"<table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table>"
+    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
 
 
 def figures_html(figures: list[tuple[str, bytes | None]]) -> str:
@@ -202,5 +203,7 @@ def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]],
             f"with {cluster['workers']} workers. A row is highlighted when a statistic falls outside its band.</p>"
             + section(summary, rows, plt))
     path = out / REPORT_NAME
-    path.write_text(html_page("Campaign", "Campaign", body), encoding="utf-8")
+    record = summary.get("record") or {}
+    name = Path(record.get("spec_path") or out.name).stem
+    path.write_text(html_page(page_header("Campaign", name, record), f"{name}: campaign", body), encoding="utf-8")
     return path

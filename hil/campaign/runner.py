@@ -9,6 +9,7 @@ import signal
 import sys
 import time
 import uuid
+from datetime import datetime, timezone
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -121,7 +122,9 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
     from hil.campaign.report import write_campaign_report
     from hil.campaign.summary import summarise, write_summary
     from hil.campaign.workers import costly_defaults
+    from hil.outputs.record import run_record
 
+    started = datetime.now(timezone.utc)
     campaign = load_campaign(spec)
     kind = KINDS[campaign.spec.kind]
     if (out / RUNS_NAME).exists() and not resume:
@@ -144,7 +147,9 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
             interrupted = str(exc)
         finally:
             write_runs(out, rows)
-    summary = {"spec": campaign.spec.as_dict(), **summarise(campaign.points, rows, info.as_dict(), kind.point_summary)}
+    summary = {"spec": campaign.spec.as_dict(), **summarise(campaign.points, rows, info.as_dict(), kind.point_summary),
+               "record": {**run_record({}, campaign.path.read_text(), started, datetime.now(timezone.utc)),
+                          "spec_path": str(campaign.path)}}
     write_summary(out, summary)
     write_campaign_report(out, summary, rows, kind.section)
     print(summary_text(summary, out, kind))

@@ -7,6 +7,7 @@ No outputs are written, no viewer opened."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 from typing import Any
@@ -34,9 +35,13 @@ def flatten(value: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def task_columns(task: RunTask) -> dict[str, Any]:
-    """The columns every row of the task has, done or failed: its id, indices, seed and swept values."""
+    """The columns every row of the task has, done or failed: its id, indices, seed, swept values and its part of
+    the record (the unit of its config's ``record`` block, the SHA-256 of the config text the run was given)."""
+    unit = task.config.get("record") or {}
+    digest = hashlib.sha256(yaml.safe_dump(task.config).encode()).hexdigest()
     return {"id": task.id, "point": task.point, "run": task.run, "seed": task.seed,
-            **flatten(task.values, SWEEP_PREFIX)}
+            **flatten(task.values, SWEEP_PREFIX), "record.dut_part": unit.get("dut_part"),
+            "record.dut_serial": unit.get("dut_serial"), "record.config_sha256": digest}
 
 
 def failed_row(task: RunTask, error: BaseException | str) -> dict[str, Any]:

@@ -15,7 +15,10 @@ import numpy as np
 from hil.history.entry import CALIBRATION, NOISE, SWING
 from hil.outputs.figures import pyplot
 from hil.outputs.measurements import format_value
+from hil.outputs.page_header import page_header
+from hil.outputs.record import source_commit
 from hil.outputs.report import html_page
+from hil.recording.recorder import package_version
 
 HISTORY_HTML = "history.html"
 AXES = ("x", "y", "z")
@@ -33,7 +36,8 @@ def write_history_page(out: Path, summary: dict[str, Any]) -> Path:
             + "".join(f"<figure><img alt='{html.escape(t)}' src='data:image/png;base64,{base64.b64encode(p).decode()}'>"
                       f"<figcaption>{html.escape(t)}</figcaption></figure>" for t, p in figures))
     path = out / HISTORY_HTML
-    path.write_text(html_page(f"Trial history: {html.escape(unit)}", f"history of {html.escape(unit)}", body))
+    header = page_header("Trial history", unit, {"software_version": package_version(), "commit": source_commit()})
+    path.write_text(html_page(header, f"history of {unit}", body))
     return path
 
 

@@ -27,6 +27,8 @@ from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
 from hil.outputs.figures import pyplot
+from hil.outputs.page_header import page_header
+from hil.outputs.report import html_page
 from hil.units import ARCSEC, DEG_PER_H, UG
 
 BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))
@@ -131,31 +133,32 @@ def residual_figure(residuals: Residuals) -> bytes:
     return buf.getvalue()
 
 
-def write_calibration_report(out: Path, doc: dict, residuals: Residuals, figures: bool = True) -> Path:
-    """``out/calibration.html`` (self-contained: the figure inline) and ``calibration_residuals.png``."""
+def write_calibration_report(out: Path, doc: dict, residuals: Residuals, result: dict, verdict: str,
+                             figures: bool = True) -> Path:
+    """``out/calibration.html`` (self-contained: the figure inline) and ``calibration_residuals.png``, headed by
+    the trial's name, record, end and ``verdict`` from its ``result`` (result.json's document)."""
     rows = "".join(
-        f"<tr><td>{html.escape(r['term'])}</td><td>{_fmt(r['estimate'])}</td><td>{_fmt(r['sigma'])}</td>"
-        f"<td>{_fmt(r['truth'])}</td><td>{_fmt(r['error_sigma'])}</td><td>{html.escape(r['reason'] or '')}</td></tr>"
+        f"<tr><td>{html.escape(r['term'])}</td><td class='num'>{_fmt(r['estimate'])}</td>"
+        f"<td class='num'>{_fmt(r['sigma'])}</td><td class='num'>{_fmt(r['truth'])}</td>"
+        f"<td class='num'>{_fmt(r['error_sigma'])}</td><td>{html.escape(r['reason'] or '')}</td></tr>"
         for r in comparison(doc))
     image = ""
     if figures and doc["positions"]:
         png = residual_figure(residuals)
         (out / "calibration_residuals.png").write_bytes(png)
-        image = (f'<figure><img alt="residuals per position" style="max-width:100%" '
+        image = (f'<figure><img alt="residuals per position" '
                  f'src="data:image/png;base64,{base64.b64encode(png).decode()}"><figcaption>Residual of each '
                  "window's mean output against its reference (gravity; the earth rate plus the table's rate) "
                  "before calibration (the error-free model) and after it (the fitted model).</figcaption></figure>")
-    page = (
-        "<!doctype html><html><head><meta charset='utf-8'><title>calibration</title><style>"
-        "body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #ccc;"
-        "padding:2px 6px;text-align:right}td:first-child,td:last-child{text-align:left}</style></head><body>"
-        "<h1>Multi-position calibration</h1><p>Units as in the term names (µg, ppm, arcsec, µg/g², °/h). "
-        "Truth: the injected errors as this schedule sees them (emulated trials); error / σ with an angle's σ "
-        "combined with the encoder resolution (1e-6°).</p>"
-        "<table><tr><th>term</th><th>estimate</th><th>1σ</th><th>truth</th><th>error / σ</th><th>unobservable</th>"
-        f"</tr>{rows}</table>{image}</body></html>\n")
+    body = ("<p class='meta'>Multi-position calibration (2018 three-stage paper). Units as in the term names "
+            "(µg, ppm, arcsec, µg/g², °/h). Truth: the injected errors as this schedule sees them (emulated "
+            "trials); error / σ with an angle's σ combined with the encoder resolution (1e-6°).</p>"
+            "<table><thead><tr><th>term</th><th>estimate</th><th>1σ</th><th>truth</th><th>error / σ</th>"
+            f"<th>unobservable</th></tr></thead><tbody>{rows}</tbody></table>{image}")
+    name = str(result["trial"]["name"])
+    header = page_header("Calibration", name, result.get("record"), result.get("ended"), verdict)
     path = out / "calibration.html"
-    path.write_text(page, encoding="utf-8")
+    path.write_text(html_page(header, f"{name}: calibration", body), encoding="utf-8")
     return path
 
 

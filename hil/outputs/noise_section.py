@@ -30,7 +30,7 @@ def noise_section(doc: dict) -> str:
             rows.append(f"<tr><td>{e(sensor)} {e(name)}</td>{cells}<td>{e(_UNITS[key])}</td></tr>")
     motion = ("the table's motion was taken out with its angles" if doc.get("motion_removed")
               else "a static record, analysed as it is")
-    return (f"<h2>Noise characterisation</h2><p class='meta'>Overlapping Allan deviation of "
+    return (f"<h2>Allan deviation and noise terms</h2><p class='meta'>Overlapping Allan deviation of "
             f"{format_value(doc.get('samples'))} samples ({format_value(doc.get('duration_s'))} s, "
             f"{e(str(doc.get('source', '')))}; {motion}); terms from a joint weighted fit (IEEE Std 952 / 1293), "
             f"intervals at {format_value(level)} two-sided.</p>"

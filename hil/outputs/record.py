@@ -8,12 +8,12 @@ import hashlib
 import json
 import socket
 import subprocess
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from hil.config import Config, RecordConfig, load_config
-from hil.recording.recorder import package_version
+from hil.recording.recorder import package_version, read_start_record
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
               "started_utc", "ended_utc", "host", "controller")  # what junit.xml and the report's header show
@@ -38,16 +38,28 @@ def run_record(fields: dict[str, Any], config_text: str | None, started: datetim
             "host": socket.gethostname()}
 
 
+def _config_ports(cfg: Config) -> dict[str, Any]:
+    imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
+    return {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+
+
 def trial_record(cfg: Config, config_text: str, started: datetime, ended: datetime, out: Path) -> dict[str, Any]:
     """The record of a trial of ``cfg`` (its YAML ``config_text``) that ran from ``started`` to ``ended`` (aware
-    datetimes, UTC) into ``out`` (its ports.json, when the devices were emulated, names the ports)."""
-    ports_file = out / "ports.json"
-    if ports_file.exists():
-        ports = json.loads(ports_file.read_text())
-    else:
-        imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
-        ports = {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+    datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it started), else
+    the config's."""
+    recorded = read_start_record(out / "recording.mcap") or {}
+    ports = json.loads(recorded["ports"]) if recorded.get("ports") else _config_ports(cfg)
     return {**run_record(cfg.record.model_dump(), config_text, started, ended), "ports": ports,
+            "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
+
+
+def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None) -> dict[str, Any]:
+    """The record of a trial as it starts (the recording's metadata): :func:`trial_record`'s fields but
+    ``ended_utc``, with the ``ports`` the devices were found on (None: the config's)."""
+    now = datetime.now(timezone.utc)
+    record = run_record(cfg.record.model_dump(), config_text, now, now)
+    del record["ended_utc"]
+    return {**record, "ports": ports if ports is not None else _config_ports(cfg),
             "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
 
 

@@ -29,6 +29,7 @@ from hil.outputs.measurements import (
 )
 from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
+from hil.outputs.page_header import page_header
 from hil.outputs.record import PROPERTIES
 from hil.outputs.result import calibration_applied_text
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
@@ -91,7 +92,11 @@ def write_noise_report(out_dir: Path) -> Path:
     if (out_dir / "result.json").exists():
         return write_report(out_dir)
     figures = _figure_html(_figures(out_dir, None, {}))
-    page = html_page("Noise characterisation", "", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
+    doc = json.loads((out_dir / NOISE_JSON).read_text())
+    record = doc.get("record") or {}
+    name = Path(record.get("source") or out_dir.name).stem
+    header = page_header("Noise characterisation", name, record)
+    page = html_page(header, f"{name}: noise", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     return path
@@ -145,6 +150,9 @@ body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2e
        color: #1b1b1b; padding: 0 1em; }
 h1 { margin-bottom: 0.2em; } h2 { margin-top: 1.6em; border-bottom: 1px solid #ddd; }
 .meta { color: #555; }
+header.run .kind { margin: 0; color: #555; text-transform: uppercase; letter-spacing: 0.06em; font-size: 0.85em; }
+header.run h1 { margin-top: 0.1em; } header.run .facts b { color: #1b1b1b; font-weight: 600; }
+.wide { overflow-x: auto; }
 .ended { font-weight: bold; } .ended.early { color: #a40000; }
 .verdict { display: inline-block; padding: 0.3em 1em; font-size: 1.6em; font-weight: bold; border-radius: 6px;
            color: white; margin: 0.5em 0; }
@@ -179,14 +187,13 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
         )
     summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
                + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
-    name = e(str(trial.get("name", "trial")))
     ended = result.get("ended", "completed")
-    body = f"""<p class="ended {'completed' if ended == 'completed' else 'early'}">Trial {e(ended)}.</p>
-<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
-Accelerometer bias from swinging motion (Liu et al. 2019).</p>
+    what = ("Multi-position calibration (2018 three-stage paper): the terms in calibration.html"
+            if "calibration" in result else "Accelerometer bias from swinging motion (Liu et al. 2019)")
+    body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
+{e(what)}.</p>
 <p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
 {_record_table(result.get("record"))}
-<div class="verdict {verdict}">{verdict}</div>
 <p>{e(summary)}.</p>
 {"".join(f'<p class="note">{e(n)}</p>' for n in notes)}
 <h2>Measurements</h2>
@@ -198,7 +205,8 @@ Accelerometer bias from swinging motion (Liu et al. 2019).</p>
 {_figure_html(figures) or "<p>No figures in this directory.</p>"}
 <p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
 (recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
-    return html_page(f"Trial report: {name}", f"{name}: {verdict}", body)
+    header = page_header("Trial report", str(trial.get("name", "trial")), result.get("record"), ended, verdict)
+    return html_page(header, f"{trial.get('name', 'trial')}: {verdict}", body)
 
 
 def _record_table(record: dict | None) -> str:
@@ -220,13 +228,14 @@ def _figure_html(figures: list[tuple[str, bytes]]) -> str:
     )
 
 
-def html_page(heading: str, title: str, body: str) -> str:
-    """One self-contained page: inline style, nothing fetched."""
+def html_page(header: str, title: str, body: str) -> str:
+    """One self-contained page: ``header`` (:func:`~hil.outputs.page_header.page_header`), inline style,
+    nothing fetched."""
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{title or heading}</title><style>{_CSS}</style></head>
+<title>{html.escape(title)}</title><style>{_CSS}</style></head>
 <body>
-<h1>{heading}</h1>
+{header}
 {body}
 </body></html>
 """

@@ -5,12 +5,15 @@ Format (MCAP, https://mcap.dev; readable by any MCAP tool):
 - metadata record ``trial`` at the start: ``config`` (the trial YAML as given), ``version`` (this
   package's version), ``format`` (``turntable-hil/1``), ``duration_s`` (the trial length the live
   run used, empty when open-ended), ``time_scale`` (the emulator's speed, 1 for real devices, empty for as fast as possible);
+- metadata record ``record`` after it: the trial's record as it starts (result.json's ``record`` but for
+  ``ended_utc``: the unit, operator, station, software version and commit, config digest, ``started_utc``,
+  host, ports as JSON, controller; "" for none);
 - one channel per stream (``imu``, ``table``, ...), schemaless; its ``message_encoding`` says what a
   message holds: ``application/octet-stream`` (bytes exactly as read from a serial port) or
   ``turntable-hil/can-frame`` (4-byte big-endian arbitration id, 1 flag byte with bit 0 = extended
   id, then the payload);
 - metadata record ``trial_end`` at the end, ``ended``: how the live trial ended (``completed``,
-  ``early: <reason>``, ``interrupted: <signal>``); absent in a file cut short;
+  ``early: <reason>``, ``interrupted: <signal>``), and ``ended_utc``; absent in a file cut short;
 - channel ``events``, JSON messages ``{"stream": .., "event": "outage" | "reconnected", "detail": ..}``;
 - ``log_time`` is the host receive time in integer nanoseconds (the pipeline works on that rounded
   time, so a replay sees exactly what the live run saw); ``sequence`` is the global arrival order.
@@ -29,8 +32,10 @@ import struct
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import Any
 
 from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Message, Metadata
@@ -81,7 +86,8 @@ class Recorder:
     """
 
     def __init__(self, path: str | Path, config_text: str, flush_s: float = 0.1,
-                 duration: float | None = None, time_scale: float | None = 1.0) -> None:
+                 duration: float | None = None, time_scale: float | None = 1.0,
+                 record: dict[str, Any] | None = None) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - owned by the writer thread until close()
@@ -92,6 +98,9 @@ class Recorder:
         self._writer.add_metadata("trial", {"config": config_text, "version": package_version(), "format": FORMAT,
                                             "duration_s": "" if duration is None else repr(duration),
                                             "time_scale": "" if time_scale is None else repr(time_scale)})
+        if record is not None:  # who, which unit, which software, when: strings, "" for none, JSON for a block
+            self._writer.add_metadata("record", {key: "" if value is None else value if isinstance(value, str)
+                                                 else json.dumps(value) for key, value in record.items()})
         self._channels: dict[tuple[str, str], int] = {}
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._flush_s = flush_s
@@ -118,7 +127,8 @@ class Recorder:
         self._closing.set()
         self._thread.join()
         if ended is not None:
-            self._writer.add_metadata("trial_end", {"ended": ended})
+            ended_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            self._writer.add_metadata("trial_end", {"ended": ended, "ended_utc": ended_utc})
         self._writer.finish()
         self._file.close()
 
@@ -172,6 +182,21 @@ class Recording:
 
     def __iter__(self) -> Iterator[RawChunk | StreamEvent]:
         return iter(self.items)
+
+
+def read_start_record(path: str | Path) -> dict[str, str] | None:
+    """The ``record`` metadata a Recorder wrote at the start of the recording ``path`` (strings, "" for none);
+    None when it has none (an older recording, or one cut before it)."""
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Message):
+                    return None  # the metadata comes before any message
+                if isinstance(record, Metadata) and record.name == "record":
+                    return dict(record.metadata)
+    except (OSError, McapError, EOFError, struct.error, ValueError):
+        return None
+    return None
 
 
 class RecordingReader:

@@ -90,15 +90,19 @@ class CalibrationOutcome(TrialOutcome):
         return cls(**fields, calibration=document, residuals=residuals)
 
     def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
-        """calibration.json and calibration.html (when calibrated), then the trial's outputs."""
+        """The trial's outputs, then (when calibrated) calibration.json with the trial's record and
+        calibration.html headed by its verdict; returns the verdict."""
+        verdict = super().write(figures, draw)
         if self.calibration is not None:
             from hil.outputs.calibration import write_calibration
             from hil.outputs.calibration_report import write_calibration_report
 
-            self.out.mkdir(parents=True, exist_ok=True)
+            if "record" in self.result:
+                self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
-            write_calibration_report(self.out, self.calibration, self.residuals, figures and self.cfg.output.figures)
-        return super().write(figures, draw)
+            write_calibration_report(self.out, self.calibration, self.residuals, self.result, verdict,
+                                     figures and self.cfg.output.figures)
+        return verdict
 
 
 def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:

@@ -30,6 +30,7 @@ from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
 from hil.config import Config
 from hil.estimation.online import Snapshot
+from hil.outputs.record import start_record
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import IMU, TABLE, SamplesCallback, TrialProcessor
 from hil.pipeline.stream_watch import StreamWatch
@@ -173,7 +174,8 @@ class LiveTrial:
         self.on_end = on_end or (lambda: None)
         self.finished = finished or (lambda: False)
         self.interrupted: str | None = None
-        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale)
+        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
+                                 record=start_record(cfg, config_text, ports))
         self.queue: queue.Queue = queue.Queue(queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
