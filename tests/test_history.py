@@ -19,6 +19,7 @@ from scipy.stats import chi2
 
 from hil.history.entry import calibration_figures, noise_figures
 from hil.history.store import MIGRATIONS, History, HistoryError
+from hil.outputs.result_schema import read_result
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium")
@@ -65,6 +66,7 @@ def test_history_json_reports_the_units_runs_and_a_repeatability_computed_from_i
     np.testing.assert_allclose(doc["accel_bias_repeatability_ug"], s, rtol=1e-12)
     np.testing.assert_allclose(doc["accel_bias_repeatability_ci_ug"], np.stack([lo, hi], axis=1), rtol=1e-12)
     assert {t["out_dir"] for t in doc["trials"]} == {str(run.resolve()) for run in runs}
+    assert all(read_result(run / "result.json").record.dut_serial == "A" for run in runs)
     everyone = json.loads(hil("history", "--json", "--history", history).stdout)
     assert everyone["runs"] == 4
 

@@ -18,6 +18,7 @@ from mcap.stream_reader import StreamReader
 
 from hil.campaign.runs import task_columns
 from hil.campaign.task import RunTask
+from hil.outputs.result_schema import read_result
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium")
@@ -48,6 +49,15 @@ def outputs(tmp_path_factory):
     for name, run in done.items():
         assert run.returncode in (0, 3), f"{name}: {run.stderr}"
     return tmp
+
+
+def test_the_trials_result_files_follow_the_schema_with_their_record(outputs):
+    replay = hil("replay", str(outputs / "run"), "--viewer", "none", "--no-figures")
+    assert replay.returncode in (0, 3), replay.stderr
+    for run in ("cal", "run", "run/replay"):
+        result = read_result(outputs / run / "result.json")
+        assert result.record is not None and result.record.software_version
+    assert read_result(outputs / "run" / "result.json").record.dut_serial == "SN-RUN"
 
 
 def test_calibration_json_and_html_carry_the_trials_record_and_verdict(outputs):

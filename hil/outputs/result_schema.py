@@ -1,0 +1,132 @@
+"""result.json's schema as a pydantic model (docs/contracts.md, "result.json"), exported as JSON Schema to
+docs/result.schema.json (``python -m hil.outputs.result_schema``; a test fails when the committed file differs).
+Read a result.json with :func:`read_result`: the model validates it, and callers use its fields."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict
+
+SCHEMA_FILE = Path(__file__).resolve().parents[2] / "docs" / "result.schema.json"
+Vector3 = list[float | None]
+
+
+class _Block(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Trial(_Block):
+    name: str
+    duration_s: float | None
+    samples: int
+
+
+class DriftCheck(_Block):
+    drift_ug_per_h: Vector3 | None
+    sigma_ug_per_h: Vector3 | None
+    significant: bool
+
+
+class Estimate(_Block):
+    """µg and seconds; with the bias unobservable ``accel_bias_ug`` is null and ``observable`` false."""
+
+    bias_model: str
+    accel_bias_ug: Vector3 | None
+    accel_bias_sigma_ug: Vector3 | None
+    observable: bool
+    gram_rank: int
+    gram_condition: float | None
+    converged_at_s: float | None
+    noise_ug: float | None
+    drift_check: DriftCheck | None = None
+    accel_bias_t0_ug: Vector3 | None = None
+    accel_bias_t0_sigma_ug: Vector3 | None = None
+    accel_bias_drift_ug_per_h: Vector3 | None = None
+    accel_bias_drift_sigma_ug_per_h: Vector3 | None = None
+    drift_converged_at_s: float | None = None
+
+
+class TableReference(_Block):
+    accel_bias_ug: Vector3 | None
+    accel_bias_sigma_ug: Vector3 | None
+    tilt_deg: list[float | None] | None
+    accel_bias_drift_ug_per_h: Vector3 | None = None
+    accel_bias_drift_sigma_ug_per_h: Vector3 | None = None
+
+
+class Angles(_Block):
+    pitch: float | None
+    roll: float | None
+    yaw: float | None = None
+
+
+class Alignment(_Block):
+    """Estimate minus turntable reference (deg); null where the trial gave no solution."""
+
+    method1: Angles | None
+    method2: Angles | None
+    theoretical: Angles | None
+
+
+class Truth(_Block):
+    accel_bias_ug: Vector3
+    accel_drift_ug_per_h: Vector3
+
+
+class CalibrationSummary(_Block):
+    file: str
+    positions: int
+    residual_rms_ug: float | None
+    residual_max_ug: float | None
+    unobservable: list[str]
+    worst_error_sigma: float | None
+
+
+class Record(_Block):
+    dut_part: str | None
+    dut_serial: str | None
+    station: str | None
+    operator: str | None
+    notes: str | None
+    software_version: str
+    commit: str | None
+    config_sha256: str | None
+    started_utc: str
+    ended_utc: str
+    host: str
+    ports: dict[str, Any] | None
+    controller: str | None
+
+
+class Result(_Block):
+    """One trial's result.json."""
+
+    trial: Trial
+    ended: str
+    calibration_applied: dict[str, Any] | None
+    streams: dict[str, Any]
+    estimate: Estimate | None
+    table_reference: TableReference | None
+    alignment_deg: Alignment | None
+    truth: Truth | None = None
+    calibration: CalibrationSummary | None = None
+    record: Record | None = None
+
+
+def read_result(path: str | Path) -> Result:
+    """The result.json at ``path``, validated."""
+    return Result.model_validate_json(Path(path).read_bytes())
+
+
+def schema_text() -> str:
+    """The JSON Schema of :class:`Result`, as docs/result.schema.json holds it."""
+    return json.dumps(Result.model_json_schema(), indent=2) + "\n"
+
+
+if __name__ == "__main__":  # python -m hil.outputs.result_schema: write docs/result.schema.json anew
+    SCHEMA_FILE.write_text(schema_text())
+    print(SCHEMA_FILE, file=sys.stderr)
