@@ -57,14 +57,6 @@ def pytest_configure(config: pytest.Config) -> None:
                                        "one of its judged measurements (all, or those named)")
 
 
-def set_dotted(doc: dict, key: str, value: Any) -> None:
-    """``doc["a"]["b"] = value`` for the key ``"a.b"``, making the blocks it lacks."""
-    *blocks, last = key.split(".")
-    for block in blocks:
-        doc = doc.setdefault(block, {})
-    doc[last] = value
-
-
 def read_cases(junit: Path) -> tuple[Case, ...]:
     """The test cases of a trial's junit.xml."""
     cases = []
@@ -83,11 +75,12 @@ def _config_file(config: str | Path, overrides: dict[str, Any] | None, where: Pa
         return str(config)
     import yaml
 
+    from hil.campaign.spec import set_key  # a campaign's sweep sets its keys alike
     from hil.inputs import resolve_path
 
     doc = yaml.safe_load(resolve_path(str(config)).read_text())
     for key, value in overrides.items():
-        set_dotted(doc, key, value)
+        set_key(doc, key, value)
     path = where / f"{Path(str(config)).stem}-overridden.yaml"
     path.write_text(yaml.safe_dump(doc))
     return str(path)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import make_config
+from tests.helpers import make_config
 
 from drivers.acl import AclCommand, AclError, AclReply, ReplyReader, format_message, frame_reply, parse_message
 from drivers.acutrol_controller import AcutrolController, AcutrolOptions, mode_of

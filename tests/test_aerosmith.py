@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import make_config
+from tests.helpers import make_config
 
 from drivers.aerosmith_controller import AerosmithController, AerosmithOptions
 from drivers.table_controller import InterlockError, TableError

@@ -56,10 +56,23 @@ def test_seeds_are_the_spawned_children_and_more_runs_keep_the_first_ones():
     assert run_seeds(11, 10)[:4] == run_seeds(11, 4)
 
 
-@pytest.mark.parametrize("key", ["imu.errors.accel_noise_ug", "trial.duration_s", "imu.can.bitrate",
-                                 "turntable.motion.axes"])
-def test_config_keys_are_accepted(key):
+AXES = {"outer": {"amplitude_deg": 4, "period_s": 6}, "middle": {"amplitude_deg": 3, "period_s": 9}}
+
+
+@pytest.mark.parametrize(("key", "values"), [("imu.errors.accel_noise_ug", [[10, 10, 10], [20, 30, 40]]),
+                                             ("trial.duration_s", [30.0, 90.0]),
+                                             ("imu.can.bitrate", [250000, 1000000]),
+                                             ("turntable.motion.axes", [AXES, {"inner": {"amplitude_deg": 2, "period_s": 5}}])])
+def test_a_swept_config_key_reaches_each_points_config(tmp_path, key, values):
     check_key(key)
+    tasks = load_campaign(_spec(tmp_path, {key: values}, runs=1)).tasks
+    found = []
+    for task in tasks:
+        block = task.config
+        for part in key.split("."):
+            block = block[part]
+        found.append(block)
+    assert found == values and [t.values for t in tasks] == [{key: v} for v in values]
 
 
 @pytest.mark.parametrize(("key", "named"), [("imu.errors.accel_noise", "'imu.errors.accel_noise'"),

@@ -206,7 +206,9 @@ def test_a_noise_campaign_on_a_local_cluster_of_two_workers(tmp_path, capsys):
     for p in summary["points"]:
         vrw = p["terms"]["accel.vrw_m_per_s_per_sqrt_h"]
         assert all(a["resolved"] == 3 and abs(a["relative_error_mean"]) < 0.05 for a in vrw)
-        assert isinstance(p["coverage_consistent"], bool)
+        inside = [a["coverage_inside"] for axes in p["terms"].values() for a in axes if "coverage_inside" in a]
+        assert p["coverage_tested"] == len(inside) > 0  # the flag recounted from the point's terms
+        assert p["coverage_consistent"] == all(inside) and p["coverage_above"] + p["coverage_below"] == inside.count(False)
     page = (tmp_path / "o" / "campaign.html").read_text()
     assert "Noise terms per sweep point" in page and page.count("data:image/png;base64,") >= 3
     out = capsys.readouterr().out

@@ -11,7 +11,7 @@ import pytest
 from emulators.simulation import Simulation
 from hil.cli import main
 from hil.units import DEG
-from tests.conftest import PAPER_ERRORS, make_config
+from tests.helpers import PAPER_ERRORS, make_config
 
 
 def write_config(path, **kwargs):
@@ -30,10 +30,20 @@ def test_simulate_writes_result_series_and_figures(tmp_path):
     assert result["estimate"]["observable"] is True
     assert result["estimate"]["gram_rank"] == 12
     assert result["truth"]["accel_bias_ug"] == [60.0, 150.0, 260.0]
+    bias, sigma = (np.array(result["estimate"][k]) for k in ("accel_bias_ug", "accel_bias_sigma_ug"))
+    assert np.all(np.abs(bias - PAPER_ERRORS["accel_bias_ug"]) < 4 * sigma)  # what the files say: the estimate
     assert set(result["alignment_deg"]) == {"method1", "method2", "theoretical"}
-    for name in ("series.csv", "config.yaml", "report.html", "junit.xml", "bias.png", "alignment.png",
-                 "observability.png"):
-        assert (tmp_path / "out" / name).stat().st_size > 0
+    assert abs(result["alignment_deg"]["method2"]["pitch"]) < 0.01  # the paper's method 2: near the table
+    with open(tmp_path / "out" / "series.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    last = rows[-1]
+    assert float(last["t_s"]) == pytest.approx(60.0) and [float(last[f"bias_{a}_ug"]) for a in "xyz"] == \
+        pytest.approx(bias.tolist(), rel=1e-9)  # the series ends at the result's estimate
+    assert (tmp_path / "out" / "config.yaml").read_text() == (tmp_path / "c.yaml").read_text()
+    report = (tmp_path / "out" / "report.html").read_text()
+    assert "<h1>" in report and f"{bias[2]:.4g}"[:4] in report
+    for name in ("bias.png", "alignment.png", "observability.png"):
+        assert (tmp_path / "out" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.mark.parametrize("flags", [[], ["--no-figures"]])

@@ -11,7 +11,7 @@ import time
 import can
 import cantools
 import pytest
-from conftest import Decoding
+from tests.helpers import Decoding
 
 from drivers.can_dbc import CanDbcCodec
 from drivers.capture import decode_capture

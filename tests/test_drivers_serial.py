@@ -11,7 +11,7 @@ import tty
 from pathlib import Path
 
 import pytest
-from conftest import Decoding
+from tests.helpers import Decoding
 
 from drivers.acl import AclReply, LineFramer, frame_reply, parse_message
 from drivers.acutrol_controller import AcutrolController

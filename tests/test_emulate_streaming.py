@@ -13,7 +13,7 @@ import can
 import pytest
 import serial
 import yaml
-from conftest import interruptible
+from tests.helpers import interruptible
 from test_emulated_shutdown import CONFIG
 
 KVH_HEADER = b"\xfe\x81\xff\x55"
@@ -37,25 +37,26 @@ def _stop(proc: subprocess.Popen, stats: Path) -> dict:
     return json.loads(stats.read_text())
 
 
-def test_a_reader_on_the_imu_port_alone_gets_its_frames_at_the_configured_rate(tmp_path):
+def test_a_reader_on_the_imu_port_alone_gets_every_frame_while_the_unread_table_port_drops_its_own(tmp_path):
+    """The rate itself is measured in benchmarks/emulator_timing.py; here the emulator's own counts: both
+    devices run on the one pulse train, so the table drops what the IMU writes, and the reader loses nothing."""
     proc, ports, stats_file = _emulate(tmp_path, CONFIG)
     try:
         with serial.Serial(ports["imu"], 921600, timeout=0.05) as imu:  # nobody opens the table port
             imu.read(1 << 16)  # what arrived before the first timed read
-            counters, started = [], time.monotonic()
             data = b""
-            while time.monotonic() - started < 3.0:
+            while len(data) < 3 * 200 * 36:  # three seconds of frames
                 data += imu.read(4096)
-            elapsed = time.monotonic() - started
         frames = [data[i:i + 36] for i in range(data.find(KVH_HEADER), len(data) - 35, 36)]
         counters = [f[29] for f in frames if f.startswith(KVH_HEADER)]
     finally:
         stats = _stop(proc, stats_file)
     assert len(counters) == len(frames) and len(frames) > 0
     assert all((b - a) % 128 == 1 for a, b in zip(counters, counters[1:]))  # consecutive: nothing lost
-    assert 0.7 * 200 < len(frames) / elapsed < 1.3 * 200
-    table = stats["devices"]["turntable_data"]
-    assert table["frames"] == 0 and table["lost_unread"] > 0.7 * 200 * elapsed  # a port nobody reads drops
+    imu_stats, table = stats["devices"]["imu"], stats["devices"]["turntable_data"]
+    assert imu_stats["frames"] >= len(frames)  # (and lost unread only before the port was opened)
+    emitted = imu_stats["frames"] + imu_stats["lost_unread"]
+    assert table["frames"] == 0 and abs(table["lost_unread"] - emitted) <= 2  # the same pulses, every one dropped
 
 
 @pytest.mark.usefixtures("udp_multicast_alone")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 from crccheck.crc import Crc16Xmodem, Crc32Mpeg2
-from conftest import from_zero
+from tests.helpers import from_zero
 
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec

@@ -16,7 +16,7 @@ import cantools
 import numpy as np
 import pytest
 import yaml
-from conftest import from_zero, interruptible
+from tests.helpers import from_zero, interruptible
 from test_emulated_devices import read_raw
 
 from drivers.capture import decode_capture

@@ -8,7 +8,7 @@ from hil.estimation.strapdown import cumulative_product
 from hil.frames import EARTH_RATE, Earth, TableGeometry, euler_matrix
 from hil.samples import AlignedBatch
 from hil.units import DEG, UG
-from tests.conftest import PAPER_ERRORS, earth_turn, make_config, run_estimator
+from tests.helpers import PAPER_ERRORS, earth_turn, make_config, run_estimator
 
 
 def test_cumulative_product_equals_sequential_products():

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 import yaml
-from conftest import Decoding, from_zero
+from tests.helpers import Decoding, from_zero
 from test_emulated_devices import read_raw
 
 from drivers.framing import SequenceUnwrapper

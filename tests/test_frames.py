@@ -2,7 +2,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import earth_turn, scipy_attitude
+from tests.helpers import earth_turn, scipy_attitude
 from scipy.spatial.transform import Rotation
 
 from hil.frames import (

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from conftest import scipy_attitude
+from tests.helpers import scipy_attitude
 
 from hil.estimation.gimbal import as_stacked, gimbal_matrices, row_times
 from hil.frames import TableGeometry

@@ -16,7 +16,7 @@ from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
 from hil.trial.live import LatencyStats, LiveTrial, TrialAborted
 from hil.trial.offline import replay_recording
-from conftest import processed
+from tests.helpers import processed
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -3,7 +3,7 @@ device came back, and also after the trial's end."""
 
 from __future__ import annotations
 
-from conftest import make_config
+from tests.helpers import make_config
 
 from drivers.codec import RawChunk, StreamEvent
 from emulators.simulation import Simulation

@@ -39,7 +39,7 @@ def test_small_rotation_vectors_match_scipy():
 
 def test_gyro_table_gate_passes_clean_increments_and_catches_a_damaged_one():
     import numpy as np
-    from conftest import make_config
+    from tests.helpers import make_config
 
     from emulators.simulation import Simulation
     from hil.pipeline.plausibility import GyroTableGate

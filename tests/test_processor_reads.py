@@ -6,7 +6,7 @@ samples beyond the trial's duration."""
 from __future__ import annotations
 
 import pytest
-from conftest import make_config
+from tests.helpers import make_config
 
 from drivers.codec import RawChunk
 from emulators.simulation import Simulation

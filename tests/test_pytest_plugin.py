@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from hil.pytest_plugin import read_cases, set_dotted
+from hil.pytest_plugin import read_cases
 from tests.wheel_venv import install_wheel
 
 LAB_TESTS = '''
@@ -57,13 +57,6 @@ def test_a_labs_test_file_runs_under_pytest_with_the_installed_plugin(tmp_path):
     plugin = subprocess.run([venv.python, "-c", "import hil.pytest_plugin as p; print(p.__file__)"], cwd=lab,
                             env=venv.env, capture_output=True, text=True, check=True).stdout
     assert plugin.startswith(str(venv.site))
-
-
-def test_overrides_set_dotted_keys_and_make_missing_blocks():
-    doc = {"trial": {"duration_s": 10}}
-    set_dotted(doc, "trial.duration_s", 20)
-    set_dotted(doc, "output.limits.bias_sigma_ug_max", 5)
-    assert doc == {"trial": {"duration_s": 20}, "output": {"limits": {"bias_sigma_ug_max": 5}}}
 
 
 def test_junit_cases_are_read_with_their_outcome_and_message(tmp_path):

@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 import yaml
-from conftest import PAPER_ERRORS, make_config, run_estimator
+from tests.helpers import PAPER_ERRORS, make_config, run_estimator
 
 from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES

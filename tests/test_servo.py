@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import from_zero
+from tests.helpers import from_zero
 from test_emulated_devices import read_raw
 
 from drivers.acl import AclCommand, ReplyReader

@@ -12,7 +12,7 @@ from emulators.simulation import Simulation
 from emulators.simulation_process import HEADER, SimulationProcess, _read_batch, _write_batch
 from hil.config import Config, InputError, load_config, parse_config
 from hil.samples import AlignedBatch
-from tests.conftest import make_config
+from tests.helpers import make_config
 
 ROOT = Path(__file__).resolve().parent.parent
 TRIAL_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("*.yaml") if not p.name.startswith("campaign_"))

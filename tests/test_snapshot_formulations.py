@@ -17,7 +17,7 @@ from emulators.simulation import Simulation
 from hil.estimation.apparent_gravity import N_DRIFT, N_FULL, N_GRAVITY
 from hil.estimation.online import OnlineEstimator
 from hil.frames import EULER_SEQ
-from tests.conftest import PAPER_ERRORS, earth_turn, make_config, scipy_attitude
+from tests.helpers import PAPER_ERRORS, earth_turn, make_config, scipy_attitude
 
 EPS = np.finfo(float).eps
 ANGLE_ATOL = 1e-13  # rad; the errors are Euler differences, each angle rounded to ~1e-16 rad

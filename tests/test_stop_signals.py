@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from hil.cli import main
-from conftest import processed
+from tests.helpers import processed
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import make_config
+from tests.helpers import make_config
 from drivers.codec import RawChunk, StreamEvent
 from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import make_config, scipy_attitude, true_attitude_ib0
+from tests.helpers import make_config, scipy_attitude, true_attitude_ib0
 from scipy.spatial.transform import Rotation
 
 from emulators.simulation import Simulation

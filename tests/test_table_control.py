@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 import yaml
-from conftest import make_config
+from tests.helpers import make_config
 
 from hil.cli import main
 from hil.trial.table_control import MotionCheck

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import make_config
+from tests.helpers import make_config
 
 from emulators.simulation import Simulation
 from hil.pipeline.time_offset import TimeOffsetEstimator

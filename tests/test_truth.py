@@ -2,7 +2,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import true_attitude_ib0
+from tests.helpers import true_attitude_ib0
 from scipy.spatial.transform import Rotation
 
 from emulators.motion import Positions, motion_from_config
@@ -10,7 +10,7 @@ from emulators.truth import Truth
 from hil.estimation.strapdown import Strapdown
 from hil.frames import EARTH_RATE, Earth, TableGeometry
 from hil.units import DEG
-from tests.conftest import make_config
+from tests.helpers import make_config
 
 
 def test_integrated_ideal_increments_reproduce_true_attitude_after_one_hour():

@@ -5,13 +5,12 @@ from __future__ import annotations
 import os
 import subprocess
 import threading
-import time
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PAPER_ERRORS, make_config
+from tests.helpers import PAPER_ERRORS, make_config
 from rerun.chunk import RrdReader
 
 from emulators.simulation import Simulation
@@ -151,14 +150,11 @@ def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, mon
     viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry)
     release = threading.Event()
     viewer._submit(release.wait)  # the logging thread is stuck in this job
-    start = time.perf_counter()
-    for k in range(50):
+    for k in range(50):  # a call that waited would wait for ever: the logging thread is held until after
         viewer.log_health(float(k), HEALTH)
         viewer.log_snapshot(snapshots[-1])
-    elapsed = time.perf_counter() - start
     release.set()
     viewer.close()
-    assert elapsed < 0.5
     assert viewer.dropped >= 100 - 4
     assert (tmp_path / "recording.rrd").exists()
 
