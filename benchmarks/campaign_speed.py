@@ -75,7 +75,7 @@ def existing_cluster(tmp: Path, workers: list[str]) -> Iterator[str]:
         _stopped(scheduler)
 
 
-def compare_clusters(args: argparse.Namespace, tasks: list, run_one, serial: list, tmp: Path) -> None:
+def compare_clusters(args: argparse.Namespace, tasks: list, run_swing, serial: list, tmp: Path) -> None:
     """runs/s of the same runs on a LocalCluster, on `hil worker` workers and on plain `dask worker` ones."""
     from distributed import Client
 
@@ -90,13 +90,13 @@ def compare_clusters(args: argparse.Namespace, tasks: list, run_one, serial: lis
             clients[name].wait_for_workers(args.workers, timeout=120)
         best = {name: (float("inf"), 0.0) for name in clients}
         for client in clients.values():
-            client.run(run_one, tasks[0])  # each worker's imports, outside the timing
+            client.run(run_swing, tasks[0])  # each worker's imports, outside the timing
         for k in range(args.repeat):
             names = list(clients)
             for name in names[k % 3:] + names[:k % 3]:  # each cluster first in turn: the load drifts
                 client = clients[name]
                 start, rows = time.perf_counter(), []
-                gather(client, run_one, tasks, rows, tmp)
+                gather(client, run_swing, tasks, rows, tmp)
                 wall = time.perf_counter() - start
                 assert sorted(rows, key=lambda r: r["id"]) == serial, f"{name}: the rows differ from the serial ones"
                 best[name] = min(best[name], (wall, os.getloadavg()[0]))
@@ -125,31 +125,31 @@ def main() -> None:
         spec.write_text(yaml.safe_dump({"base": str(BASES[args.kind]), "kind": args.kind, "runs": args.runs, "seed": 1,
                                         "sweep": sweep}))
         tasks = load_campaign(spec).tasks
-        run_one = KINDS[args.kind].run
-        run_one(tasks[0])  # imports and caches warm, as on a worker after its first run
+        run_swing = KINDS[args.kind].run
+        run_swing(tasks[0])  # imports and caches warm, as on a worker after its first run
         serial_s = float("inf")
         for _ in range(args.repeat):
             start = time.perf_counter()
-            serial = [run_one(task) for task in tasks]
+            serial = [run_swing(task) for task in tasks]
             serial_s = min(serial_s, time.perf_counter() - start)
         length = "its schedule" if args.kind == "calibration" else f"{args.duration:g} s"
         print(f"{args.runs} {args.kind} runs of {length} at {args.rate:g} Hz")
         print(f"serial, in process: {serial_s:7.2f} s, {args.runs / serial_s:6.2f} runs/s, "
               f"{serial_s / args.runs * 1e3:7.1f} ms a run (load average {os.getloadavg()[0]:.1f})")
         if args.scheduler:
-            compare_clusters(args, tasks, run_one, serial, Path(tmp))
+            compare_clusters(args, tasks, run_swing, serial, Path(tmp))
             return
         one_worker_s = None
         for workers in (1, 2):
             start = time.perf_counter()
             with open_client(None, workers) as (client, _):
                 started = time.perf_counter()
-                client.run(run_one, tasks[0])  # each worker's imports, outside the timing
+                client.run(run_swing, tasks[0])  # each worker's imports, outside the timing
                 warm = time.perf_counter()
                 wall = float("inf")
                 for _ in range(args.repeat):
                     start_pass, rows = time.perf_counter(), []
-                    gather(client, run_one, tasks, rows, Path(tmp))
+                    gather(client, run_swing, tasks, rows, Path(tmp))
                     wall = min(wall, time.perf_counter() - start_pass)
                     assert sorted(rows, key=lambda r: r["id"]) == serial, "the cluster's rows differ from the serial ones"
                 empty = float("inf")

@@ -31,7 +31,7 @@ import yaml
 from emulators.clocks import counter_starts
 from emulators.process import spawn_emulator, stop_emulator
 from hil.config import load_config
-from hil.trial.live import LiveTrial
+from hil.trial.live import LiveTrial, TrialHooks
 
 
 def rss_mib() -> float:
@@ -101,8 +101,8 @@ def main() -> None:
                                          stats_file=out / "emulator.json", wait_readers=not args.lab)
         time.sleep(late)
         frames = FrameAges()
-        trial = LiveTrial(cfg, text, out, args.duration, ports, source_done=lambda: emulator.poll() is not None,
-                          on_samples=frames.on_samples)
+        trial = LiveTrial(cfg, text, out, args.duration, ports, hooks=TrialHooks(
+            source_done=lambda: emulator.poll() is not None, on_samples=frames.on_samples))
         memory: list[tuple[float, float]] = []
         stop = threading.Event()
 

@@ -1,5 +1,5 @@
 """What one campaign run costs beyond its simulation and estimation: a swing run of the 2019 paper's scenario
-(configs/liu2019_sim.yaml, 400 000 samples) as a worker takes it (``hil.campaign.runs.run_one``, warm: the
+(configs/liu2019_sim.yaml, 400 000 samples) as a worker takes it (``hil.campaign.runs.run_swing``, warm: the
 worker's imports done by an earlier run), profiled; prints the run's time, the time in the emulator's batches
 and in the estimator's (``Simulation.batches``, ``Processor.feed_batch``), the rest of the trial, what the run
 does outside it (config validation, the config's YAML text, the row), the profile's top five by own time,
@@ -19,11 +19,11 @@ from pathlib import Path
 
 import yaml
 
-from hil.campaign.runs import run_one
+from hil.campaign.runs import run_swing
 from hil.campaign.spec import load_campaign
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "liu2019_sim.yaml"
-PARTS = {"run": "runs.py:47(run_one)", "trial": "offline.py:60(run_simulation)",
+PARTS = {"run": "runs.py:47(run_swing)", "trial": "offline.py:60(run_simulation)",
          "simulation": "simulation.py:47(batches)", "estimation": "processor.py:158(feed_batch)"}
 
 
@@ -32,9 +32,9 @@ def main() -> None:
         spec = Path(tmp) / "spec.yaml"
         spec.write_text(yaml.safe_dump({"base": str(CONFIG), "runs": 2, "seed": 1}))
         first, task = load_campaign(spec).tasks
-    run_one(first)
+    run_swing(first)
     profile = cProfile.Profile()
-    profile.runcall(run_one, task)
+    profile.runcall(run_swing, task)
     stats = pstats.Stats(profile)
     cumulative = {f"{Path(file).name}:{line}({name})": entry[3] for (file, line, name), entry in stats.stats.items()}
     t = {part: next(v for key, v in cumulative.items() if key.endswith(where)) for part, where in PARTS.items()}

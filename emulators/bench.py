@@ -1,7 +1,7 @@
 """The pulse-train bench: the emulated IMU and table of one run, driven by one sync pulse train.
 
 :class:`Bench` assembles the devices from the config (servo, frame streams of :mod:`emulators.sources`,
-ports of :mod:`emulators.ports`, writers of :mod:`emulators.writer`, the emulated table's command server);
+ports of :mod:`emulators.ports`, writers of :mod:`emulators.paced_writer`, the emulated table's command server);
 :meth:`Bench.pulse_loop` emits every device's frames in time order, paced by a :class:`SyncClock`;
 :meth:`Bench.stats` sums the run up as :class:`EmulatorStats`. :mod:`emulators.process` runs it.
 """
@@ -26,7 +26,7 @@ from emulators.servo import Servo
 from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
 from emulators.table_server import TableServer, emulated_table
-from emulators.writer import DeviceWriter
+from emulators.paced_writer import DeviceWriter
 from hil.config import Config
 from hil.units import ARCSEC
 

@@ -35,7 +35,7 @@ from pathlib import Path
 
 from emulators.bench import Bench, EmulatorStats, SyncClock
 from emulators.ports import wait_for_readers
-from emulators.writer import DRAIN_S
+from emulators.paced_writer import DRAIN_S
 from hil.config import Config, ConfigError
 
 PR_SET_PDEATHSIG = 1  # prctl option: a signal for the child when its parent dies

@@ -8,7 +8,7 @@ not sent). Frames are encoded by the drivers' codecs, so the emulator speaks
 exactly what the drivers read. The table's motion is the servo's (:mod:`emulators.servo`): a
 :class:`DeviceStream` computes its frames a chunk ahead and recomputes the chunk when the servo's
 plan changes, from a snapshot of its random state, so a command changes the frames from the next
-pulse and everything stays reproducible. :mod:`emulators.writer` puts the frames on the ports.
+pulse and everything stays reproducible. :mod:`emulators.paced_writer` puts the frames on the ports.
 """
 
 from __future__ import annotations

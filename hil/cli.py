@@ -168,7 +168,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from hil.outputs.report import write_report
+    from hil.outputs.trial_report import write_report
 
     print(write_report(Path(args.dir)))
     return 0

@@ -15,9 +15,9 @@ import pytest
 import yaml
 
 from hil.campaign.runner import resumed_rows
-from hil.campaign.runs import failed_row, flatten, run_one
+from hil.campaign.runs import failed_row, flatten, run_swing
 from hil.campaign.spec import RunTask, SpecError, check_key, load_campaign, run_seeds
-from hil.campaign.summary import bias_error, consistency, nees_band, ratio_band, summarise
+from hil.campaign.swing_summary import bias_error, consistency, nees_band, ratio_band, summarise
 from hil.campaign.table import read_runs, to_table, write_runs
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -122,7 +122,7 @@ def test_one_run_is_the_simulated_trial_flattened(tmp_path):
 
     config = yaml.safe_load(LIU.read_text())
     config["trial"].update(duration_s=40.0, rate_hz=20.0, seed=123)
-    row = run_one(_task(config, {"trial.duration_s": 40.0}))
+    row = run_swing(_task(config, {"trial.duration_s": 40.0}))
     outcome, _ = run_simulation(parse_config(config), "", tmp_path, ViewerOptions())
     assert row["error"] is None and row["sweep.trial.duration_s"] == 40.0 and row["seed"] == 123
     assert [row[f"estimate.accel_bias_ug.{i}"] for i in range(3)] == outcome.result["estimate"]["accel_bias_ug"]
@@ -133,7 +133,7 @@ def test_one_run_is_the_simulated_trial_flattened(tmp_path):
 def test_a_run_that_raises_is_a_row_with_its_error():
     config = yaml.safe_load(LIU.read_text())
     del config["trial"]["duration_s"]
-    row = run_one(_task(config))
+    row = run_swing(_task(config))
     assert row["id"] == "p000-r0000" and "trial.duration_s: required key is missing" in row["error"]
     assert "estimate.accel_bias_ug.0" not in row
 

@@ -17,9 +17,9 @@ from tests.helpers import PAPER_ERRORS, make_config, run_estimator
 from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES
 from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, measurements, overall
-from hil.outputs.report import ReportError, write_report
+from hil.outputs.trial_report import ReportError, write_report
 from hil.outputs.result import build_result, summary_text
-from hil.outputs.writer import write_trial_outputs
+from hil.outputs.trial_outputs import write_trial_outputs
 from hil.samples import StreamCounts
 
 

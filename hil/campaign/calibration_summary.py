@@ -6,7 +6,7 @@ With e the error (estimate minus the truth as the schedule observes it) of the M
 sigma their reported 1-sigma and z their error in sigmas (hil/outputs/calibration_report.py ``comparison``:
 an angle's sigma with the encoder's resolution): the mean and std (M - 1 degrees of freedom) of e, the mean
 sigma, the ratio ``r = std(e) / mean(sigma)`` with the chi-square band of a consistent estimator
-(:func:`hil.campaign.summary.ratio_band`), the fraction of runs with ``|z| <= 3`` (0.9973 for a consistent
+(:func:`hil.campaign.swing_summary.ratio_band`), the fraction of runs with ``|z| <= 3`` (0.9973 for a consistent
 one) and the RMS of z (1). A run that reports the term unobservable counts in ``unobservable``, not in M.
 Per family (the axes of a term) the range of the ratios, and the fraction within 3 sigma and the RMS of z
 over all its runs. The point's headline: how many of the n terms with a ratio have it outside its band
@@ -26,7 +26,7 @@ import numpy as np
 from scipy import stats
 
 from hil.campaign.runs import ERROR, TERM
-from hil.campaign.summary import LEVEL, ratio_band
+from hil.campaign.swing_summary import LEVEL, ratio_band
 from hil.campaign.task import point_label
 
 WITHIN = 3.0  # sigmas

@@ -9,11 +9,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from hil.campaign import calibration_summary, noise_summary, summary
-from hil.campaign.calibration_report import calibration_section
-from hil.campaign.noise_report import noise_section
-from hil.campaign.report import swing_section
-from hil.campaign.runs import run_calibration, run_noise, run_one
+from hil.campaign import calibration_summary, noise_summary, swing_summary
+from hil.campaign.calibration_consistency import calibration_section
+from hil.campaign.noise_consistency import noise_section
+from hil.campaign.campaign_report import swing_section
+from hil.campaign.runs import run_calibration, run_noise, run_swing
 from hil.campaign.task import RunTask
 
 Row = dict[str, Any]
@@ -28,7 +28,7 @@ class Kind:
 
 
 KINDS = {
-    "swing": Kind(run_one, summary.point_summary, summary.point_lines, swing_section),
+    "swing": Kind(run_swing, swing_summary.point_summary, swing_summary.point_lines, swing_section),
     "noise": Kind(run_noise, noise_summary.point_summary, noise_summary.point_lines, noise_section),
     "calibration": Kind(run_calibration, calibration_summary.point_summary, calibration_summary.point_lines,
                         calibration_section),

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import stats
 
 from hil.campaign.runs import ERROR, TRUTH
-from hil.campaign.summary import LEVEL
+from hil.campaign.swing_summary import LEVEL
 from hil.campaign.task import point_label
 from hil.outputs.noise import SENSORS
 

@@ -119,8 +119,8 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
     """Run (or go on with) a campaign; returns the exit code: 0 every run done, 1 some runs failed (their
     rows say why; ``--resume`` runs them again) or a stop signal ended it (the outputs of the runs done)."""
     from hil.campaign.cluster import open_client
-    from hil.campaign.report import write_campaign_report
-    from hil.campaign.summary import summarise, write_summary
+    from hil.campaign.campaign_report import write_campaign_report
+    from hil.campaign.swing_summary import summarise, write_summary
     from hil.campaign.workers import costly_defaults
     from hil.outputs.record import run_record
 

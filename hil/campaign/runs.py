@@ -49,7 +49,7 @@ def failed_row(task: RunTask, error: BaseException | str) -> dict[str, Any]:
     return {**task_columns(task), ERROR: " ".join(text.split()) or "failed"}
 
 
-def run_one(task: RunTask) -> dict[str, Any]:
+def run_swing(task: RunTask) -> dict[str, Any]:
     """The row of one run: a simulated trial of the task's config; a run that raises is a row with ``error``."""
     from hil.config import parse_config
     from hil.trial.offline import run_simulation

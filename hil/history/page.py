@@ -17,7 +17,7 @@ from hil.outputs.figures import pyplot
 from hil.outputs.measurements import format_value
 from hil.outputs.page_header import page_header
 from hil.outputs.record import source_commit
-from hil.outputs.report import html_page
+from hil.outputs.trial_report import html_page
 from hil.recording.recorder import package_version
 
 HISTORY_HTML = "history.html"

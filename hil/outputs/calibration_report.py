@@ -28,7 +28,7 @@ from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
 from hil.outputs.figures import pyplot
 from hil.outputs.page_header import page_header
-from hil.outputs.report import html_page
+from hil.outputs.trial_report import html_page
 from hil.units import ARCSEC, DEG_PER_H, UG
 
 BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,26 @@ from hil.units import DEG, UG
 
 RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
+
+
+@dataclass(frozen=True)
+class TrialEnd:
+    """How a trial ended: ``completed``, ``early`` (``reason``: why) or ``interrupted`` (``reason``: the
+    signal). ``str()`` is result.json's ``ended`` (docs/contracts.md), the one place it is written."""
+
+    kind: str
+    reason: str = ""
+
+    @classmethod
+    def early(cls, reason: object) -> TrialEnd:
+        return cls("early", str(reason))
+
+    @classmethod
+    def interrupted(cls, signal: str) -> TrialEnd:
+        return cls("interrupted", signal)
+
+    def __str__(self) -> str:
+        return self.kind if self.kind == COMPLETED else f"{self.kind}: {self.reason}"
 
 
 def _angles(v: np.ndarray | None, names=("pitch", "roll", "yaw")) -> dict[str, float] | None:

@@ -14,7 +14,7 @@ from hil.estimation.calibration_model import Window
 from hil.estimation.calibration_schedule import Schedule
 from hil.outputs.calibration_report import Residuals
 from hil.outputs.figures import Draw, write_figures
-from hil.outputs.result import COMPLETED
+from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 
@@ -75,7 +75,7 @@ class CalibrationOutcome(TrialOutcome):
         fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(TrialOutcome)}
         if outcome.ended == COMPLETED and (sequence is None or not sequence.done):
             where = sequence.progress if sequence is not None else "not started"
-            fields["result"]["ended"] = f"early: {unfinished} ({where})"
+            fields["result"]["ended"] = str(TrialEnd.early(f"{unfinished} ({where})"))
         if fields["result"]["ended"] != COMPLETED:
             return cls(**fields)
         from hil.outputs.calibration_report import calibration_summary
@@ -83,7 +83,7 @@ class CalibrationOutcome(TrialOutcome):
         try:
             windows = sequence.windows()
         except ValueError as exc:  # a window whose samples were all lost (gated out, or gaps in the data)
-            fields["result"]["ended"] = f"early: {exc}"
+            fields["result"]["ended"] = str(TrialEnd.early(exc))
             return cls(**fields)
         document, residuals = fit_windows(outcome.cfg, windows, truth)
         fields["result"]["calibration"] = calibration_summary(document)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from hil.config import Config
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
+from hil.trial.live import TrialHooks
 from hil.trial.outcome import TrialSetupError
 from hil.trial.viewer_feed import ViewerOptions
 
@@ -38,7 +39,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
     duration = emulated_length(cfg, schedule) if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
-    def commanded(control, cfg: Config, viewer) -> tuple[object, dict]:
+    def commanded(control, cfg: Config, viewer) -> TrialHooks:
         control.client.apply_limits()
         limits = (cfg.limits.missing_max, cfg.limits.gated_max)  # a window may lack what the trial may
         lacking = 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
@@ -47,8 +48,8 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
         sequence.start()
         control.client.sync_output(True)
         sequences.append(sequence)
-        return sequence, {"on_samples": sequence.on_samples, "finished": lambda: sequence.done,
-                          "queue_items": QUEUE_ITEMS}
+        return TrialHooks(motion_check=sequence, on_samples=sequence.on_samples, finished=lambda: sequence.done,
+                          queue_items=QUEUE_ITEMS)
 
     outcome, viewer = run_live(cfg, config_path, out, duration, speed, dataclasses.replace(viewer, layout="calibration"),
                                quiet, commanded)

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from hil.config import Config
-from hil.outputs.result import COMPLETED
+from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
@@ -72,7 +72,8 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     processor.finish()
     if viewer is not None and processor.estimator is not None:
         viewer.log_snapshots(processor.estimator.snapshots)
-    ended = COMPLETED if sequence.failure is None else f"early: turntable is not moving as commanded: {sequence.failure}"
+    ended = str(TrialEnd(COMPLETED) if sequence.failure is None
+                else TrialEnd.early(f"turntable is not moving as commanded: {sequence.failure}"))
     outcome = TrialOutcome.of(processor, cfg, config_text, out, ended, emulated_truth(cfg))
     unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
     return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer

@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ from drivers.transport import Transport, open_transport
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.record import start_record
-from hil.outputs.result import COMPLETED
+from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import IMU, TABLE, SamplesCallback, TrialProcessor
 from hil.pipeline.stream_watch import StreamWatch
 from hil.recording.recorder import Recorder, to_ns
@@ -131,58 +132,68 @@ def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Tr
             TABLE: open_transport(table_port, TABLE, cfg.turntable.baudrate)}
 
 
-class LiveTrial:
-    """Acquire, record and estimate until the duration is reached, the devices stop, or a stop signal.
+def _warn(text: str) -> None:
+    print(f"hil: WARNING: {text}", file=sys.stderr)
 
-    ``source_done`` (optional) is polled: when it returns True (the emulator process has exited) and
-    the data has stopped, the trial ends; it is complete if it reached the duration within
-    ``END_TOLERANCE_S`` (its last frames may have been dropped). ``time_scale`` is the emulator's
-    speed. ``on_progress`` gets the processor about twice a second. With a ``motion_check`` (the
-    harness commands the table) the trial ends when the table does not move as commanded or its data
-    stops for ``TABLE_WATCHDOG_S``; the caller then turns the table off. An outage of every device
-    shorter than ``output.outage_limit_s`` is ridden out (the readers reconnect), a longer one ends the
-    trial early. ``stop_requested`` (optional) is polled every step: a signal name ends the trial as
-    interrupted. A trial whose IMU samples are all rejected for ``STALL_S`` ends early with the
-    processor's diagnosis, and one whose stream's bytes arrive for ``output.stream_timeout_s`` without a
-    frame with the :class:`StreamWatch`'s line (the port, and what the bytes decode as). ``on_end``
-    (optional) is called the moment acquisition ends, however it ends, before the backlog is processed:
-    where the table is turned off. ``on_samples`` goes to the processor
-    (:class:`TrialProcessor`); ``finished`` (optional) is polled every step: True ends the trial as
-    completed (a trial whose length is set by what the harness commands). ``queue_items`` bounds the
-    processing queue: a small one holds the emulated devices close behind the processing (the table then
-    answers a command without lag).
+
+@dataclass(frozen=True)
+class TrialHooks:
+    """What a runner plugs into a :class:`LiveTrial`; every field optional.
+
+    ``motion_check``: the harness commands the table; the trial ends when the table does not move as
+    commanded or its data stops for ``TABLE_WATCHDOG_S`` (the caller then turns the table off).
+    ``on_progress`` gets the trial time, the latest snapshot and the health about twice a second;
+    ``on_warning`` a warning line. ``source_done`` is polled: True (the emulator process has exited) with the
+    data stopped ends the trial, complete if it reached the duration within ``END_TOLERANCE_S``.
+    ``stop_requested`` is polled every step: a signal name ends the trial as interrupted. ``on_end`` is
+    called the moment acquisition ends, however it ends, before the backlog is processed: where the table is
+    turned off. ``on_samples`` goes to the processor (:class:`TrialProcessor`). ``finished`` is polled every
+    step: True ends the trial as completed (a trial whose length is set by what the harness commands).
+    ``queue_items`` bounds the processing queue: a small one holds the emulated devices close behind the
+    processing (the table then answers a command without lag).
+    """
+
+    motion_check: MotionCheck | None = None
+    on_progress: Callable[[float, Snapshot | None, dict], None] | None = None
+    on_warning: Callable[[str], None] = _warn
+    source_done: Callable[[], bool] = lambda: False
+    stop_requested: Callable[[], str | None] = lambda: None
+    on_end: Callable[[], None] = lambda: None
+    on_samples: SamplesCallback | None = None
+    finished: Callable[[], bool] = lambda: False
+    queue_items: int = QUEUE_ITEMS
+
+
+class LiveTrial:
+    """Acquire, record and estimate until the duration is reached, the devices stop, or a stop signal,
+    with the runner's :class:`TrialHooks`.
+
+    ``time_scale`` is the emulator's speed. An outage of every device shorter than ``output.outage_limit_s``
+    is ridden out (the readers reconnect), a longer one ends the trial early. A trial whose IMU samples are
+    all rejected for ``STALL_S`` ends early with the processor's diagnosis, and one whose stream's bytes arrive
+    for ``output.stream_timeout_s`` without a frame with the :class:`StreamWatch`'s line (the port, and what
+    the bytes decode as).
     """
 
     def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
                  ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float | None = 1.0,
-                 motion_check: MotionCheck | None = None,
-                 on_progress: Callable[[float, Snapshot | None, dict], None] | None = None,
-                 source_done: Callable[[], bool] | None = None,
-                 stop_requested: Callable[[], str | None] | None = None,
-                 on_end: Callable[[], None] | None = None, on_samples: SamplesCallback | None = None,
-                 finished: Callable[[], bool] | None = None, queue_items: int = QUEUE_ITEMS,
-                 on_warning: Callable[[str], None] | None = None) -> None:
+                 hooks: TrialHooks = TrialHooks()) -> None:
         self.cfg = cfg
-        self.on_warning = on_warning or (lambda text: print(f"hil: WARNING: {text}", file=sys.stderr))
+        self.hooks = hooks
         self.sync_warned = False
         self.out = out
         self.duration = duration
         self.viewer = viewer
-        self.on_progress = on_progress
-        self.source_done = source_done or (lambda: False)
-        self.stop_requested = stop_requested or (lambda: None)
-        self.on_end = on_end or (lambda: None)
-        self.finished = finished or (lambda: False)
         self.interrupted: str | None = None
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
                                  record=start_record(cfg, config_text, ports))
-        self.queue: queue.Queue = queue.Queue(queue_items)
+        self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
         feed = ViewerFeed(viewer, self._live_health)
-        self.motion_check = motion_check
-        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed), on_samples)
+        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed),
+                                        hooks.on_samples)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
         codecs = {stream: decoder.codec for stream, decoder in self.processor.decoders.items()}
@@ -198,19 +209,19 @@ class LiveTrial:
         Raises :class:`~drivers.transport.TransportError` (after closing everything) when a port cannot
         be opened at the start.
         """
-        ended = "early: the trial did not start"
+        ended = TrialEnd.early("the trial did not start")
         try:
             for reader in self.readers:
                 reader.start()
             try:
                 self._loop()
             except TrialAborted as exc:
-                ended = f"early: {exc}"
+                ended = TrialEnd.early(exc)
             else:
-                ended = f"interrupted: {self.interrupted}" if self.interrupted else COMPLETED
-            return ended
+                ended = TrialEnd.interrupted(self.interrupted) if self.interrupted else TrialEnd(COMPLETED)
+            return str(ended)
         finally:
-            self.on_end()
+            self.hooks.on_end()
             for reader in self.readers:
                 reader.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
@@ -221,9 +232,9 @@ class LiveTrial:
                 self.viewer.close()
 
     def _table_to(self, feed: ViewerFeed) -> Callable[[np.ndarray, np.ndarray], None]:
-        if self.motion_check is None:
+        if self.hooks.motion_check is None:
             return feed.on_table
-        check = self.motion_check
+        check = self.hooks.motion_check
 
         def both(t: np.ndarray, angles: np.ndarray) -> None:
             feed.on_table(t, angles)
@@ -243,8 +254,8 @@ class LiveTrial:
     def _loop(self) -> None:
         started = time.monotonic()
         next_progress, next_sync_check = started, SYNC_CHECK_S  # the latter in trial time
-        while not (self.processor.complete or self.ended_by_source or self.finished()):
-            self.interrupted = self.stop_requested()
+        while not (self.processor.complete or self.ended_by_source or self.hooks.finished()):
+            self.interrupted = self.hooks.stop_requested()
             if self.interrupted:
                 return
             try:
@@ -254,8 +265,8 @@ class LiveTrial:
             if item is not None:
                 updates = self.processor.updates
                 self.processor.feed(item)
-                if self.motion_check is not None and self.motion_check.failure:
-                    raise TrialAborted(f"turntable is not moving as commanded: {self.motion_check.failure}")
+                if self.hooks.motion_check is not None and self.hooks.motion_check.failure:
+                    raise TrialAborted(f"turntable is not moving as commanded: {self.hooks.motion_check.failure}")
                 if self.processor.stalled:
                     raise TrialAborted(self.processor.stalled)
                 self._watch(item)
@@ -267,10 +278,10 @@ class LiveTrial:
             if now >= next_progress:
                 next_progress = now + 0.5
                 health = self.health()
-                if self.on_progress is not None:
+                if self.hooks.on_progress is not None:
                     estimator = self.processor.estimator
                     snap = estimator.snapshots[-1] if estimator is not None and estimator.snapshots else None
-                    self.on_progress(self.processor.trial_time, snap, health)
+                    self.hooks.on_progress(self.processor.trial_time, snap, health)
             if self.processor.trial_time >= next_sync_check and not self.sync_warned:
                 next_sync_check = self.processor.trial_time + SYNC_CHECK_S
                 self._check_sync()
@@ -283,7 +294,7 @@ class LiveTrial:
         warning = lag_warning(offset, self.cfg.imu_rate_hz)
         if warning is not None:
             self.sync_warned = True
-            self.on_warning(warning)
+            self.hooks.on_warning(warning)
 
 
     def _watch(self, item: RawChunk | StreamEvent) -> None:
@@ -301,7 +312,7 @@ class LiveTrial:
         near_end = self.duration is not None and self.processor.trial_time >= self.duration - END_TOLERANCE_S
         # the data has ended: the devices stopped at the end (its last frames may be lost), or the
         # emulator's process is gone and the readers have handed over its last bytes
-        if now - last > SETTLE_S and ((last and near_end) or self.source_done()):
+        if now - last > SETTLE_S and ((last and near_end) or self.hooks.source_done()):
             self.ended_by_source = True
             if not near_end and self.duration is not None:
                 raise TrialAborted(f"the emulated devices stopped at {self.processor.trial_time:.1f} s "
@@ -310,7 +321,7 @@ class LiveTrial:
         if last == 0.0 and now - started > START_TIMEOUT_S:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
         table_last = self.fanout.last_by_stream.get(TABLE)
-        if self.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
+        if self.hooks.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
             raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
         limit = self.cfg.output.outage_limit_s
         if last and now - last > limit:

@@ -4,11 +4,13 @@ viewer closed and the emulator reaped on every way out, signals included."""
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from hil.config import Config
+from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.viewer_feed import ViewerOptions, open_viewer
 
@@ -21,10 +23,10 @@ def emulated(cfg: Config) -> bool:
     return sources == {"emulator"}
 
 
-# Given the open table control, the config and the viewer (or None), starts the table and returns what watches it
-# (``motion_check``) and further LiveTrial arguments; the default arms ``turntable.motion`` and checks it
-# (:class:`MotionCheck`).
-Commanded = Callable[[object, Config, object], tuple[object, dict]]
+# Given the open table control, the config and the viewer (or None), starts the table and returns the trial's
+# hooks for it: what watches it (``motion_check``), and for a trial the harness paces, ``on_samples``,
+# ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it (:class:`MotionCheck`).
+Commanded = Callable[[object, Config, object], TrialHooks]
 
 
 def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
@@ -60,7 +62,6 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
     from drivers.table_controller import InterlockError, LimitError, TableError
     from emulators.process import EmulatorError, spawn_emulator, stop_emulator
-    from hil.trial.live import LiveTrial
     from hil.trial.table_control import TableControl
     from hil.viewer.progress import ConsoleProgress
 
@@ -76,16 +77,17 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
         viewer = open_viewer(options, cfg, out, blocking=False)
         command_url = _command_url(cfg, ports)
         with ConsoleProgress(duration, quiet=quiet) as progress:
-            check, extra = None, {}
+            hooks = TrialHooks()
             if command_url is not None:
                 control = TableControl(command_url, cfg.turntable)
                 control.open()
-                check, extra = commanded(control, cfg, viewer)
-            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer=viewer, time_scale=time_scale,
-                              motion_check=check, on_progress=progress.update, stop_requested=stop_requested,
-                              on_end=control.stop if control is not None else None, on_warning=progress.warn,
-                              source_done=(lambda: emulator.poll() is not None or (out / "emulator.json").exists())
-                              if emulator else None, **extra)
+                hooks = dataclasses.replace(commanded(control, cfg, viewer), on_end=control.stop)
+            if emulator is not None:
+                hooks = dataclasses.replace(hooks, source_done=lambda: emulator.poll() is not None
+                                            or (out / "emulator.json").exists())
+            hooks = dataclasses.replace(hooks, on_progress=progress.update, on_warning=progress.warn,
+                                        stop_requested=stop_requested)
+            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer, time_scale, hooks)
             return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None
@@ -111,12 +113,12 @@ def _check_motion(cfg: Config) -> None:
         raise TrialSetupError(str(exc)) from None
 
 
-def _arm(control, cfg: Config, viewer) -> tuple[object, dict]:
+def _arm(control, cfg: Config, viewer) -> TrialHooks:
     """``hil run``: the configured motion, checked against what the table reports."""
     from hil.trial.table_control import MotionCheck
 
     control.arm()
-    return MotionCheck(cfg.turntable, cfg.trial.rate_hz), {}
+    return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))
 
 
 def _command_url(cfg: Config, ports: dict | None) -> str | None:

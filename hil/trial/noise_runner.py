@@ -188,7 +188,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     :mod:`hil.trial.noise_acquisition`). ``record`` gives noise.json's ``record`` once the analysis is done."""
     from hil.estimation.allan_taus import parse_taus
     from hil.outputs.noise import write_noise
-    from hil.outputs.report import write_noise_report
+    from hil.outputs.trial_report import write_noise_report
 
     try:
         grid = parse_taus(taus)

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hil.config import Config
-from hil.outputs.result import COMPLETED
+from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.recording.recorder import Recording, RecordingReader
 from hil.recording.replay import recorded_pace
@@ -40,7 +40,8 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
 
 def how_it_ended(recording: RecordingReader | Recording) -> str:
     """How the recorded trial ended (its ``trial_end`` record), for a recording read to its end."""
-    return recording.ended or ("early: the recording was cut short" if recording.truncated else COMPLETED)
+    return recording.ended or str(TrialEnd.early("the recording was cut short") if recording.truncated
+                                  else TrialEnd(COMPLETED))
 
 
 def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer: Viewer | None = None

@@ -11,7 +11,7 @@ from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.measurements import FAIL
 from hil.outputs.result import COMPLETED, summary_text, trial_result
-from hil.outputs.writer import write_trial_outputs
+from hil.outputs.trial_outputs import write_trial_outputs
 from hil.pipeline.processor import TrialProcessor
 
 

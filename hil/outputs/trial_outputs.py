@@ -9,7 +9,7 @@ from hil.config import ReportLimits
 from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.measurements import measurements, overall
-from hil.outputs.report import write_report
+from hil.outputs.trial_report import write_report
 from hil.outputs.result import write_result
 from hil.outputs.series import write_series
 

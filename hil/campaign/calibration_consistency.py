@@ -1,7 +1,7 @@
 """A calibration campaign's part of campaign.html: the headline and the families' statistics per sweep point,
 the table of every term's, the errors over their sigma per block (accelerometers, gyros, table) against
 N(0, 1), and per sweep point the ratio std(error)/mean(sigma) of every term over its chi-square band (the
-figure helpers of :mod:`hil.campaign.report`)."""
+figure helpers of :mod:`hil.campaign.campaign_report`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.campaign.report import banded, figures_html, normal_histograms, point_labels
+from hil.campaign.campaign_report import banded, figures_html, normal_histograms, point_labels
 from hil.campaign.runs import ERROR, TERM
 from hil.campaign.task import point_label
 

@@ -1,6 +1,6 @@
 """A noise campaign's part of campaign.html: the table of fitted terms against the truth per sweep point, the
 fitted/truth histograms per term, and per term the coverage of the reported intervals with its binomial band
-(drawn with the figure helpers of :mod:`hil.campaign.report`)."""
+(drawn with the figure helpers of :mod:`hil.campaign.campaign_report`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from hil.campaign.noise_summary import AXES, TERM_KEYS
-from hil.campaign.report import banded, figures_html, png, point_labels
+from hil.campaign.campaign_report import banded, figures_html, png, point_labels
 from hil.campaign.runs import ERROR, TRUTH
 from hil.campaign.task import point_label
 

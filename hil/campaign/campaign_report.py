@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from hil.campaign.summary import SIGMA, bias_error
+from hil.campaign.swing_summary import SIGMA, bias_error
 from hil.campaign.task import point_label
 from hil.outputs.page_header import page_header
-from hil.outputs.report import html_page
+from hil.outputs.trial_report import html_page
 from hil.outputs.figures import pyplot
 
 REPORT_NAME = "campaign.html"
