@@ -41,7 +41,7 @@ def run_estimator(cfg: Config, solve_period=10.0, geometry=None) -> OnlineEstima
     est = OnlineEstimator(sim.truth.earth, geometry or sim.truth.geometry, solve_period=solve_period)
     for batch in sim.batches():
         est.update_many(batch)
-    est.solution()
+    est.finish()
     return est
 
 

@@ -44,7 +44,7 @@ def run(cfg, bias_model="constant", solve_period=100.0, batches=None):
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=solve_period, bias_model=bias_model)
     for batch in batches if batches is not None else sim.batches():
         est.update_many(batch)
-    est.solution()
+    est.finish()
     return est
 
 

@@ -184,7 +184,14 @@ class OnlineEstimator:
         return known
 
     def solution(self) -> Snapshot:
-        """The solution with everything received so far."""
+        """The solution with everything received so far; nothing is kept (:meth:`finish` keeps it)."""
+        if self.snapshots and self.snapshots[-1].samples == self.gravity.samples:
+            return self.snapshots[-1]
+        return self._snapshots([self._instant()], tracked=False)[0]
+
+    def finish(self) -> Snapshot:
+        """End of data: keep the solution with everything received as the last snapshot and in the track;
+        returns it."""
         if not self.snapshots or self.snapshots[-1].samples != self.gravity.samples:
             self._keep(self._snapshots([self._instant()])[0])
         return self.snapshots[-1]
@@ -250,8 +257,9 @@ class OnlineEstimator:
         """What a snapshot now needs: the normal equations, the time, and the attitudes."""
         return _Instant(self.gravity.sums(), self._t_last - self.t0, self._attitude.copy(), self._reference)
 
-    def _snapshots(self, instants: list[_Instant]) -> list[Snapshot]:
-        """The snapshots at these instants, their least squares solved and their alignments formed as stacks."""
+    def _snapshots(self, instants: list[_Instant], tracked: bool = True) -> list[Snapshot]:
+        """The snapshots at these instants, their least squares solved and their alignments formed as stacks;
+        each solve added to :attr:`track` when ``tracked``."""
         if not instants:
             return []
         models = (N_DRIFT, N_GRAVITY) if BIAS_MODELS[self.bias_model] == N_DRIFT else (N_DRIFT, N_FULL, N_GRAVITY)
@@ -260,10 +268,11 @@ class OnlineEstimator:
         errors = self._alignment_errors(instants, solutions)
         snapshots = []
         for instant, (drift, full, gravity_only), errs in zip(instants, solutions, errors):
-            self.track.append(np.concatenate((
-                [instant.t],
-                *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
-            )))  # fmt: skip
+            if tracked:
+                self.track.append(np.concatenate((
+                    [instant.t],
+                    *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
+                )))  # fmt: skip
             snapshots.append(Snapshot(instant.t, instant.sums.samples, full, gravity_only, instant.attitude, *errs,
                                       drift_check=DriftCheck.from_solution(drift)))
         return snapshots

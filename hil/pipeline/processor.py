@@ -1,9 +1,7 @@
-"""The trial's processing chain: decoding, alignment, plausibility, estimation, and the result.
-
-Fed raw chunks in arrival order (live devices, a recording) it is deterministic: the same sequence of
-chunks and events gives the same samples, the same estimator batches and so a bit-identical result.
-Samples that need no alignment (a simulation, a CSV of increments) enter after the aligner, in batches.
-"""
+"""The trial's processing chain: decoding, alignment, plausibility, estimation, and the result. Fed raw chunks
+in arrival order (live devices, a recording) it is deterministic: the same sequence of chunks and events gives
+the same samples, the same estimator batches and so a bit-identical result. Samples that need no alignment (a
+simulation, a CSV of increments) enter after the aligner, in batches."""
 
 from __future__ import annotations
 
@@ -206,6 +204,8 @@ class TrialProcessor:
             self._read(stream, decoder.flush())
         ready = self._aligned(*self.pairing.flush()) if self.pairing is not None else []
         self._estimate(ready + self.aligner.flush(), final=True)
+        if self.estimator is not None:
+            self.estimator.finish()
 
     @property
     def complete(self) -> bool:

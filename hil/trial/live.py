@@ -209,7 +209,7 @@ class LiveTrial:
         Raises :class:`~drivers.transport.TransportError` (after closing everything) when a port cannot
         be opened at the start.
         """
-        ended = TrialEnd.early("the trial did not start")
+        ended = TrialEnd.early("the trial did not start")  # str(ended) is result.json's "ended"
         try:
             for reader in self.readers:
                 reader.start()
@@ -226,7 +226,7 @@ class LiveTrial:
                 reader.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
                 self.processor.feed(self.queue.get_nowait())
-            self.recorder.close(ended)
+            self.recorder.close(str(ended))
             self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
