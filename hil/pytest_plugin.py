@@ -140,10 +140,7 @@ def hil_emulator(tmp_path_factory: pytest.TempPathFactory):
         return json.loads(ports_file.read_text())
 
     yield start
+    from emulators.process import stop_emulator
+
     for child in children:
-        child.terminate()
-        try:
-            child.wait(10)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
+        stop_emulator(child)
