@@ -17,6 +17,7 @@ from drivers.acl import parse_message
 from hil.cli import main
 from hil.config import parse_config
 from hil.outputs.calibration_report import comparison, observed_truth
+from tests.helpers import processed
 
 TRIAL_S = 10.0
 # real-time trials of devices in their own processes, at up to 2 kHz: their receive times are the host's, so they
@@ -99,7 +100,7 @@ def test_a_power_cycle_mid_trial_is_noticed_re_paired_and_the_trial_goes_on(tmp_
     assert doc["streams"]["imu_gated"] <= 0.02 * doc["streams"]["aligned"] and within_sigmas(doc)
     again = tmp_path / "again"
     assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0
-    assert result(again) == doc
+    assert processed(again) == processed(out)  # a replay has its own record, the rest bit for bit
 
 
 def test_a_harness_stopped_for_half_a_second_notices_the_lost_wraps_and_completes(tmp_path):
