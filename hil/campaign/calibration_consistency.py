@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from hil.campaign.campaign_report import banded, figures_html, normal_histograms, point_labels
+from hil.campaign.campaign_report import banded, normal_histograms, point_labels
+from hil.outputs.trial_report import figures_html
 from hil.campaign.runs import ERROR, TERM
 from hil.campaign.task import point_label
 

@@ -6,7 +6,6 @@ figure helpers here serve every kind's section. matplotlib is imported when the 
 
 from __future__ import annotations
 
-import base64
 import html
 import io
 from collections.abc import Callable
@@ -18,7 +17,7 @@ import numpy as np
 from hil.campaign.swing_summary import SIGMA, bias_error
 from hil.campaign.task import point_label
 from hil.outputs.page_header import page_header
-from hil.outputs.trial_report import html_page
+from hil.outputs.trial_report import figures_html, html_page
 from hil.outputs.figures import pyplot
 
 REPORT_NAME = "campaign.html"
@@ -174,13 +173,6 @@ def _table(summary: dict) -> str:
                     f"<td class='num'>{_num(p.get('nees_mean'))}</td><td class='num'>{_band(p, 'nees_band')}</td>"
                     f"<td class='num'>{conv}</td></tr>")
     return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
-
-
-def figures_html(figures: list[tuple[str, bytes | None]]) -> str:
-    """The figures (caption, PNG; None: not drawn) as self-contained HTML."""
-    return "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
-                   f"{base64.b64encode(image).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
-                   for caption, image in figures if image is not None)
 
 
 def swing_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:

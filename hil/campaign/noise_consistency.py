@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from hil.campaign.noise_summary import AXES, TERM_KEYS
-from hil.campaign.campaign_report import banded, figures_html, png, point_labels
+from hil.campaign.campaign_report import banded, png, point_labels
+from hil.outputs.trial_report import figures_html
 from hil.campaign.runs import ERROR, TRUTH
 from hil.campaign.task import point_label
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import base64
 import html
 import io
 from datetime import datetime
@@ -17,7 +16,7 @@ from hil.outputs.figures import pyplot
 from hil.outputs.measurements import format_value
 from hil.outputs.page_header import page_header
 from hil.outputs.record import source_commit
-from hil.outputs.trial_report import html_page
+from hil.outputs.trial_report import figures_html, html_page
 from hil.recording.recorder import package_version
 
 HISTORY_HTML = "history.html"
@@ -32,9 +31,7 @@ def write_history_page(out: Path, summary: dict[str, Any]) -> Path:
     unit = summary["dut_serial"] or "every unit"
     figures = [(title, _plot(title, series)) for title, series in _series(trials) if series]
     body = (f'<p class="meta">{len(trials)} trials, {summary["runs"]} completed swing trials.</p>'
-            f"{_repeatability(summary)}<h2>Trials</h2>{_table(trials)}<h2>Over time</h2>"
-            + "".join(f"<figure><img alt='{html.escape(t)}' src='data:image/png;base64,{base64.b64encode(p).decode()}'>"
-                      f"<figcaption>{html.escape(t)}</figcaption></figure>" for t, p in figures))
+            f"{_repeatability(summary)}<h2>Trials</h2>{_table(trials)}<h2>Over time</h2>{figures_html(figures)}")
     path = out / HISTORY_HTML
     header = page_header("Trial history", unit, {"software_version": package_version(), "commit": source_commit()})
     path.write_text(html_page(header, f"history of {unit}", body))

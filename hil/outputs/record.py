@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import socket
@@ -19,8 +20,10 @@ PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version
               "started_utc", "ended_utc", "host", "controller")  # what junit.xml and the report's header show
 
 
+@functools.cache
 def source_commit() -> str | None:
-    """The git commit of the checkout the package runs from (``-dirty`` when changed), None outside one."""
+    """The git commit of the checkout the package runs from (``-dirty`` when changed), None outside one; asked
+    of git once a process (a live trial's record is taken at its start and at its end)."""
     root = Path(__file__).resolve().parents[2]
     try:
         run = subprocess.run(["git", "-C", str(root), "describe", "--always", "--dirty", "--abbrev=40"],
@@ -38,9 +41,13 @@ def run_record(fields: dict[str, Any], config_text: str | None, started: datetim
             "host": socket.gethostname()}
 
 
-def _config_ports(cfg: Config) -> dict[str, Any]:
-    imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
-    return {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+def _devices(cfg: Config, ports: dict[str, Any] | None) -> dict[str, Any]:
+    """The record's ``ports`` (``ports`` as found, else the config's) and ``controller`` (none without a command
+    port)."""
+    if ports is None:
+        imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
+        ports = {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+    return {"ports": ports, "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
 
 
 def trial_record(cfg: Config, config_text: str, started: datetime, ended: datetime, out: Path) -> dict[str, Any]:
@@ -48,9 +55,8 @@ def trial_record(cfg: Config, config_text: str, started: datetime, ended: dateti
     datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it started), else
     the config's."""
     recorded = read_start_record(out / "recording.mcap") or {}
-    ports = json.loads(recorded["ports"]) if recorded.get("ports") else _config_ports(cfg)
-    return {**run_record(cfg.record.model_dump(), config_text, started, ended), "ports": ports,
-            "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
+    ports = json.loads(recorded["ports"]) if recorded.get("ports") else None
+    return {**run_record(cfg.record.model_dump(), config_text, started, ended), **_devices(cfg, ports)}
 
 
 def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None) -> dict[str, Any]:
@@ -59,8 +65,7 @@ def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None) ->
     now = datetime.now(timezone.utc)
     record = run_record(cfg.record.model_dump(), config_text, now, now)
     del record["ended_utc"]
-    return {**record, "ports": ports if ports is not None else _config_ports(cfg),
-            "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
+    return {**record, **_devices(cfg, ports)}
 
 
 def noise_record(given: dict[str, str | None], source: str | Path, started: datetime,

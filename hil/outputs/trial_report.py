@@ -96,7 +96,7 @@ def write_noise_report(out_dir: Path) -> Path:
     record = doc.get("record") or {}
     name = Path(record.get("source") or out_dir.name).stem
     header = page_header("Noise characterisation", name, record)
-    page = html_page(header, f"{name}: noise", f"{_noise(out_dir)}<h2>Figures</h2>{figures}")
+    page = html_page(header, f"{name}: noise", f"{noise_section(doc)}<h2>Figures</h2>{figures}")
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     return path
@@ -226,6 +226,13 @@ def _figure_html(figures: list[tuple[str, bytes]]) -> str:
         f"<figcaption>{e(_CAPTIONS.get(name, name))}</figcaption></figure>"
         for name, data in figures
     )
+
+
+def figures_html(figures: list[tuple[str, bytes | None]]) -> str:
+    """The figures (caption, PNG; None: not drawn) as self-contained HTML."""
+    return "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
+                   f"{base64.b64encode(image).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
+                   for caption, image in figures if image is not None)
 
 
 def html_page(header: str, title: str, body: str) -> str:
