@@ -24,7 +24,9 @@ import time
 from drivers.codec import RawChunk
 from drivers.kvh1750 import FRAME_SIZE as KVH_FRAME
 from drivers.tts1 import FRAME_SIZE as TTS1_FRAME
-from hil.pipeline.processor import IMU, TABLE, TrialProcessor
+from hil.pipeline.decoding import IMU, TABLE
+from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.progress import Finished
 from hil.recording.replay import open_recording
 
 
@@ -55,25 +57,24 @@ def main() -> None:
     with recording:
         chunks = reads(list(recording), cfg.imu_rate_hz, cfg.trial.rate_hz, args.gather)
 
-    def run(pause: float = 0.0) -> TrialProcessor:
+    def run(pause: float = 0.0) -> Finished:
         processor = TrialProcessor(cfg, None, 1.0)
         for chunk in chunks:
             processor.feed(chunk)
             if pause:
                 time.sleep(pause)
-        processor.finish()
-        return processor
+        return processor.finish()
 
     best = float("inf")
     for _ in range(args.repeat):
         start = time.thread_time()
-        processor = run(args.pause)
+        finished = run(args.pause)
         best = min(best, time.thread_time() - start)
-    counts = processor.counts()
-    trial_s = processor.trial_time
+    counts = finished.streams
+    trial_s = finished.progress.trial_time
     print(f"imu {cfg.imu_rate_hz:g} Hz, table {cfg.trial.rate_hz:g} Hz, reads of {args.gather * 1e3:g} ms, "
           f"estimator.batch_samples {cfg.block_samples}, {args.pause * 1e3:g} ms between reads: {len(chunks)} reads, {counts.aligned} samples "
-          f"aligned ({counts.dropped} dropped, {counts.corrupt} corrupt), {processor.updates} estimator updates")
+          f"aligned ({counts.dropped} dropped, {counts.corrupt} corrupt), {finished.progress.updates} estimator updates")
     print(f"best of {args.repeat}: {best:.3f} s of CPU for {trial_s:.1f} s of trial = {100 * best / trial_s:.2f} % of one core; "
           f"{1e6 * best / len(chunks):.0f} us per read, {1e6 * best / max(counts.aligned, 1):.1f} us per IMU sample")
     profile = cProfile.Profile()

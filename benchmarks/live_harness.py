@@ -31,6 +31,7 @@ import yaml
 from emulators.clocks import counter_starts
 from emulators.process import spawn_emulator, stop_emulator
 from hil.config import load_config
+from hil.pipeline.progress import Progress
 from hil.trial.live import LiveTrial, TrialHooks
 
 
@@ -62,8 +63,10 @@ class FrameAges:
     def __init__(self) -> None:
         self.updates: list[tuple[float, float]] = []  # (monotonic time, trial time of the oldest sample taken)
 
-    def on_samples(self, t: np.ndarray, *_: np.ndarray) -> None:
-        self.updates.append((time.monotonic(), float(t[0])))
+    def on_progress(self, progress: Progress) -> None:
+        """A listener of the pipeline: when each run of samples was taken."""
+        now = time.monotonic()
+        self.updates += [(now, float(run.t[0])) for run in progress.samples()]
 
     def percentiles_ms(self, started: float, t0: float, delay: float, table_start: float) -> tuple[float, float, float]:
         """p50, p99 and max (ms) given the emulator's clock start (monotonic), the estimator's t0, the IMU's latch
@@ -102,8 +105,11 @@ def main() -> None:
         time.sleep(late)
         frames = FrameAges()
         trial = LiveTrial(cfg, text, out, args.duration, ports, hooks=TrialHooks(
-            source_done=lambda: emulator.poll() is not None, on_samples=frames.on_samples))
+            source_done=lambda: emulator.poll() is not None, listeners=(frames.on_progress,)))
         memory: list[tuple[float, float]] = []
+
+        def trial_time() -> float:
+            return trial.progress.trial_time if trial.progress is not None else 0.0
         stop = threading.Event()
 
         threads: dict[str, float] = {}
@@ -114,7 +120,7 @@ def main() -> None:
                 threads.update(thread_cpu())  # the readers' last second is lost: they end with the trial
                 ticks += 1
                 if ticks % 60 == 0:
-                    memory.append((trial.processor.trial_time, rss_mib()))
+                    memory.append((trial_time(), rss_mib()))
 
         watcher = threading.Thread(target=sample_memory, daemon=True)
         watcher.start()
@@ -124,19 +130,19 @@ def main() -> None:
         cpu1, wall1 = resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
         stop.set()
         stop_emulator(emulator) if args.lab else emulator.wait()  # lab: the devices stream on, as hardware does
-        memory.append((trial.processor.trial_time, rss_mib()))
+        memory.append((trial_time(), rss_mib()))
         cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
         wall = wall1 - wall0
         lat = trial.latency.percentiles_ms()
-        counts = trial.processor.counts()
+        counts = trial.finished.streams
         load_after = os.getloadavg()
         print(f"imu {cfg.imu_rate_hz:g} Hz ({cfg.imu.protocol}), table {cfg.trial.rate_hz:g} Hz, "
               f"estimator.batch_samples {cfg.block_samples}; load average (1, 5, 15 min) before "
               + " ".join(f"{x:.2f}" for x in load_before) + ", after " + " ".join(f"{x:.2f}" for x in load_after))
-        print(f"trial {trial.processor.trial_time:.1f} s of data in {wall:.1f} s wall; "
+        print(f"trial {trial_time():.1f} s of data in {wall:.1f} s wall; "
               f"{counts.aligned} samples aligned, {counts.dropped} dropped, {counts.corrupt} corrupt, "
               f"{counts.extra['imu_unpaired']} unpaired, {counts.extra['imu_gated']} gated")
-        print("sync pairing: " + json.dumps(trial.processor.pairing.report.as_dict()) + (
+        print("sync pairing: " + json.dumps(counts.extra["sync"]) + (
             f" (attached {late:g} s after the devices started)" if args.lab else ""))
         print(f"harness CPU: {cpu:.2f} s = {100 * cpu / wall:.1f} % of one core "
               f"({1e6 * cpu / max(counts.aligned, 1):.0f} us per IMU sample, all threads)")
@@ -146,7 +152,7 @@ def main() -> None:
         written = ", ".join(f"{name} {device['frames']} frames" for name, device in stats["devices"].items())
         print(f"emulator (its own process): {stats['pulses']} pulses in {stats['elapsed_s']:.1f} s, {written}")
         table_start = counter_starts(cfg)[1] / cfg.imu_rate_hz
-        ages = frames.percentiles_ms(stats["started"], trial.processor.estimator.t0, cfg.imu.latch_delay_us * 1e-6,
+        ages = frames.percentiles_ms(stats["started"], trial.finished.estimator.t0, cfg.imu.latch_delay_us * 1e-6,
                                      table_start)
         print("frame written -> estimate updated, ms (the oldest sample taken, its wait in the port included): "
               "p50 {:.2f}, p99 {:.2f}, max {:.2f}".format(*ages))

@@ -37,6 +37,7 @@ from emulators.simulation_process import SimulationProcess
 from hil.config import Config, parse_config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.progress import Finished
 from hil.recording.recorder import Recorder, RecordingReader
 from hil.recording.replay import open_recording
 from hil.trial.offline import how_it_ended, replay_recording
@@ -90,8 +91,9 @@ def simulate(cfg: Config, config_text: str, every: float) -> None:
             processor.feed_batch(batch)
             rows.at(float(batch.t[-1]))
     child_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # the emulator's, reaped by now
-    samples = processor.counts().aligned
-    outputs(processor, cfg, config_text, COMPLETED, rows)
+    finished = processor.finished()
+    samples = finished.streams.aligned
+    outputs(finished, cfg, config_text, COMPLETED, rows)
     print(f"peak RSS {peak_mib():.1f} MiB (the emulator's process: {child_mib:.1f} MiB), "
           f"{samples / rows.wall():,.0f} samples/s over the whole run")
 
@@ -137,21 +139,21 @@ def replay(path: Path, every: float) -> None:
     reader, cfg = open_recording(path)
     rows = Rows(every)
     with reader:
-        processor = replay_recording(Hourly(reader, rows), cfg)  # type: ignore[arg-type]  # the reader, watched
+        finished = replay_recording(Hourly(reader, rows), cfg)  # type: ignore[arg-type]  # the reader, watched
     ended = how_it_ended(reader)
     rows.row("replayed", f"   {reader.metadata['duration_s']} s recorded, truncated {reader.truncated}, "
                          f"ended {reader.ended!r}")
-    samples = processor.counts().aligned
+    samples = finished.streams.aligned
     replay_s = rows.wall()
-    outputs(processor, cfg, reader.metadata["config"], ended, rows)
+    outputs(finished, cfg, reader.metadata["config"], ended, rows)
     print(f"peak RSS {peak_mib():.1f} MiB, {samples:,} samples replayed at {samples / replay_s:,.0f} samples/s "
           f"({size / MIB / replay_s:.1f} MiB/s of recording), {samples / rows.wall():,.0f} samples/s with the outputs")
 
 
-def outputs(processor: TrialProcessor, cfg: Config, config_text: str, ended: str, rows: Rows) -> None:
+def outputs(finished: Finished, cfg: Config, config_text: str, ended: str, rows: Rows) -> None:
     """Every output of the trial, written to a temporary directory."""
     with tempfile.TemporaryDirectory() as tmp:
-        outcome = TrialOutcome.of(processor, cfg, config_text, Path(tmp), ended, emulated_truth(cfg))
+        outcome = TrialOutcome.of(finished, cfg, config_text, Path(tmp), ended, emulated_truth(cfg))
         verdict = outcome.write()
     rows.row("outputs written", f"   ({verdict})")
 

@@ -8,6 +8,7 @@ of aligned samples as batches, and a simulation or a CSV import feeds aligned ba
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -112,15 +113,23 @@ class AlignedSample:
     angles: tuple[float, float, float] | None = None
 
 
+NO_ANGLES = (math.nan, math.nan, math.nan)  # a sample or a gap's end without table angles
+
+
 @dataclass(frozen=True, slots=True)
 class ImuGap:
     """IMU samples lost over (t_start, t_end]: the estimator carries its attitude across with the table
-    angles at both ends (None where the table had none) and takes no measurement from the gap."""
+    angles at both ends (``NO_ANGLES`` where the table had none) and takes no measurement from the gap."""
 
     t_start: float
     t_end: float
-    angles_start: tuple[float, float, float] | None
-    angles_end: tuple[float, float, float] | None
+    angles_start: tuple[float, float, float]
+    angles_end: tuple[float, float, float]
+
+    @property
+    def known(self) -> bool:
+        """The table's angles are known at both ends."""
+        return not any(math.isnan(a) for a in (*self.angles_start, *self.angles_end))
 
 
 @dataclass(frozen=True)
@@ -128,8 +137,9 @@ class AlignedBatch:
     """Struct-of-arrays form of consecutive aligned samples (the aligner's runs, simulation, CSV import).
 
     ``t`` (N,) ends each increment interval; ``dtheta`` and ``dv`` are (N, 3); ``angles`` is (N, 3)
-    (outer, middle, inner) at ``t`` or None when no turntable reference exists (in the aligner's runs,
-    NaN rows for the samples without angles).
+    (outer, middle, inner) at ``t``, NaN rows for the samples without angles, or None from a source that has
+    no turntable reference at all (a simulation or a CSV without angles: the pipeline takes it as NaN rows,
+    :meth:`angle_rows`).
     """
 
     t: np.ndarray
@@ -148,6 +158,15 @@ class AlignedBatch:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    @property
+    def has_angles(self) -> bool:
+        """Every sample has its table angles."""
+        return self.angles is not None and not np.isnan(self.angles).any()
+
+    def angle_rows(self) -> np.ndarray:
+        """The angles (N, 3), NaN rows where a sample has none."""
+        return self.angles if self.angles is not None else np.full((len(self.t), 3), np.nan)
 
     @classmethod
     def from_samples(cls, samples: list[AlignedSample], t0: float) -> AlignedBatch:

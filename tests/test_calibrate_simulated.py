@@ -146,7 +146,7 @@ def test_a_window_whose_samples_were_all_lost_ends_the_trial_early_with_the_wind
     sequence.windows_found.append(StepWindow(sequence.steps[0], 2.0, 6.0))
     sequence._index = len(sequence.steps)  # the schedule went through
     t = np.arange(1, 301) / RATE_HZ  # the samples stop at 1.5 s
-    sequence.on_samples(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
+    sequence.keep(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
     outcome = TrialOutcome(cfg, "", tmp_path / "out", {"ended": "completed"}, [])
     calibrated = CalibrationOutcome.of_sequence(outcome, sequence, True)
     assert calibrated.ended == ("early: calibration position 1: 800 of the 800 samples of its window 2.00..6.00 s "
@@ -165,9 +165,9 @@ def test_a_window_that_lacks_samples_ends_the_trial_as_soon_as_it_closes(tmp_pat
     t = np.arange(1, 1401) / RATE_HZ
     kept = np.ones(len(t), bool)
     kept[800:800 + lost] = False  # rejected at 4.0 s, inside the window
-    sequence.on_samples(t[:1000][kept[:1000]], *(np.zeros((int(kept[:1000].sum()), 3)),) * 3)
+    sequence.keep(t[:1000][kept[:1000]], *(np.zeros((int(kept[:1000].sum()), 3)),) * 3)
     assert sequence.failure is None  # the window is still open
-    sequence.on_samples(t[1000:][kept[1000:]], *(np.zeros((int(kept[1000:].sum()), 3)),) * 3)
+    sequence.keep(t[1000:][kept[1000:]], *(np.zeros((int(kept[1000:].sum()), 3)),) * 3)
     if fails:
         assert sequence.failure == (f"calibration position 1: {lost + 1} of the 800 samples of its window 2.00..6.00 s "
                                     f"were rejected or lost (more than {lacking_max:.2%}): no fit on it")

@@ -113,10 +113,10 @@ def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):
     rec = read_recording(recording)
     assert rec.truncated or rec.items  # cut anywhere: still readable
     first = rec.items[0].host_time
-    processor = replay_recording(*open_recording(recording))
+    finished = replay_recording(*open_recording(recording))
     # everything the devices sent up to 1 s before the kill is there and replays
-    assert processor.trial_time >= killed_at - first - 1.0 - 0.1
-    assert processor.decoders["imu"].framer.counters.corrupt == 0
+    assert finished.progress.trial_time >= killed_at - first - 1.0 - 0.1
+    assert finished.progress.health["imu"]["corrupt"] == 0
 
 
 def _run_config(tmp_path, name, limits=None, **imu_and_table):

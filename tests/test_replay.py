@@ -53,8 +53,8 @@ def test_the_streamed_replay_is_the_replay_of_the_whole_read(recording):
     streamed = replay_recording(reader, cfg)
     whole = replay_recording(read_recording(recording), cfg)
     assert not reader.truncated and reader.ended == "completed"
-    counts = streamed.streams()
-    assert counts == whole.streams()
+    counts = streamed.streams
+    assert counts == whole.streams
     assert counts.imu_frames == counts.table_frames == counts.aligned == DURATION * 200
     assert counts.dropped == counts.corrupt == 0
     assert TrialOutcome.of(streamed, cfg, "", Path()).result == TrialOutcome.of(whole, cfg, "", Path()).result

@@ -148,7 +148,7 @@ class OnlineEstimator:
         self._last_dt = float(dt[-1])
         accept = self._accept(f_ib0)
         table = None
-        if batch.angles is not None:
+        if batch.has_angles:
             mean_attitude, attitude = self._table_attitudes(batch.angles)
             table = self.table.update_segments(0.5 * (t_start + t_end), batch.dv / dt[:, None], mean_attitude, stops,
                                                accept)
@@ -171,7 +171,7 @@ class OnlineEstimator:
         ``C_n^b(t1) C_n(t2)^n(t1) C_b^n(t2)`` (gimbal angles at both ends plus the earth's turn). No
         measurement is taken from the gap. False when the table angles are missing at either end: the
         attitude is then held, and the estimate degrades by the rotation the gap hid."""
-        known = gap.angles_start is not None and gap.angles_end is not None
+        known = gap.known
         if known:
             self.strapdown.carry(table_body_rotation(self.geometry, self.earth, gap.t_end - gap.t_start,
                                                      gap.angles_start, gap.angles_end)[0])

@@ -12,11 +12,11 @@ interpolation on the four table samples that end at the first one at or after th
 instant lies within the last knot interval, where the error is ~1e-13 rad for a 10 deg/s swing at
 200 Hz). It releases IMU samples in count order and copes with
 
-- duplicates (dropped, counted) and out-of-order frames (reordered within ``reorder_window``);
-- IMU gaps: up to ``max_fill`` missing samples are filled from the cubic through the cumulative
+- duplicates (dropped, counted) and out-of-order frames (reordered within ``REORDER_WINDOW``);
+- IMU gaps: up to ``MAX_FILL`` missing samples are filled from the cubic through the cumulative
   increments around the gap (counted); longer gaps become an :class:`~hil.samples.ImuGap` that the
   estimator bridges with the table attitude;
-- table gaps: interpolated across up to ``max_angle_gap_s``; beyond that the IMU samples go out
+- table gaps: interpolated across up to ``MAX_ANGLE_GAP_S``; beyond that the IMU samples go out
   without angles (counted).
 
 Samples come in as the arrays of one read (:class:`~hil.samples.ImuSamples`, :class:`~hil.samples.TableSamples`)
@@ -38,7 +38,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.pipeline.clock_model import AffineClock
-from hil.samples import AlignedBatch, ImuGap, ImuSample, ImuSamples, TableSample, TableSamples
+from hil.samples import NO_ANGLES, AlignedBatch, ImuGap, ImuSample, ImuSamples, TableSample, TableSamples
+
+MAX_FILL = 10  # IMU samples a gap may lack and still be filled
+REORDER_WINDOW = 4  # IMU samples a frame may arrive out of order and still be put in place
+MAX_ANGLE_GAP_S = 0.1  # s of table data the angles are interpolated across
 
 Vec3 = tuple[float, float, float]
 Released = AlignedBatch | ImuGap
@@ -178,15 +182,11 @@ class Aligner:
     """
 
     def __init__(self, imu_rate_hz: float, table_counter_rate_hz: float, imu_delay_s: float = 0.0, *,
-                 with_table: bool = True, max_fill: int = 10, reorder_window: int = 4,
-                 max_angle_gap_s: float = 0.1, table_wait_s: float = 5.0, free_running: bool = False) -> None:
+                 with_table: bool = True, table_wait_s: float = 5.0, free_running: bool = False) -> None:
         self.imu_period = 1.0 / imu_rate_hz
         self.table_count_period = 1.0 / table_counter_rate_hz
         self.imu_delay = imu_delay_s
         self.with_table = with_table
-        self.max_fill = max_fill
-        self.reorder_window = reorder_window
-        self.max_angle_gap = max_angle_gap_s
         self.table_wait = table_wait_s
         self.counters = AlignerCounters()
         # pending IMU samples, sorted by count
@@ -198,7 +198,7 @@ class Aligner:
         self._history: list[tuple[int, np.ndarray, np.ndarray]] = []  # last released (count, dtheta, dv)
         self._table = _TableKnots()
         self._out: list[Released] = []
-        self._last_angles: Vec3 | None = None
+        self._last_angles: Vec3 = NO_ANGLES
         self.clocks = (AffineClock(imu_rate_hz), AffineClock(table_counter_rate_hz)) if free_running else None
 
     def imu_time(self, index):
@@ -288,7 +288,7 @@ class Aligner:
             k = self._next
             if self._count[0] != k:
                 newest, resume = int(self._count[-1]), int(self._count[0])
-                if (newest - k < self.reorder_window or newest == resume) and not final:
+                if (newest - k < REORDER_WINDOW or newest == resume) and not final:
                     break  # k may still arrive out of order; the fill needs the sample after the resume
                 if self.with_table and not final and not self._table_ready(np.array([self.imu_time(resume)
                                                                                      - self.imu_period]))[0]:
@@ -321,7 +321,7 @@ class Aligner:
         self._out.append(AlignedBatch(t, dtheta, dv, angles))
         last = [(int(k[j]), dtheta[j], dv[j]) for j in range(max(0, len(k) - 2), len(k))]
         self._history = [*self._history, *last][-2:]
-        self._last_angles = None if np.isnan(angles[-1, 0]) else tuple(angles[-1].tolist())
+        self._last_angles = tuple(angles[-1].tolist())
         self.counters.aligned += len(k)
         self._next = int(k[-1]) + 1
 
@@ -331,7 +331,7 @@ class Aligner:
         missing = resume - start
         self.counters.imu_gaps += 1
         following = len(self._count) > 1 and self._count[1] == resume + 1
-        if missing <= self.max_fill and len(self._history) == 2 and following:
+        if missing <= MAX_FILL and len(self._history) == 2 and following:
             self.counters.imu_filled += missing
             k = np.arange(start, resume)
             dtheta, dv = self._fill(start, resume)
@@ -340,15 +340,14 @@ class Aligner:
             return
         self.counters.imu_bridged += missing
         t_start, t_end = self.imu_time(start) - self.imu_period, self.imu_time(resume) - self.imu_period
-        end = self._angles_at(np.array([t_end]))[0]
-        end_angles = None if np.isnan(end[0]) else tuple(end.tolist())
+        end_angles = tuple(self._angles_at(np.array([t_end]))[0].tolist())
         self._out.append(ImuGap(t_start, t_end, self._last_angles, end_angles))
         self._history = []
         self._last_angles = end_angles
         self._next = resume
 
     def _angles_at(self, t: np.ndarray) -> np.ndarray:
-        return self._table.at(t, self.max_angle_gap) if self.with_table else np.full((len(t), 3), np.nan)
+        return self._table.at(t, MAX_ANGLE_GAP_S) if self.with_table else np.full((len(t), 3), np.nan)
 
     def _fill(self, start: int, resume: int) -> tuple[np.ndarray, np.ndarray]:
         """Increments (n, 3) of the missing samples from the cubic through the cumulative sums around the gap."""

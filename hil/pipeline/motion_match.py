@@ -12,6 +12,7 @@ or turning at a constant rate, shows no such change: its time cannot be read fro
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,3 +108,47 @@ def best_offset(u: np.ndarray, dtheta: np.ndarray, table: TableRotations, candid
     if (float(others.min()) - float(score[best])) * n / noise < DECISIVE:
         return Match(None, moving, n)
     return Match(int(candidates[best]), moving, n)
+
+
+class PairedMotion:
+    """The last ``span_s`` of paired IMU increments and table angles on the pulse line (pulses (N,), values
+    (N, 3)), which the motion searches and checks match; ``rotations`` builds the table's interval rotations
+    from (pulses, angles) and ``table_first`` is the table's first pulse."""
+
+    def __init__(self, rate_hz: float, span_s: float,
+                 rotations: Callable[[np.ndarray, np.ndarray], TableRotations]) -> None:
+        self.span = span_s * rate_hz
+        self.rotations = rotations
+        self.imu = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # (pulse, dtheta)
+        self.table = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # (pulse, angles)
+        self.table_first: int | None = None
+
+    def add_imu(self, pulses: np.ndarray, dtheta: np.ndarray) -> None:
+        self.imu = kept(self.imu, pulses, dtheta, self.span)
+
+    def add_table(self, pulses: np.ndarray, angles: np.ndarray) -> None:
+        if self.table_first is None:
+            self.table_first = int(pulses[0])
+        self.table = kept(self.table, pulses, angles, self.span)
+
+    def forget_imu(self, shift: int | None = None) -> None:
+        """The IMU's history dropped (its pairing broke), or moved ``shift`` pulses (re-paired nearby)."""
+        pulses, dtheta = self.imu
+        self.imu = (pulses[:0], dtheta[:0]) if shift is None else (pulses + shift, dtheta)
+
+    def forget_table(self) -> None:
+        self.table = (self.table[0][:0], self.table[1][:0])
+
+    def match(self, pulses: np.ndarray, dtheta: np.ndarray, candidates: np.ndarray) -> Match:
+        """The offset among ``candidates`` that makes the IMU's increments at ``pulses`` agree with the table."""
+        return best_offset(pulses, dtheta, self.rotations(*self.table), candidates)
+
+
+def kept(history: tuple[np.ndarray, np.ndarray], pulses: np.ndarray, values: np.ndarray, span: float
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """History plus new samples, the last ``span`` pulses of it (trimmed when twice that is held)."""
+    p, v = np.concatenate((history[0], pulses)), np.concatenate((history[1], values))
+    if len(p) and p[-1] - p[0] > 2 * span:
+        first = int(np.searchsorted(p, p[-1] - span))
+        p, v = p[first:], v[first:]
+    return p, v

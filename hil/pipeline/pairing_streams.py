@@ -4,6 +4,7 @@ the receive-time record behind its baseline; and the sample-array operations the
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +40,37 @@ class StreamPairing:
         """Seconds of the device's time the held samples span."""
         return (int(self.held[-1].sync_index[-1]) - int(self.held[0].sync_index[0])) / rate if self.held else 0.0
 
+    def broken(self, step: int, tolerance: Callable[[], float], cause: str) -> None:
+        """The pairing broke where the counter last jumped (by other than ``step``) within the held reads, or
+        else at the read whose lateness leapt by more than ``tolerance()`` pulses, or else before them: the samples
+        before that are paired as they were (:attr:`before_break`), the rest start the new segment with the reads
+        that brought them."""
+        held = joined(self.held) if self.held else None
+        jumps = np.flatnonzero(np.diff(held.sync_index) != step) if held is not None else []
+        late = np.array([e for _, e in self.segment])
+        steps = np.abs(np.diff(late))  # a counter that went on by the frames it sent, but not by the time that passed
+        ends = np.cumsum([len(read) for read in self.held])  # a read's samples end there in ``held``
+        cut = int(jumps[-1]) + 1 if len(jumps) else 0
+        if not cut and len(steps) and steps.max() > tolerance():
+            cut = int(ends[int(np.argmax(steps))])
+        if cut:
+            self.before_break = shifted(part(held, np.arange(cut)), self.offset)
+            self.segment = [read for read, end in zip(self.segment, ends, strict=True) if end > cut]
+            self.held = [part(held, np.arange(cut, len(held)))]
+        self.cause = cause
+        self.offset_before = self.offset
+        self.offset = None
+        self.late = 0
+
+    def trim(self, span: float) -> int:
+        """Drops the oldest held reads beyond ``span`` pulses of the newest sample (one read always stays);
+        returns the samples dropped."""
+        newest = int(self.held[-1].sync_index[-1])
+        dropped = 0
+        while len(self.held) > 1 and newest - int(self.held[0].sync_index[-1]) > span:
+            dropped += len(self.held.pop(0))
+        return dropped
+
     def spread(self, quantile: float = 0.9) -> float:
         """Pulses the paired reads' lateness scatters by: its ``quantile`` over its least."""
         values = np.array([v for _, v in self.window])
@@ -59,16 +91,6 @@ def shifted(samples: Samples, offset: int) -> Samples:
     fields = {name: getattr(samples, name) for name in kind.__dataclass_fields__}
     fields["sync_index"] = samples.sync_index + offset
     return kind(**fields)
-
-
-def kept(history: tuple[np.ndarray, np.ndarray], pulses: np.ndarray, values: np.ndarray, span: float
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """History plus new samples, the last ``span`` pulses of it (trimmed when twice that is held)."""
-    p, v = np.concatenate((history[0], pulses)), np.concatenate((history[1], values))
-    if len(p) and p[-1] - p[0] > 2 * span:
-        first = int(np.searchsorted(p, p[-1] - span))
-        p, v = p[first:], v[first:]
-    return p, v
 
 
 def part(samples: Samples, index: np.ndarray) -> Samples:

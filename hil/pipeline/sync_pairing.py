@@ -36,8 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hil.pipeline.motion_match import MIN_INTERVALS, Match, TableRotations, best_offset
-from hil.pipeline.pairing_streams import MIN_READS, Samples, StreamPairing, joined, kept, part, shifted
+from hil.pipeline.motion_match import MIN_INTERVALS, PairedMotion, TableRotations
+from hil.pipeline.pairing_streams import Samples, StreamPairing, joined, part, shifted
+from hil.pipeline.receive_times import STILL_S, ReceiveTimes
 from hil.samples import ImuSamples, TableSamples
 
 WINDOW_S = 10.0  # host seconds of reads behind a stream's receive-time baseline
@@ -45,9 +46,6 @@ SUSPECT_READS = 4  # late reads in a row that break a pairing
 HOLD_S = 5.0  # samples wait this long (of their own time) for a pairing; older ones are dropped as unpaired
 HISTORY_S = 4.0  # paired samples kept for the motion checks
 CHECK_S = 2.0  # a paired IMU is checked against the table's motion this often (of IMU time)
-STILL_S = 1.0  # table data before a table at rest is paired by receive time
-MIN_TOLERANCE_S = 0.003  # host seconds: the least lateness the watch allows for
-JITTER_FACTOR = 3.0  # the watch allows this many times the reads' spread (90th percentile over minimum)
 SEARCH_S = 0.02  # at least this much of either side of the coarse offset is searched by motion
 UNPACED_SEARCH_S = 1.0
 RETRY_S = 0.2  # of new table data before a waiting IMU is searched by motion again
@@ -68,6 +66,12 @@ class SyncReport:
     def as_dict(self) -> dict:
         return dict(self.__dict__)
 
+    def paired(self, by: str, at: float, accuracy_ms: float | None) -> None:
+        """Paired ``by`` motion or receive time, at trial time ``at`` (s), good to ``accuracy_ms`` (receive time)."""
+        self.paired_by = by
+        self.confirmed_at_s = round(at, 6) if by == MOTION else None
+        self.accuracy_ms = None if accuracy_ms is None else round(accuracy_ms, 3)
+
 
 class SyncPairing:
     """Pairs the two streams' counters on one pulse line; :meth:`add_imu` / :meth:`add_table` take one read's
@@ -84,26 +88,24 @@ class SyncPairing:
         self.rate = rate_hz
         self.host_rate = None if time_scale is None else rate_hz * time_scale  # pulses per host second
         self.table_step = table_step
-        self.imu_modulus = imu_modulus
-        self.rotations = rotations
         self.imu = StreamPairing("imu", wire_s[0] * rate_hz)
         self.table = StreamPairing("table", wire_s[1] * rate_hz, offset=0)  # the table's count is the pulse line
+        self.receive = ReceiveTimes(self.host_rate, self.imu, self.table, imu_modulus)
+        self.motion = PairedMotion(rate_hz, HISTORY_S, rotations)
         self.report = SyncReport()
-        self.failure: str | None = None  # why the streams cannot be paired (ends a live trial)
-        self._h_ref: float | None = None
-        self._imu_history = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # paired (pulse, dtheta)
-        self._table_history = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # paired (pulse, angles)
         self._checked = 0  # IMU pulse of the last motion check
-        self._table_first: int | None = None  # the first table pulse
         self._first_pulse: int | None = None  # the first IMU pulse paired: trial times count from it
 
-    # -- the reads ---------------------------------------------------------------------------------
+    @property
+    def failure(self) -> str | None:
+        """Why the streams cannot be paired (ends a live trial)."""
+        return self.receive.failure
 
     def add_imu(self, samples: ImuSamples) -> tuple[TableSamples | None, ImuSamples | None]:
         """One IMU read; returns the (table, IMU) samples now paired."""
         released = self._read(self.imu, samples)
         if released is not None and self.report.paired_by is not None:
-            self._remember_imu(released)
+            self.motion.add_imu(released.sync_index, released.dtheta)
             self._check_motion(released)
         return None, released
 
@@ -111,10 +113,10 @@ class SyncPairing:
         """One table read; returns the (table, IMU) samples now paired (a table read may settle the IMU's)."""
         released = self._read(self.table, samples)
         if released is not None:
-            self._remember_table(released)
+            self.motion.add_table(released.sync_index, released.angles)
         imu = self._settle(self.imu) if self.imu.offset is None and self.imu.held else None
         if imu is not None:
-            self._remember_imu(imu)
+            self.motion.add_imu(imu.sync_index, imu.dtheta)
         return released, imu
 
     def event(self, stream: str, kind: str) -> None:
@@ -133,10 +135,9 @@ class SyncPairing:
                 out.append(released)
             else:
                 out.append(None)
-        self._drop(self.imu, len(self.imu.held))
+        self.report.unpaired += sum(len(read) for read in self.imu.held)
+        self.imu.held = []
         return out[0], out[1]
-
-    # -- one read ----------------------------------------------------------------------------------
 
     def _read(self, s: StreamPairing, samples: Samples) -> Samples | None:
         """One read of ``s``: what of it (and of earlier reads) is now paired, on the pulse line."""
@@ -149,9 +150,7 @@ class SyncPairing:
         if not len(samples):
             return None
         h = float(samples.host_time[-1])
-        if self._h_ref is None:
-            self._h_ref = h
-        e = self._lateness(s, h, int(samples.sync_index[-1]))
+        e = self.receive.lateness(s, h, int(samples.sync_index[-1]))
         if s.offset is None:
             s.held.append(samples)
             s.segment.append((h, e))
@@ -159,7 +158,7 @@ class SyncPairing:
             return self._settle(s)
         late = e - s.offset
         baseline = s.baseline() if self.host_rate is not None else None
-        if baseline is not None and abs(late - baseline) > self.tolerance():
+        if baseline is not None and abs(late - baseline) > self.receive.tolerance():
             s.held.append(samples)
             s.segment.append((h, e))
             s.late += 1
@@ -175,112 +174,38 @@ class SyncPairing:
             s.window.popleft()
         return shifted(released, s.offset)
 
-    def _lateness(self, s: StreamPairing, h: float, counter: int) -> float:
-        """Pulses from the newest frame's pulse (less the stream's offset) to its arrival: ``e``."""
-        if self.host_rate is None:
-            return 0.0
-        return self.host_rate * (h - self._h_ref) - s.wire - counter
-
-    def jitter(self, quantile: float = 0.9) -> float:
-        """Pulses the reads' lateness scatters by (its ``quantile`` over its least, the worse stream's)."""
-        return max(self.imu.spread(quantile), self.table.spread(quantile))
-
-    def tolerance(self) -> float:
-        """Pulses of lateness the watch allows: ``JITTER_FACTOR`` times the jitter, at least ``MIN_TOLERANCE_S``."""
-        return max(2.0, MIN_TOLERANCE_S * self.host_rate, JITTER_FACTOR * self.jitter())
-
     def _break(self, s: StreamPairing, cause: str) -> None:
-        """The stream's pairing broke where its counter last jumped within the held reads (else before them):
-        the samples before that are paired as they were (:attr:`StreamPairing.before_break`), the rest start the new
-        segment with the reads that brought them."""
-        step = 1 if s is self.imu else self.table_step
-        held = joined(s.held) if s.held else None
-        jumps = np.flatnonzero(np.diff(held.sync_index) != step) if held is not None else []
-        late = np.array([e for _, e in s.segment])
-        steps = np.abs(np.diff(late))  # a counter that went on by the frames it sent, but not by the time that passed
-        ends = np.cumsum([len(part) for part in s.held])  # a read's samples end there in ``held``
-        cut = int(jumps[-1]) + 1 if len(jumps) else 0
-        if not cut and len(steps) and steps.max() > self.tolerance():
-            cut = int(ends[int(np.argmax(steps))])
-        if cut:
-            s.before_break = shifted(part(held, np.arange(cut)), s.offset)
-            s.segment = [read for read, end in zip(s.segment, ends, strict=True) if end > cut]
-            s.held = [part(held, np.arange(cut, len(held)))]
-        s.cause = cause
-        s.offset_before = s.offset
-        s.offset = None
-        s.late = 0
-        if s is self.imu:  # the motion checks compare the streams from here on
-            self._imu_history = (self._imu_history[0][:0], self._imu_history[1][:0])
+        """The stream's pairing broke (:meth:`StreamPairing.broken`); the motion checks compare the streams
+        from its new segment on."""
+        s.broken(1 if s is self.imu else self.table_step, self.receive.tolerance, cause)
+        if s is self.imu:
+            self.motion.forget_imu()
         else:
-            self._table_history = (self._table_history[0][:0], self._table_history[1][:0])
+            self.motion.forget_table()
             self._checked = 0  # the IMU is checked against the table's new segment as soon as it can be
-
-    # -- settling a pairing ------------------------------------------------------------------------
 
     def _settle(self, s: StreamPairing) -> Samples | None:
         """Pair a waiting stream once its data allow; returns its held samples, paired, or None."""
-        coarse = self._coarse(s)
+        receive = self.receive
+        coarse = receive.coarse(s, self.rate, self.motion.table_first)
         if coarse is None:
             return None
         if s is self.table:
-            return self._paired(s, self._receive_time_offset(s, coarse), RECEIVE_TIME)
-        pulses, _ = self._table_history
+            return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
+        pulses, _ = self.motion.table
         if not len(pulses) or (s.tried is not None and pulses[-1] - s.tried < RETRY_S * self.rate):
             return None
         s.tried = int(pulses[-1])
-        search = math.ceil(max(2 * self.tolerance(), SEARCH_S * self.host_rate, self._backlog(s))
+        search = math.ceil(max(2 * receive.tolerance(), SEARCH_S * self.host_rate, receive.backlog(s))
                            if self.host_rate is not None else UNPACED_SEARCH_S * self.rate)
-        match = self._match(joined(s.held), np.arange(coarse - search, coarse + search + 1))
+        held = joined(s.held)
+        match = self.motion.match(held.sync_index, held.dtheta, np.arange(coarse - search, coarse + search + 1))
         if match.offset is not None:
             return self._paired(s, match.offset, MOTION)
         table_span = (pulses[-1] - pulses[0]) / self.rate
         if (not match.moving and table_span >= STILL_S) or s.waited(self.rate) >= HOLD_S:
-            return self._paired(s, self._receive_time_offset(s, coarse), RECEIVE_TIME)
+            return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
         return None
-
-    def _backlog(self, s: StreamPairing) -> float:
-        """Pulses by which the segment's reads were late at worst against their least: after a stall of the
-        host its first reads bring old frames, and the least lateness may not yet be a prompt read's."""
-        late = [e for _, e in s.segment]
-        return max(late) - min(late) + self.tolerance()
-
-    def _receive_time_offset(self, s: StreamPairing, coarse: int) -> int:
-        """The offset by receive time alone: the one before the break where the receive times cannot tell them
-        apart (a host that was late broke it, not the device)."""
-        if s.offset_before is not None and self.host_rate is not None and abs(coarse - s.offset_before) <= \
-                self.tolerance():
-            return s.offset_before
-        return coarse
-
-    def _coarse(self, s: StreamPairing) -> int | None:
-        """The offset the receive times give (None until they can)."""
-        if self.host_rate is None:
-            if s.offset_before is not None:
-                return s.offset_before  # reconnected: the unwrapped count carries on, unless the device restarted
-            first = self._table_first
-            return None if first is None else first - int(s.held[0].sync_index[0])
-        if len(s.segment) < MIN_READS and s.waited(self.rate) < STILL_S:
-            return None
-        other = self.table if s is self.imu else self.imu
-        baseline = s.baseline(1)
-        if baseline is None:
-            baseline = other.baseline(1) if other.offset is not None else None
-        if baseline is None:
-            return None
-        jitter = self.jitter(0.5)  # the least lateness is found while half the reads are prompt
-        if s is self.imu and self.imu_modulus and jitter >= self.imu_modulus / 2:
-            jitter_ms, half_ms = (1e3 * x / self.host_rate for x in (jitter, self.imu_modulus / 2))
-            self.failure = (f"the receive times scatter by {jitter_ms:.0f} ms, more than half the IMU counter's "
-                            f"period ({half_ms:.0f} ms): its counter cannot be paired with the table's; read the "
-                            f"ports faster (a lower-latency host or adapter), lower imu.rate_hz, or use a device "
-                            f"with a wider counter")
-            return None
-        return round(min(e for _, e in s.segment) - baseline)
-
-    def _match(self, imu: ImuSamples, candidates: np.ndarray) -> Match:
-        pulses, angles = self._table_history
-        return best_offset(imu.sync_index, imu.dtheta, self.rotations(pulses, angles), candidates)
 
     def _paired(self, s: StreamPairing, offset: int, by: str) -> Samples | None:
         """Settle ``s`` at ``offset``: its held samples go out on the pulse line."""
@@ -292,8 +217,9 @@ class SyncPairing:
         released = shifted(joined(s.held), offset)
         s.held, s.segment, s.tried = [], [], None
         if first:
-            keep = released.sync_index > self._table_first - self.table_step  # no angles more than a table frame before
-            self._drop_count(int(np.count_nonzero(~keep)))
+            # no angles more than a table frame before the table's first
+            keep = released.sync_index > self.motion.table_first - self.table_step
+            self.report.unpaired += int(np.count_nonzero(~keep))
             if keep.any():
                 self._first_pulse = int(released.sync_index[keep][0])
         at = self._trial_time(int(released.sync_index[-1]))
@@ -308,10 +234,8 @@ class SyncPairing:
         return released if len(released) else None
 
     def _set_by(self, by: str, at: float) -> None:
-        self.report.paired_by = by
-        self.report.confirmed_at_s = round(at, 6) if by == MOTION else None
-        self.report.accuracy_ms = None if by == MOTION or self.host_rate is None else round(
-            1e3 * self.tolerance() / self.host_rate, 3)
+        accuracy = None if by == MOTION or self.host_rate is None else 1e3 * self.receive.tolerance() / self.host_rate
+        self.report.paired(by, at, accuracy)
 
     # -- watching a paired IMU by motion -----------------------------------------------------------
 
@@ -319,12 +243,10 @@ class SyncPairing:
         """Every ``CHECK_S``, the gyros against the table: a better offset nearby re-pairs the IMU; a pairing
         by receive time that the motion confirms becomes one by motion."""
         newest = int(released.sync_index[-1])
-        if newest - self._checked < CHECK_S * self.rate or not len(self._table_history[0]):
+        if newest - self._checked < CHECK_S * self.rate or not len(self.motion.table[0]):
             return
-        search = math.ceil(self.tolerance()) + 2 if self.host_rate is not None else 3
-        pulses, dtheta = self._imu_history
-        match = self._match(ImuSamples(pulses, dtheta, dtheta, np.zeros(len(pulses)), np.zeros(len(pulses))),
-                            np.arange(-search, search + 1))
+        search = math.ceil(self.receive.tolerance()) + 2 if self.host_rate is not None else 3
+        match = self.motion.match(*self.motion.imu, np.arange(-search, search + 1))
         if match.moving and match.intervals < MIN_INTERVALS:
             return  # too little data since a break: again at the next read
         self._checked = newest
@@ -336,12 +258,10 @@ class SyncPairing:
             self.report.offset_pulses = self.imu.offset - (self.table.offset or 0)
             self.report.repairs.append({"at_s": round(at, 6), "cause": f"imu: gyro/table disagreement "
                                                                        f"({match.offset:+d} pulses)"})
-            self._imu_history = (pulses + match.offset, dtheta)
+            self.motion.forget_imu(shift=match.offset)
             self.imu.window = deque((h, v - match.offset) for h, v in self.imu.window)
         if self.report.paired_by != MOTION or match.offset:
             self._set_by(MOTION, at)
-
-    # -- bookkeeping -------------------------------------------------------------------------------
 
     def _trial_time(self, pulse: int) -> float:
         """Seconds of the pulse train from the first IMU sample paired (or this one) to ``pulse``."""
@@ -349,26 +269,7 @@ class SyncPairing:
             self._first_pulse = pulse
         return (pulse - self._first_pulse) / self.rate
 
-    def _remember_imu(self, samples: ImuSamples) -> None:
-        self._imu_history = kept(self._imu_history, samples.sync_index, samples.dtheta, HISTORY_S * self.rate)
-
-    def _remember_table(self, samples: TableSamples) -> None:
-        if self._table_first is None:
-            self._table_first = int(samples.sync_index[0])
-        self._table_history = kept(self._table_history, samples.sync_index, samples.angles, HISTORY_S * self.rate)
-
     def _trim_held(self, s: StreamPairing) -> None:
         """At most ``HOLD_S`` of a waiting stream's samples are held; older IMU samples are unpaired."""
-        newest = int(s.held[-1].sync_index[-1])
-        while len(s.held) > 1 and newest - int(s.held[0].sync_index[-1]) > HOLD_S * self.rate:
-            dropped = s.held.pop(0)
-            if s is self.imu:
-                self._drop_count(len(dropped))
-
-    def _drop(self, s: StreamPairing, reads: int) -> None:
-        for dropped in s.held[:reads]:
-            self._drop_count(len(dropped))
-        s.held = s.held[reads:]
-
-    def _drop_count(self, n: int) -> None:
-        self.report.unpaired += n
+        dropped = s.trim(HOLD_S * self.rate)
+        self.report.unpaired += dropped if s is self.imu else 0

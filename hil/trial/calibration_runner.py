@@ -48,7 +48,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
         sequence.start()
         control.client.sync_output(True)
         sequences.append(sequence)
-        return TrialHooks(motion_check=sequence, on_samples=sequence.on_samples, finished=lambda: sequence.done,
+        return TrialHooks(motion_check=sequence, finished=lambda: sequence.done,
                           queue_items=QUEUE_ITEMS)
 
     outcome, viewer = run_live(cfg, config_path, out, duration, speed, dataclasses.replace(viewer, layout="calibration"),

@@ -1,16 +1,16 @@
 """The calibration schedule commanded live through the controller interface, its windows cut from the table's
 reported angles.
 
-:class:`CalibrationSequence` follows the angles the table reports (the processor's ``on_table``, trial
-times and angles) step by step: it commands a step's position on every axis, waits until the table
-reports it there and still (``ARRIVED_S``), lets it settle (``calibration.settle_s``), then holds the
+:class:`CalibrationSequence` listens to the pipeline (:meth:`~CalibrationSequence.on_progress`) and follows
+the angles the table reports (trial times and angles of each block the estimator took) step by step: it
+commands a step's position on every axis, waits until the table reports it there and still (``ARRIVED_S``), lets it settle (``calibration.settle_s``), then holds the
 dwell window for ``dwell_s``. A plateau moves to its start the same way, then commands the rate and
 waits until the reported rate holds it (``ARRIVED_S``), settles, and keeps the window for its
 duration, or until the rate leaves the plateau (a middle axis braking at its position limit). Then
 the next step. A table that moves during a dwell, or leaves its rate during a plateau's settling, is a
 :attr:`failure`. Nothing here looks at the IMU's variance: the windows come from the table alone.
 
-The increments come separately (the processor's ``on_samples``) and are kept; :meth:`windows` cuts the
+The increments the estimator took come with them and are kept; :meth:`windows` cuts the
 calibration windows from them at the end: the encoder angles of each IMU interval are its midpoint's,
 the mean of the readings at its two ends (across the +-180 deg seam), and a plateau's rate is the
 encoder's turn over the window's intervals divided by their length.
@@ -30,6 +30,7 @@ import numpy as np
 from hil.estimation.calibration_model import Window, window_from_samples
 from hil.estimation.calibration_schedule import Dwell, Plateau, Schedule
 from hil.frames import wrapped
+from hil.pipeline.progress import Progress
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
 
@@ -89,8 +90,17 @@ class CalibrationSequence:
         """Command the first step."""
         self._next(0.0)
 
-    def on_samples(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
-        """Aligned samples the estimator took (the processor's ``on_samples``), kept for :meth:`windows`;
+    def on_progress(self, progress: Progress) -> None:
+        """A listener of the pipeline: each block the estimator took, its samples (:meth:`keep`) then its table
+        angles (:meth:`add`)."""
+        for block in progress.taken:
+            for run in block.samples:
+                self.keep(run.t, run.dtheta, run.dv, run.angles)
+            if len(block.table_t):
+                self.add(block.table_t, block.table_angles)
+
+    def keep(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
+        """Aligned samples the estimator took, kept for :meth:`windows`;
         a closed window whose samples have all arrived is cut at once: one that lacks samples ends the trial
         (:attr:`failure`), the others go to ``on_window``."""
         self._samples.append((t, dtheta, dv, angles))

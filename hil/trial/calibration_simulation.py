@@ -7,9 +7,9 @@ every command is formatted and parsed as on the wire, and a refusal raises as it
 goes on in steps of ``Config.block_samples`` samples (0.05 s at 200 Hz by default), the blocks in which
 the live processor hands samples and angles on: each step's samples, under the servo's plan so far (a
 command acts at the first pulse after the step it was sent in), go through the
-:class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, whose ``on_table`` (the table's
-reported angles) advances the sequence, which sends the next commands, and whose ``on_samples`` hands it
-the samples, as in the live trial. The trial ends when the sequence is done or fails, or at the emulated
+:class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, and the sequence, listening to it, takes
+the block's samples and the table's reported angles, which advance it to send the next commands, as in the
+live trial. The trial ends when the sequence is done or fails, or at the emulated
 devices' bound on the schedule's length (:func:`~hil.trial.calibration_outcome.emulated_length`), with
 the live trial's result; the table is sent Off on every way out; then the same fit
 (:class:`~hil.trial.calibration_outcome.CalibrationOutcome`). Nothing is written until the outcome's
@@ -47,13 +47,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable)
     sequence = CalibrationSequence(schedule, client, 1.0 / rate, **sequence_views(viewer, schedule, cfg))
-    on_table = ViewerFeed(viewer).on_table
-
-    def table(t, angles) -> None:
-        on_table(t, angles)
-        sequence.add(t, angles)
-
-    processor = TrialProcessor(cfg, on_table=table, on_samples=sequence.on_samples)
+    processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
     try:
         client.apply_limits()
         sequence.start()
@@ -69,11 +63,11 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
             client.close()  # every axis Off, and the modes read back
         except TableError as exc:
             print(f"hil: WARNING: could not confirm the turntable is off: {exc}", file=sys.stderr)
-    processor.finish()
-    if viewer is not None and processor.estimator is not None:
-        viewer.log_snapshots(processor.estimator.snapshots)
+    finished = processor.finish()
+    if viewer is not None and finished.estimator is not None:
+        viewer.log_snapshots(finished.snapshots)
     ended = str(TrialEnd(COMPLETED) if sequence.failure is None
                 else TrialEnd.early(f"turntable is not moving as commanded: {sequence.failure}"))
-    outcome = TrialOutcome.of(processor, cfg, config_text, out, ended, emulated_truth(cfg))
+    outcome = TrialOutcome.of(finished, cfg, config_text, out, ended, emulated_truth(cfg))
     unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
     return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer

@@ -4,7 +4,8 @@ Threads: one reader per device (:class:`drivers.reader.DeviceReader`) hands ever
 :class:`Fanout`, which stamps it with the host time rounded to the recording's nanoseconds and puts
 it, in one global order, into the recorder's queue (unbounded: the recording never drops) and into
 the bounded processing queue. The caller's thread runs the :class:`~hil.pipeline.processor.TrialProcessor`
-on that queue and the sinks (console progress, viewer) at display rate, so neither the viewer nor
+on that queue, its listeners (viewer, the table's checks) on each :class:`~hil.pipeline.progress.Progress` it
+publishes, and the console at display rate, so neither the viewer nor
 the disk can hold up acquisition. A full processing queue makes the readers wait (the serial
 driver's buffers hold the bytes): nothing is lost, and the live result stays equal to the replay's.
 """
@@ -22,7 +23,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from drivers.codec import RawChunk, StreamEvent, check_baudrate
 from drivers.latency import LatencyHistogram
@@ -33,7 +33,9 @@ from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.record import start_record
 from hil.outputs.result import COMPLETED, TrialEnd
-from hil.pipeline.processor import IMU, TABLE, SamplesCallback, TrialProcessor
+from hil.pipeline.decoding import IMU, TABLE, stream_codecs
+from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.progress import Finished, Health, Listener, Progress
 from hil.pipeline.stream_watch import StreamWatch
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
@@ -140,15 +142,17 @@ def _warn(text: str) -> None:
 class TrialHooks:
     """What a runner plugs into a :class:`LiveTrial`; every field optional.
 
-    ``motion_check``: the harness commands the table; the trial ends when the table does not move as
-    commanded or its data stops for ``TABLE_WATCHDOG_S`` (the caller then turns the table off).
+    ``motion_check``: the harness commands the table; it listens to the pipeline (``on_progress``), and the
+    trial ends when its ``failure`` says the table does not move as commanded, or when the table's data stops
+    for ``TABLE_WATCHDOG_S`` (the caller then turns the table off).
     ``on_progress`` gets the trial time, the latest snapshot and the health about twice a second;
     ``on_warning`` a warning line. ``source_done`` is polled: True (the emulator process has exited) with the
     data stopped ends the trial, complete if it reached the duration within ``END_TOLERANCE_S``.
     ``stop_requested`` is polled every step: a signal name ends the trial as interrupted. ``on_end`` is
     called the moment acquisition ends, however it ends, before the backlog is processed: where the table is
-    turned off. ``on_samples`` goes to the processor (:class:`TrialProcessor`). ``finished`` is polled every
-    step: True ends the trial as completed (a trial whose length is set by what the harness commands).
+    turned off. ``listeners`` listen to the pipeline besides (:class:`~hil.pipeline.progress.Progress`).
+    ``finished`` is polled every step: True ends the trial as completed (a trial whose length is set by what the
+    harness commands).
     ``queue_items`` bounds the processing queue: a small one holds the emulated devices close behind the
     processing (the table then answers a command without lag).
     """
@@ -159,7 +163,7 @@ class TrialHooks:
     source_done: Callable[[], bool] = lambda: False
     stop_requested: Callable[[], str | None] = lambda: None
     on_end: Callable[[], None] = lambda: None
-    on_samples: SamplesCallback | None = None
+    listeners: tuple[Listener, ...] = ()
     finished: Callable[[], bool] = lambda: False
     queue_items: int = QUEUE_ITEMS
 
@@ -191,12 +195,15 @@ class LiveTrial:
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
-        feed = ViewerFeed(viewer, self._live_health)
-        self.processor = TrialProcessor(cfg, duration, time_scale, feed.on_snapshot, self._table_to(feed),
-                                        hooks.on_samples)
+        self.progress: Progress | None = None  # the pipeline's, after the last item it took
+        self.finished: Finished | None = None  # ... and at the end
+        listeners = [ViewerFeed(viewer, self._live_health).on_progress, *hooks.listeners]
+        if hooks.motion_check is not None:
+            listeners.append(hooks.motion_check.on_progress)
+        self.processor = TrialProcessor(cfg, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
-        codecs = {stream: decoder.codec for stream, decoder in self.processor.decoders.items()}
+        codecs = stream_codecs(cfg)
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
             check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
@@ -204,7 +211,8 @@ class LiveTrial:
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
 
     def run(self) -> str:
-        """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``.
+        """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``; the
+        pipeline's end in :attr:`finished`.
 
         Raises :class:`~drivers.transport.TransportError` (after closing everything) when a port cannot
         be opened at the start.
@@ -227,34 +235,19 @@ class LiveTrial:
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
                 self.processor.feed(self.queue.get_nowait())
             self.recorder.close(str(ended))
-            self.processor.finish()
+            self.finished = self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
 
-    def _table_to(self, feed: ViewerFeed) -> Callable[[np.ndarray, np.ndarray], None]:
-        if self.hooks.motion_check is None:
-            return feed.on_table
-        check = self.hooks.motion_check
-
-        def both(t: np.ndarray, angles: np.ndarray) -> None:
-            feed.on_table(t, angles)
-            check.add(t, angles)
-
-        return both
-
-    def health(self) -> dict[str, dict[str, float]]:
-        """Stream counters with the live figures (queue length, latency)."""
-        figures = self.processor.health()
-        figures["aligner"].update(self._live_health()["aligner"])
-        return figures
-
-    def _live_health(self) -> dict[str, dict[str, float]]:
+    def _live_health(self) -> Health:
+        """The live trial's own figures (queue length, latency), added to the pipeline's health."""
         return {"aligner": {"queue": self.queue.qsize(), **self.latency.percentiles_ms()}}
 
     def _loop(self) -> None:
         started = time.monotonic()
-        next_progress, next_sync_check = started, SYNC_CHECK_S  # the latter in trial time
-        while not (self.processor.complete or self.ended_by_source or self.hooks.finished()):
+        next_progress = started
+        while not ((self.progress is not None and self.progress.complete) or self.ended_by_source
+                   or self.hooks.finished()):
             self.interrupted = self.hooks.stop_requested()
             if self.interrupted:
                 return
@@ -263,59 +256,52 @@ class LiveTrial:
             except queue.Empty:
                 item = None
             if item is not None:
-                updates = self.processor.updates
-                self.processor.feed(item)
-                if self.hooks.motion_check is not None and self.hooks.motion_check.failure:
-                    raise TrialAborted(f"turntable is not moving as commanded: {self.hooks.motion_check.failure}")
-                if self.processor.stalled:
-                    raise TrialAborted(self.processor.stalled)
-                self._watch(item)
-                if isinstance(item, RawChunk):
-                    self.latency.fed(item.host_time, self.processor.aligned)
-                    if self.processor.updates != updates:
-                        self.latency.updated(self.processor.waiting)
+                self._took(item, self.processor.feed(item))
             now = time.monotonic()
-            if now >= next_progress:
+            if now >= next_progress and self.progress is not None:
                 next_progress = now + 0.5
-                health = self.health()
                 if self.hooks.on_progress is not None:
-                    estimator = self.processor.estimator
-                    snap = estimator.snapshots[-1] if estimator is not None and estimator.snapshots else None
-                    self.hooks.on_progress(self.processor.trial_time, snap, health)
-            if self.processor.trial_time >= next_sync_check and not self.sync_warned:
-                next_sync_check = self.processor.trial_time + SYNC_CHECK_S
-                self._check_sync()
+                    p = self.progress
+                    self.hooks.on_progress(p.trial_time, p.latest, p.with_live(self._live_health()))
             if item is None and self.queue.empty():
                 self._check_alive(now, started)
 
-    def _check_sync(self) -> None:
-        """Warn once, as soon as it shows, of a lag between the streams beyond one IMU period (:func:`lag_warning`)."""
-        offset = self.processor.time_offset.estimate() if self.processor.estimator is not None else None
-        warning = lag_warning(offset, self.cfg.imu_rate_hz)
+    def _took(self, item: RawChunk | StreamEvent, progress: Progress) -> None:
+        """What the pipeline published for an item: the checks that end the trial, the stream watch, the
+        latency, and the lag between the streams (warned of once, as soon as it shows: :func:`lag_warning`)."""
+        updates = self.progress.updates if self.progress is not None else 0
+        self.progress = progress
+        if self.hooks.motion_check is not None and self.hooks.motion_check.failure:
+            raise TrialAborted(f"turntable is not moving as commanded: {self.hooks.motion_check.failure}")
+        if progress.stalled:
+            raise TrialAborted(progress.stalled)
+        if isinstance(item, StreamEvent):
+            self.stream_watch.event(item)
+        elif item.stream in progress.frames:
+            verdict = self.stream_watch.fed(item, progress.frames[item.stream])
+            if verdict:
+                raise TrialAborted(verdict)
+        if isinstance(item, RawChunk):
+            self.latency.fed(item.host_time, progress.aligned)
+            if progress.updates != updates:
+                self.latency.updated(progress.waiting)
+        warning = None if self.sync_warned else lag_warning(progress.time_offset_s, self.cfg.imu_rate_hz)
         if warning is not None:
             self.sync_warned = True
             self.hooks.on_warning(warning)
 
-
-    def _watch(self, item: RawChunk | StreamEvent) -> None:
-        """Hand an item the processor has taken to the stream watch; its verdict ends the trial."""
-        if isinstance(item, StreamEvent):
-            self.stream_watch.event(item)
-            return
-        decoder = self.processor.decoders.get(item.stream)
-        verdict = None if decoder is None else self.stream_watch.fed(item, decoder.counters.frames)
-        if verdict:
-            raise TrialAborted(verdict)
+    def _trial_time(self) -> float:
+        return self.progress.trial_time if self.progress is not None else 0.0
 
     def _check_alive(self, now: float, started: float) -> None:
         last = self.fanout.last_arrival
-        near_end = self.duration is not None and self.processor.trial_time >= self.duration - END_TOLERANCE_S
+        near_end = self.duration is not None and self._trial_time() >= self.duration - END_TOLERANCE_S
         # the data has ended: the devices stopped at the end (its last frames may be lost), or the
         # emulator's process is gone and the readers have handed over its last bytes
         if now - last > SETTLE_S and ((last and near_end) or self.hooks.source_done()):
             self.ended_by_source = True
             if not near_end and self.duration is not None:
-                raise TrialAborted(f"the emulated devices stopped at {self.processor.trial_time:.1f} s "
+                raise TrialAborted(f"the emulated devices stopped at {self._trial_time():.1f} s "
                                    f"of {self.duration:.1f} s")
             return
         if last == 0.0 and now - started > START_TIMEOUT_S:

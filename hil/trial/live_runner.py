@@ -24,7 +24,7 @@ def emulated(cfg: Config) -> bool:
 
 
 # Given the open table control, the config and the viewer (or None), starts the table and returns the trial's
-# hooks for it: what watches it (``motion_check``), and for a trial the harness paces, ``on_samples``,
+# hooks for it: what watches it (``motion_check``, a listener of the pipeline), and for a trial the harness paces,
 # ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it (:class:`MotionCheck`).
 Commanded = Callable[[object, Config, object], TrialHooks]
 
@@ -53,7 +53,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     with StopSignals() as signals:
         trial, ended = _acquire(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet,
                                 lambda: signals.received, commanded or _arm)
-        outcome = TrialOutcome.of(trial.processor, cfg, config_text, out, ended, emulated_truth(cfg))
+        outcome = TrialOutcome.of(trial.finished, cfg, config_text, out, ended, emulated_truth(cfg))
     return outcome, trial.viewer
 
 

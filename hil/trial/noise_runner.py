@@ -71,15 +71,17 @@ def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
     from hil.recording.replay import open_recording, recorded_pace
 
     recording, cfg = open_recording(path)
-    runs: list[tuple[np.ndarray, ...]] = []
-    processor = TrialProcessor(cfg, None, recorded_pace(recording)[1], on_samples=lambda *arrays: runs.append(arrays))
+    runs: list[AlignedBatch] = []
+    time_scale = recorded_pace(recording)[1]
+    processor = TrialProcessor(cfg, None, time_scale, [lambda progress: runs.extend(progress.samples())])
     with recording:
         for item in recording:
             processor.feed(item)
     processor.finish()
     if not runs:
         raise DataError(f"{path}: no IMU sample reached the estimator: nothing to analyse")
-    t, dtheta, dv, angles = (np.concatenate(column) for column in zip(*runs))  # t: trial time
+    t, dtheta, dv, angles = (np.concatenate([getattr(run, name) for run in runs])  # t: trial time
+                             for name in ("t", "dtheta", "dv", "angles"))
     return AlignedBatch(t, dtheta, dv, None if np.isnan(angles).any() else angles), cfg
 
 

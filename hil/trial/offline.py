@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from hil.config import Config
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.progress import Finished
 from hil.recording.recorder import Recording, RecordingReader
 from hil.recording.replay import recorded_pace
 from hil.trial.outcome import TrialOutcome, emulated_truth
@@ -29,12 +30,12 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
     recording, cfg = open_recording(source)
     with recording:
         viewer = open_viewer(options, cfg, out, blocking=True)
-        processor = replay_recording(recording, cfg, viewer)
+        finished = replay_recording(recording, cfg, viewer)
     # how the recording ends is known once every item has been read
     if recording.truncated:
         print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
     ended = how_it_ended(recording)
-    outcome = TrialOutcome.of(processor, cfg, recording.metadata["config"], out, ended, emulated_truth(cfg))
+    outcome = TrialOutcome.of(finished, cfg, recording.metadata["config"], out, ended, emulated_truth(cfg))
     return outcome, viewer
 
 
@@ -45,17 +46,16 @@ def how_it_ended(recording: RecordingReader | Recording) -> str:
 
 
 def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer: Viewer | None = None
-                     ) -> TrialProcessor:
-    """The finished processor of a recording's items fed in their order (and logged to ``viewer``); a
+                     ) -> Finished:
+    """The pipeline's end of a recording's items fed in their order (and logged to ``viewer``); a
     :class:`~hil.recording.recorder.RecordingReader` is read item by item as they are fed."""
-    feed = ViewerFeed(viewer)
-    processor = TrialProcessor(cfg, *recorded_pace(recording), feed.on_snapshot, feed.on_table)
+    processor = TrialProcessor(cfg, *recorded_pace(recording), [ViewerFeed(viewer).on_progress])
     for item in recording:
         processor.feed(item)
-    processor.finish()
-    if viewer is not None and processor.estimator is not None:
-        viewer.log_health(processor.trial_time, processor.health())
-    return processor
+    finished = processor.finish()
+    if viewer is not None and finished.estimator is not None:
+        viewer.log_health(finished.progress.trial_time, finished.progress.health)
+    return finished
 
 
 def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions,
@@ -70,12 +70,13 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
     else:
         batches = process.batches(cfg)
     viewer = open_viewer(options, cfg, out, blocking=True)
-    processor = TrialProcessor(cfg, on_table=ViewerFeed(viewer).on_table)
+    processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress])
     for batch in batches:
         processor.feed_batch(batch)
-    if viewer is not None and processor.estimator is not None:
-        viewer.log_snapshots(processor.estimator.snapshots)  # as columns, in one go
-    return TrialOutcome.of(processor, cfg, config_text, out, truth=emulated_truth(cfg)), viewer
+    finished = processor.finished()
+    if viewer is not None and finished.estimator is not None:
+        viewer.log_snapshots(finished.snapshots)  # as columns, in one go
+    return TrialOutcome.of(finished, cfg, config_text, out, truth=emulated_truth(cfg)), viewer
 
 
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
@@ -84,4 +85,4 @@ def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> Trial
 
     processor = TrialProcessor(cfg)
     processor.feed_batch(read_increments_csv(data))
-    return TrialOutcome.of(processor, cfg, config_text, out)
+    return TrialOutcome.of(processor.finished(), cfg, config_text, out)

@@ -12,7 +12,7 @@ from hil.outputs.figures import Draw, write_figures
 from hil.outputs.measurements import FAIL
 from hil.outputs.result import COMPLETED, summary_text, trial_result
 from hil.outputs.trial_outputs import write_trial_outputs
-from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.progress import Finished
 
 
 class TrialSetupError(InputError, ValueError):
@@ -52,16 +52,14 @@ class TrialOutcome:
         return self.result["ended"]
 
     @classmethod
-    def of(cls, processor: TrialProcessor, cfg: Config, config_text: str, out: Path, ended: str = COMPLETED,
+    def of(cls, finished: Finished, cfg: Config, config_text: str, out: Path, ended: str = COMPLETED,
            truth: dict | None = None) -> TrialOutcome:
-        """The outcome of a finished processor; ``ended`` says how the trial ended, ``calibration_applied``
-        which ``imu.calibration`` file and terms the processor applied (null: none)."""
-        result = trial_result(cfg.trial.name, processor.estimator, processor.streams(), truth, cfg.estimator.bias_model)
-        applied = processor.compensation.applied if processor.compensation is not None else None
-        result = {"trial": result["trial"], "ended": ended, "calibration_applied": applied,
+        """The outcome of a pipeline's end; ``ended`` says how the trial ended, ``calibration_applied``
+        which ``imu.calibration`` file and terms the pipeline applied (null: none)."""
+        result = trial_result(cfg.trial.name, finished.estimator, finished.streams, truth, cfg.estimator.bias_model)
+        result = {"trial": result["trial"], "ended": ended, "calibration_applied": finished.calibration_applied,
                   **{k: v for k, v in result.items() if k != "trial"}}
-        snapshots = processor.estimator.snapshots if processor.estimator is not None else []
-        return cls(cfg, config_text, out, result, snapshots)
+        return cls(cfg, config_text, out, result, finished.snapshots)
 
     def exit_code(self, verdict: str) -> int:
         """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that completed but

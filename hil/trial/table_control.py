@@ -21,6 +21,7 @@ import numpy as np
 from drivers.controllers import controller_class, controller_options, make_controller
 from drivers.table_controller import MOTION_MODES, TableError
 from hil.config import TurntableConfig
+from hil.pipeline.progress import Progress
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
 
@@ -121,6 +122,12 @@ class MotionCheck:
         self._start: float | None = None
         self.checked_at: float | None = None
         self.failure: str | None = None
+
+    def on_progress(self, progress: Progress) -> None:
+        """A listener of the pipeline: the angles of the blocks the estimator took."""
+        for block in progress.taken:
+            if len(block.table_t):
+                self.add(block.table_t, block.table_angles)
 
     def add(self, t: np.ndarray, angles: np.ndarray) -> None:
         """Gimbal angles (N, 3) rad at trial times t (N,) s."""

@@ -1,5 +1,5 @@
-"""The viewer of a trial: opened as ``--viewer`` asks, and fed the processor's snapshots, stream health
-and gimbal angles as data."""
+"""The viewer of a trial: opened as ``--viewer`` asks, and fed the pipeline's snapshots, stream health
+and gimbal angles as it publishes them (:class:`~hil.pipeline.progress.Progress`)."""
 
 from __future__ import annotations
 
@@ -15,10 +15,9 @@ import numpy as np
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
+from hil.pipeline.progress import Health, Progress
 from hil.trial.outcome import TrialSetupError, emulated_truth
 from hil.units import HOUR, UG
-
-Health = dict[str, dict[str, float]]
 
 
 class Viewer(Protocol):
@@ -87,22 +86,25 @@ def finish_viewer(viewer: Viewer | None) -> None:
 
 
 class ViewerFeed:
-    """The processor's callbacks, forwarding to a viewer (or nowhere); ``extra_health`` adds live figures."""
+    """A listener of the pipeline logging to a viewer (or nowhere): the table angles of each block the estimator
+    took and, with ``snapshots``, each new solution with the stream health (``live`` adds a live trial's
+    figures to it)."""
 
-    def __init__(self, viewer: Viewer | None, extra_health: Callable[[], Health] | None = None) -> None:
+    def __init__(self, viewer: Viewer | None, live: Callable[[], Health] | None = None,
+                 snapshots: bool = True) -> None:
         self.viewer = viewer
-        self.extra_health = extra_health
+        self.live = live
+        self.snapshots = snapshots
 
-    def on_snapshot(self, snap: Snapshot, health: Health) -> None:
+    def on_progress(self, progress: Progress) -> None:
         if self.viewer is None:
             return
-        self.viewer.log_snapshot(snap)
-        if self.extra_health is not None:
-            health = {stream: dict(values) for stream, values in health.items()}
-            for stream, values in self.extra_health().items():
-                health.setdefault(stream, {}).update(values)
-        self.viewer.log_health(snap.t, health)
-
-    def on_table(self, t: np.ndarray, angles: np.ndarray) -> None:
-        if self.viewer is not None:
-            self.viewer.log_table(t, angles)
+        for block in progress.taken:
+            if len(block.table_t):
+                self.viewer.log_table(block.table_t, block.table_angles)
+        if not self.snapshots or not progress.snapshots:
+            return
+        health = progress.health if self.live is None else progress.with_live(self.live())
+        for snap in progress.snapshots:
+            self.viewer.log_snapshot(snap)
+            self.viewer.log_health(snap.t, health)
