@@ -83,7 +83,7 @@ def read_frames(ports: dict, cfg, proc, emulator: psutil.Process) -> tuple[dict[
                     del fds[fd]
                     continue
                 name = fds[fd]
-                arrivals[name] += [now] * len(framers[name].feed_batch(data, now))
+                arrivals[name] += [now] * len(framers[name].feed_bytes(data, now))
             if proc.poll() is None:
                 try:
                     times = emulator.cpu_times()

@@ -177,7 +177,7 @@ def fuzz_bytes(codec: ByteCodec, make_record: Callable[[random.Random, int], obj
         try:
             while pos < len(stream):
                 step = rng.randint(1, 4096)
-                batches.append(framer.feed_batch(bytes(stream[pos:pos + step]), math.nan))
+                batches.append(framer.feed_bytes(bytes(stream[pos:pos + step]), math.nan))
                 pos += step
         except Exception as exc:  # the point of the fuzz: report anything that escapes
             elapsed += time.perf_counter() - t0

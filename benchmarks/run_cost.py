@@ -1,7 +1,7 @@
 """What one campaign run costs beyond its simulation and estimation: a swing run of the 2019 paper's scenario
 (configs/liu2019_sim.yaml, 400 000 samples) as a worker takes it (``hil.campaign.runs.run_swing``, warm: the
 worker's imports done by an earlier run), profiled; prints the run's time, the time in the emulator's batches
-and in the estimator's (``Simulation.batches``, ``Processor.feed_batch``), the rest of the trial, what the run
+and in the estimator's (``Simulation.batches``, ``TrialProcessor.feed_batch``), the rest of the trial, what the run
 does outside it (config validation, the config's YAML text, the row), the profile's top five by own time,
 and the load average. (cProfile charges a generator's resumptions to it: the parts are to its resolution.)
 
@@ -23,8 +23,8 @@ from hil.campaign.runs import run_swing
 from hil.campaign.spec import load_campaign
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "liu2019_sim.yaml"
-PARTS = {"run": "runs.py:47(run_swing)", "trial": "offline.py:60(run_simulation)",
-         "simulation": "simulation.py:47(batches)", "estimation": "processor.py:158(feed_batch)"}
+PARTS = {"run": ("runs.py", "run_swing"), "trial": ("offline.py", "run_simulation"),
+         "simulation": ("simulation.py", "batches"), "estimation": ("processor.py", "feed_batch")}
 
 
 def main() -> None:
@@ -36,8 +36,8 @@ def main() -> None:
     profile = cProfile.Profile()
     profile.runcall(run_swing, task)
     stats = pstats.Stats(profile)
-    cumulative = {f"{Path(file).name}:{line}({name})": entry[3] for (file, line, name), entry in stats.stats.items()}
-    t = {part: next(v for key, v in cumulative.items() if key.endswith(where)) for part, where in PARTS.items()}
+    cumulative = {(Path(file).name, name): entry[3] for (file, _, name), entry in stats.stats.items()}
+    t = {part: cumulative[where] for part, where in PARTS.items()}
     run = t["run"]
     print(f"one swing run, profiled: {run:.3f} s (load average {os.getloadavg()[0]:.1f})")
     for label, seconds in (("the emulator's batches", t["simulation"]), ("the estimator's batches", t["estimation"]),

@@ -235,9 +235,9 @@ class ByteFramer(Framer):
         return len(self._buf)
 
     def feed_chunk(self, chunk: RawChunk) -> FrameBatch:
-        return self.feed_batch(chunk.data, chunk.host_time)
+        return self.feed_bytes(chunk.data, chunk.host_time)
 
-    def feed_batch(self, data: bytes, host_time: float = math.nan) -> FrameBatch:
+    def feed_bytes(self, data: bytes, host_time: float = math.nan) -> FrameBatch:
         """The frames completed by ``data``, received at ``host_time``, as arrays."""
         codec, counters = self.codec, self.counters
         raw = self._buf + data

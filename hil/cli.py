@@ -1,4 +1,10 @@
-"""The ``hil`` command line: parses the arguments and calls one runner (:mod:`hil.trial`)."""
+"""The ``hil`` command line: parses the arguments and calls one runner (:mod:`hil.trial`).
+
+Each command imports its runner when it runs, inside its ``cmd_*`` function: the parser alone starts in
+about 40 ms (``hil --help``, a refused argument), where importing every runner would cost about 1.1 s before
+anything is checked, and the offline commands start their child processes (the figure process, the simulation
+process) before the schemas and the numerics load, so that the children's imports overlap the parent's
+(docs/architecture.md, "Where each trial kind plugs in")."""
 
 from __future__ import annotations
 

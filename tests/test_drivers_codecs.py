@@ -63,7 +63,7 @@ def test_kvh_rejects_a_flipped_bit():
 def test_kvh_rate_output_in_degrees_becomes_increments_in_radians():
     codec = Kvh1750Codec(rate_hz=200, gyro_unit="deg", gyro_output="rate", accel_unit="g")
     record = KvhFrame((10.0, 0.0, -20.0), (0.0, 0.0, 1.0), 0x77, 3, 25)
-    samples = codec.samples(codec.framer().feed_batch(codec.encode(record), 1.5))
+    samples = codec.samples(codec.framer().feed_bytes(codec.encode(record), 1.5))
     assert samples.dtheta[0] == pytest.approx((math.radians(10) / 200, 0.0, -math.radians(20) / 200))
     assert samples.dv[0] == pytest.approx((0.0, 0.0, 9.80665 / 200))
     assert (samples.sync_index[0], samples.host_time[0], samples.status[0]) == (3, 1.5, 0x77)
@@ -72,7 +72,7 @@ def test_kvh_rate_output_in_degrees_becomes_increments_in_radians():
 def test_kvh_from_sample_round_trips_through_the_wire():
     codec = Kvh1750Codec(rate_hz=1000)
     sample = ImuSample(300, (1e-5, -2e-5, 3e-6), (1e-3, 2e-3, -9.8e-3), status=STATUS_ALL_VALID)
-    frames = codec.framer().feed_batch(codec.encode(codec.from_sample(sample)))
+    frames = codec.framer().feed_bytes(codec.encode(codec.from_sample(sample)))
     assert codec.record(frames.rows[0]).sequence == 300 % 128 and codec.record(frames.rows[0]).temperature == 25
     back = codec.samples(frames)
     assert back.dtheta[0] == pytest.approx(sample.dtheta, rel=1e-7)
@@ -86,7 +86,7 @@ def test_tts1_hand_written_frame():
     frame = TTS1_BODY + Crc16Xmodem.calc(TTS1_BODY[2:]).to_bytes(2, "big")
     record = Tts1Codec().decode(frame)
     assert record == Tts1Frame(0x21, 1000, (90_000_000, -45_500_000, 179_999_999), 50)
-    sample = Tts1Codec().samples(Tts1Codec().framer().feed_batch(frame, 2.0))
+    sample = Tts1Codec().samples(Tts1Codec().framer().feed_bytes(frame, 2.0))
     assert sample.angles[0] == pytest.approx((math.pi / 2, math.radians(-45.5), math.radians(179.999999)))
     assert sample.latch_delay[0] == pytest.approx(50e-6)
     assert Tts1Codec().encode(record) == frame
@@ -124,7 +124,7 @@ def test_xsens_hand_written_message():
     record = codec.decode(XSENS)
     assert (record.packet_counter, record.sample_time_fine) == (300, 100000)
     assert record.delta_q == (1.0, 0.0, 0.0, 0.0) and record.delta_v == (0.5, -0.25, 2.0)
-    samples = codec.samples(codec.framer().feed_batch(XSENS))
+    samples = codec.samples(codec.framer().feed_bytes(XSENS))
     assert samples.dtheta.tolist() == [[0.0, 0.0, 0.0]] and samples.sync_index.tolist() == [300]
     assert codec.encode(record) == XSENS
 
@@ -137,7 +137,7 @@ def test_xsens_extended_length_and_unknown_items_are_handled():
     codec = XsensCodec(rate_hz=50)
     record = codec.decode(message)
     assert record.packet_counter == 7 and record.rate_of_turn == (1.0, 0.0, 0.0)
-    samples = codec.samples(codec.framer().feed_batch(message))
+    samples = codec.samples(codec.framer().feed_bytes(message))
     assert samples.dtheta[0] == pytest.approx((1 / 50, 0.0, 0.0)) and samples.dv[0] == pytest.approx((0.0, 0.0, 1 / 50))
 
 
@@ -157,7 +157,7 @@ def test_xsens_rejects_a_bad_checksum_and_a_bad_item_size():
 def test_xsens_from_sample_round_trips(dtheta, dv, index, outputs):
     codec = XsensCodec(rate_hz=400, outputs=outputs)
     sample = ImuSample(index, dtheta, dv, device_time=index / 400)
-    back = codec.samples(codec.framer().feed_batch(codec.encode(codec.from_sample(sample))))
+    back = codec.samples(codec.framer().feed_bytes(codec.encode(codec.from_sample(sample))))
     assert back.sync_index.tolist() == [index % 65536]
     assert back.dtheta[0] == pytest.approx(dtheta, rel=1e-6, abs=1e-7)
     assert back.dv[0] == pytest.approx(dv, rel=1e-6, abs=1e-6)

@@ -111,11 +111,11 @@ def test_zero_error_increments_equal_simulation_to_float32(zero_error_run):
     out, cfg = zero_error_run
     codec = Kvh1750Codec(RATE)
     framer = codec.framer()
-    samples = codec.samples(framer.feed_batch(out["imu"]))
+    samples = codec.samples(framer.feed_bytes(out["imu"]))
     assert framer.counters.corrupt == 0
     batch = next(Simulation.from_config(cfg).batches())
     assert len(samples) == len(batch)
     np.testing.assert_allclose(samples.dtheta, batch.dtheta, rtol=1.5e-7, atol=0)
     np.testing.assert_allclose(samples.dv, batch.dv, rtol=1.5e-7, atol=0)
-    table = Tts1Codec().framer().feed_batch(out["turntable_data"])
+    table = Tts1Codec().framer().feed_bytes(out["turntable_data"])
     assert table.rows["sync_counter"].tolist() == list(range(1, len(batch) + 1))

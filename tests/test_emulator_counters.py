@@ -40,7 +40,7 @@ def emitted(cfg, name: str, duration: float) -> list:
 
 def imu_counters(cfg, duration: float) -> list[int]:
     codec = imu_codec(cfg.imu, cfg.imu_rate_hz)
-    return [int(codec.sequences(codec.framer().feed_batch(e.payload).rows)[0])  # each frame on its own
+    return [int(codec.sequences(codec.framer().feed_bytes(e.payload).rows)[0])  # each frame on its own
             for e in emitted(cfg, "imu", duration) if e.powered]
 
 

@@ -55,7 +55,7 @@ def capture(cfg: dict | Config, speed: float | None = None, duration: float | No
 
 def framed(codec, data: bytes):
     framer = codec.framer()
-    return framer.counters, framer.feed_batch(data, math.nan)
+    return framer.counters, framer.feed_bytes(data, math.nan)
 
 
 def imu_counters(fault: dict):

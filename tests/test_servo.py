@@ -111,7 +111,7 @@ class Readers:
             t.start()
 
     def table_frames(self):
-        return Tts1Codec().framer().feed_batch(bytes(self.table))
+        return Tts1Codec().framer().feed_bytes(bytes(self.table))
 
     def wait_table_frames(self, n: int) -> None:
         deadline = time.monotonic() + 10
@@ -179,7 +179,7 @@ def test_a_swing_armed_through_the_client_is_what_tts1_and_the_imu_report():
 
     motion.breaks = lambda t0, t1: np.array([t_s]) if t0 < t_s < t1 else np.empty(0)
     codec = Kvh1750Codec(RATE)
-    imu = codec.samples(codec.framer().feed_batch(bytes(readers.imu))).dtheta[:k_off - 1]
+    imu = codec.samples(codec.framer().feed_bytes(bytes(readers.imu))).dtheta[:k_off - 1]
     n = len(imu)
     truth = Truth(Earth.from_degrees(32.0, 0.0), TableGeometry.from_config(cfg.turntable), motion)
     dtheta, _ = truth.increments(0.0, np.arange(1, n + 1) / RATE)

@@ -39,7 +39,7 @@ def test_rate_and_acceleration_become_increments_over_one_sample():
     codec = Stim300Codec(500, datagram=0x91, gyro_output="rate", accel_output="acceleration", accel_range_g=10)
     assert codec.decode(RATE_91) == StimDatagram((1 << 14, -(1 << 14), 1 << 13), (1 << 19, -(1 << 18), 0),
                                                  counter=16, latency_us=516)
-    samples = codec.samples(codec.framer().feed_batch(RATE_91))
+    samples = codec.samples(codec.framer().feed_bytes(RATE_91))
     deg = math.pi / 180
     assert samples.dtheta[0] == pytest.approx(np.array([1.0, -1.0, 0.5]) * deg / 500, rel=1e-15)
     assert samples.dv[0] == pytest.approx(np.array([1.0, -0.5, 0.0]) * G0 / 500, rel=1e-15)
@@ -51,7 +51,7 @@ def test_incremental_outputs_with_inclinometers_and_dummy_bytes():
     codec = Stim300Codec(2000, datagram=0x93, gyro_output="increment", accel_output="increment", accel_range_g=10)
     record = codec.decode(INCREMENT_93)
     assert record.gyro == (1 << 20, -1, 0) and record.accel == (1 << 20, -(1 << 22), 1) and record.counter == 254
-    samples = codec.samples(codec.framer().feed_batch(INCREMENT_93))
+    samples = codec.samples(codec.framer().feed_bytes(INCREMENT_93))
     assert samples.dtheta[0] == pytest.approx((0.5 * math.pi / 180, -2.0 ** -21 * math.pi / 180, 0.0), rel=1e-15)
     assert samples.dv[0].tolist() == [0.25, -1.0, 2.0 ** -22]
     assert codec.encode(record) == INCREMENT_93
@@ -63,7 +63,7 @@ def test_status_bytes_and_temperatures():
     assert (record.gyro_status, record.accel_status) == (0x40, 0x00)
     assert record.gyro_temp == (6528, -256, 0) and record.accel_temp == (6400,) * 3
     assert codec.csv_row(record)[9:15] == [25.5, -1.0, 0.0, 25.0, 25.0, 25.0]
-    samples = codec.samples(codec.framer().feed_batch(TEMPERATURE_A5))
+    samples = codec.samples(codec.framer().feed_bytes(TEMPERATURE_A5))
     assert samples.status.tolist() == [0x40] and samples.sync_index.tolist() == [1]
     assert codec.encode(record) == TEMPERATURE_A5
 
@@ -73,14 +73,14 @@ def test_a_damaged_datagram_is_corrupt_and_the_next_is_read():
     damaged = bytearray(RATE_91)
     damaged[5] ^= 0x01
     framer = codec.framer()
-    frames = framer.feed_batch(bytes(damaged) + RATE_91)
+    frames = framer.feed_bytes(bytes(damaged) + RATE_91)
     assert len(frames) == 1 and framer.counters.corrupt == 1
 
 
 def test_the_counter_of_internal_samples_is_followed_across_its_wrap():
     codec = Stim300Codec(250)  # the counter steps by 8: 32 datagrams a wrap
     samples = [ImuSample(k, (1e-5, 0.0, -1e-5), (0.0, 0.0, 0.04)) for k in range(20, 100)]
-    frames = codec.framer().feed_batch(b"".join(codec.encode(codec.from_sample(s)) for s in samples))
+    frames = codec.framer().feed_bytes(b"".join(codec.encode(codec.from_sample(s)) for s in samples))
     assert frames.rows["counter"][:3].tolist() == [(8 * k) % 256 for k in (20, 21, 22)]
     assert frames.sync_index.tolist() == list(range(20, 100))
     back = codec.samples(frames)

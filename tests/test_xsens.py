@@ -53,7 +53,7 @@ def test_every_precision_decodes_to_the_values_the_specification_gives(precision
     assert sum(message[1:]) % 256 == 0
     codec = XsensCodec(rate_hz=100)
     framer = codec.framer()
-    frames = framer.feed_batch(message)
+    frames = framer.feed_bytes(message)
     record = codec.record(frames.rows[0])
     assert record == MtData2Frame(packet_counter=300, status_byte=5, delta_q=(1.0, 0.0, 0.0, 0.0), delta_v=delta_v,
                                   acceleration=(1.0, -0.25, 0.5), rate_of_turn=(0.5, 0.0, -0.25))
@@ -86,7 +86,7 @@ def test_fixed_point_keeps_what_float32_cannot():
 
 def test_rates_without_increments_are_integrated_over_one_sample():
     codec = XsensCodec(200, precision="fp12.20", outputs="rates")
-    frames = codec.framer().feed_batch(codec.encode(MtData2Frame(packet_counter=7, acceleration=(0.0, 0.0, 9.75),
+    frames = codec.framer().feed_bytes(codec.encode(MtData2Frame(packet_counter=7, acceleration=(0.0, 0.0, 9.75),
                                                                  rate_of_turn=(0.5, -0.25, 0.0))))
     samples = codec.samples(frames)
     assert samples.dtheta.tolist() == [[0.5 / 200, -0.25 / 200, 0.0]]
@@ -98,7 +98,7 @@ def test_an_item_of_the_wrong_size_for_its_precision_is_corrupt():
     message[14] = 0x31  # DeltaQ announced as FP12.20 with 6-byte numbers
     message[-1] = -sum(message[1:-1]) & 0xFF
     framer = XsensCodec(100).framer()
-    assert len(framer.feed_batch(bytes(message))) == 0 and framer.counters.corrupt == 1
+    assert len(framer.feed_bytes(bytes(message))) == 0 and framer.counters.corrupt == 1
 
 
 def _rotation_vector(q: list[float]) -> np.ndarray:
@@ -114,7 +114,7 @@ def test_real_captures_decode_to_the_published_values(precision):
     expected = json.loads((CAPTURES / "decoded.json").read_text())[precision]
     codec = XsensCodec(rate_hz=100)
     framer = codec.framer()
-    frames = framer.feed_batch((CAPTURES / f"{precision}.bin").read_bytes())
+    frames = framer.feed_bytes((CAPTURES / f"{precision}.bin").read_bytes())
     assert framer.counters.frames == len(expected) and framer.counters.corrupt == 0
     assert framer.counters.skipped_bytes == 0 and "UtcTime 0x1010" in framer.counters.skipped_items
     samples = codec.samples(frames)
@@ -142,6 +142,6 @@ def test_a_sensor_item_in_another_coordinate_setting_is_skipped_and_counted():
     message += bytes([-sum(message[1:]) & 0xFF])
     codec = XsensCodec(100)
     framer = codec.framer()
-    frames = framer.feed_batch(message)
+    frames = framer.feed_bytes(message)
     assert codec.record(frames.rows[0]).delta_v is None and len(codec.samples(frames)) == 0
     assert framer.counters.skipped_items == {"DeltaV 0x4014": 1}

@@ -31,7 +31,7 @@ def point_labels(points: list[dict]) -> list[str]:
 
 
 def png(fig) -> bytes:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # pyplot() of hil.outputs.figures has chosen the backend
 
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100)

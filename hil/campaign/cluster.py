@@ -40,7 +40,7 @@ def default_workers() -> int:
 def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[tuple[object, ClusterInfo]]:
     """A connected ``distributed.Client`` and what it runs on; a LocalCluster of ``workers`` processes
     (default: :func:`default_workers`) unless ``scheduler`` names one, whose ``workers`` are waited for."""
-    import dask
+    import dask  # dask and distributed (about 1 s) only when a campaign runs
     from distributed import Client, LocalCluster
 
     if workers is not None and workers < 1:

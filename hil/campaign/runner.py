@@ -18,11 +18,16 @@ from typing import Any
 
 import yaml
 
+from hil.campaign.campaign_report import write_campaign_report
+from hil.campaign.cluster import open_client
 from hil.campaign.kinds import KINDS, Kind, Row
 from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, task_columns
 from hil.campaign.spec import DEFAULT_KIND, Campaign, SpecError, load_campaign
+from hil.campaign.swing_summary import summarise, write_summary
 from hil.campaign.table import RUNS_NAME, read_runs, write_runs
 from hil.campaign.task import RunTask
+from hil.campaign.workers import costly_defaults
+from hil.outputs.record import run_record
 from hil.trial.stop_signals import STOP_SIGNALS
 
 CHECKPOINT_S = 5.0  # runs.parquet is rewritten at most this often while runs complete
@@ -80,7 +85,7 @@ def stop_signals() -> Iterator[None]:
 
 
 def _progress(total: int, done: int):
-    from rich.console import Console
+    from rich.console import Console  # the bar only for a campaign run in a terminal
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     progress = Progress(TextColumn("campaign"), BarColumn(), MofNCompleteColumn(), TextColumn("runs,"),
@@ -92,7 +97,7 @@ def _progress(total: int, done: int):
 def gather(client, run: Callable[[RunTask], Row], tasks: list[RunTask], rows: list[Row], out: Path) -> None:
     """Map ``run`` (a kind's run) over ``tasks`` on the client's cluster; each row appended to ``rows`` as its run
     completes (a run whose task is lost is a row with its error), runs.parquet rewritten on the way."""
-    from distributed import as_completed
+    from distributed import as_completed  # see hil.campaign.cluster.open_client
 
     batch = uuid.uuid4().hex[:8]  # keys of their own: another campaign on a shared scheduler has the same ids
     futures = client.map(run, tasks, key=[f"campaign-{batch}-{t.id}" for t in tasks])
@@ -118,12 +123,6 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
                  resume: bool = False) -> int:
     """Run (or go on with) a campaign; returns the exit code: 0 every run done, 1 some runs failed (their
     rows say why; ``--resume`` runs them again) or a stop signal ended it (the outputs of the runs done)."""
-    from hil.campaign.cluster import open_client
-    from hil.campaign.campaign_report import write_campaign_report
-    from hil.campaign.swing_summary import summarise, write_summary
-    from hil.campaign.workers import costly_defaults
-    from hil.outputs.record import run_record
-
     started = datetime.now(timezone.utc)
     campaign = load_campaign(spec)
     kind = KINDS[campaign.spec.kind]

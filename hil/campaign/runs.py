@@ -3,7 +3,9 @@ of ``hil simulate`` and its result.json document (kind ``swing``), or the simula
 ``hil noise CONFIG`` and its noise.json document with the noise terms the config puts in (kind ``noise``), or
 the simulated calibration trial of ``hil calibrate --simulate`` with its terms against the truth (kind
 ``calibration``).
-No outputs are written, no viewer opened."""
+No outputs are written, no viewer opened. Each kind's function imports its trial's modules when it first runs:
+the client imports this module only to send the functions by reference, and a worker loads the one kind its
+campaign runs (a swing campaign never loads the servo or the calibration fit)."""
 
 from __future__ import annotations
 

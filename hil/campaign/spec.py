@@ -21,10 +21,15 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from emulators.servo_simulation import ServoSimulation
+from emulators.simulation import Simulation
 from hil.campaign.task import RunTask, point_label
 from hil.config import Config, ConfigError, InputError, parse_config
 from hil.config_types import describe_validation
 from hil.inputs import resolve_path
+from hil.pipeline.processor import TrialProcessor
+from hil.trial.calibration_outcome import checked_schedule
+from hil.trial.outcome import TrialSetupError
 
 
 class SpecError(InputError, ValueError):
@@ -125,12 +130,6 @@ def _check_point(config: dict, label: str, source: str, kind: str) -> None:
     """The trial config of a point, checked as its kind's trial sets it up (the emulator and the processor,
     with ``imu.calibration`` read; a calibration's schedule within the table's limits and the in-process
     servo); a ConfigError or TrialSetupError names the point."""
-    from emulators.servo_simulation import ServoSimulation
-    from emulators.simulation import Simulation
-    from hil.pipeline.processor import TrialProcessor
-    from hil.trial.calibration_outcome import checked_schedule
-    from hil.trial.outcome import TrialSetupError
-
     try:
         cfg = parse_config(config, source)
         cfg.emulated_only(source, "hil campaign")

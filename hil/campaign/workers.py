@@ -19,7 +19,7 @@ TRIM = "MALLOC_TRIM_THRESHOLD_"
 
 def worker_settings() -> dict:
     """This worker process's settings of :data:`WORKER_CONFIG` (run on every worker by ``client.run``)."""
-    import dask
+    import dask  # on the worker, which has it loaded
 
     return {"profile": bool(dask.config.get("distributed.worker.profile.enabled")), "trim": os.environ.get(TRIM)}
 
@@ -51,7 +51,7 @@ def run_workers(scheduler: str, nworkers: int, host: str | None = None) -> int:
     """Run ``dask worker`` in this process with :data:`WORKER_CONFIG` (its nannies hand it to the worker
     processes) until it ends (a signal); its exit code. Workers that cannot start (the scheduler not reached
     within dask's connect timeout, an address taken) are an :class:`InputError` naming the cause."""
-    import dask
+    import dask  # dask and distributed only for hil worker
     from distributed.cli.dask_worker import main
 
     with dask.config.set(WORKER_CONFIG):

@@ -126,7 +126,7 @@ def _sqlite(path: Path) -> Iterator:
 @contextmanager
 def _sqlalchemy(url: str) -> Iterator:
     try:
-        import sqlalchemy
+        import sqlalchemy  # an optional extra, for a database URL only
     except ImportError:
         raise HistoryError(f"{url}: a database URL needs SQLAlchemy: pip install 'turntable-hil[history]'") from None
     engine = sqlalchemy.create_engine(url)

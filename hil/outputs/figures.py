@@ -36,7 +36,7 @@ def write_figures(out: Path, series: np.ndarray, result: dict, names: tuple[str,
 
 def pyplot() -> ModuleType:
     """matplotlib's pyplot on the Agg backend (files only, no display), imported on first use."""
-    import matplotlib
+    import matplotlib  # 0.4 s: only for a trial that draws (docs/architecture.md, the figure process)
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

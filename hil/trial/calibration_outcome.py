@@ -9,14 +9,26 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from drivers.table_controller import TableError
 from hil.config import Config
+from hil.estimation.accel_calibration import calibrate_accelerometers
 from hil.estimation.calibration_model import Window
-from hil.estimation.calibration_schedule import Schedule
-from hil.outputs.calibration_report import Residuals
+from hil.estimation.calibration_schedule import Schedule, check_limits, schedule_duration, schedule_from_config
+from hil.estimation.gyro_calibration import calibrate_gyros
+from hil.frames import Earth, TableGeometry
+from hil.outputs.calibration import calibration_document, write_calibration
+from hil.outputs.calibration_report import (
+    Residuals,
+    calibration_summary,
+    observed_truth,
+    window_residuals,
+    write_calibration_report,
+)
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
 from hil.trial.outcome import TrialOutcome, TrialSetupError
+from hil.trial.table_control import check_controller
 
 # The emulated devices run for this many times the schedule's nominal length (+ 120 s), and the trial ends when
 # the schedule does. Each command acts as late as the data queued between the devices and the processing, so on
@@ -28,10 +40,6 @@ UNFINISHED = "the devices stopped before the schedule ended"
 def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
     """``calibration``'s schedule; raises :class:`TrialSetupError` (prefixed with ``where``) when a step lies
     outside ``turntable.limits`` or needs what ``turntable.controller`` cannot do."""
-    from drivers.table_controller import TableError
-    from hil.estimation.calibration_schedule import check_limits, schedule_from_config
-    from hil.trial.table_control import check_controller
-
     schedule = schedule_from_config(cfg.calibration)
     prefix = f"{where}: " if where else ""
     try:
@@ -50,8 +58,6 @@ def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
 
 def emulated_length(cfg: Config, schedule: Schedule) -> float:
     """Trial seconds the emulated devices run for a schedule (see :data:`EMULATED_MARGIN`)."""
-    from hil.estimation.calibration_schedule import schedule_duration
-
     return EMULATED_MARGIN * schedule_duration(schedule, cfg.turntable.limits) + 120.0
 
 
@@ -78,7 +84,6 @@ class CalibrationOutcome(TrialOutcome):
             fields["result"]["ended"] = str(TrialEnd.early(f"{unfinished} ({where})"))
         if fields["result"]["ended"] != COMPLETED:
             return cls(**fields)
-        from hil.outputs.calibration_report import calibration_summary
 
         try:
             windows = sequence.windows()
@@ -94,9 +99,6 @@ class CalibrationOutcome(TrialOutcome):
         calibration.html headed by its verdict; returns the verdict."""
         verdict = super().write(figures, draw)
         if self.calibration is not None:
-            from hil.outputs.calibration import write_calibration
-            from hil.outputs.calibration_report import write_calibration_report
-
             if "record" in self.result:
                 self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
@@ -108,12 +110,6 @@ class CalibrationOutcome(TrialOutcome):
 def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:
     """Fit the accelerometers on the dwells and the gyros on every window (when there are plateaus);
     calibration.json's document (with ``truth`` and ``truth.as_observed`` when ``truth``) and the residuals."""
-    from hil.estimation.accel_calibration import calibrate_accelerometers
-    from hil.estimation.gyro_calibration import calibrate_gyros
-    from hil.frames import Earth, TableGeometry
-    from hil.outputs.calibration import calibration_document
-    from hil.outputs.calibration_report import observed_truth, window_residuals
-
     calibration = cfg.calibration
     earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
     geometry = TableGeometry.from_config(cfg.turntable)

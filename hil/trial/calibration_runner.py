@@ -15,8 +15,11 @@ import dataclasses
 from pathlib import Path
 
 from hil.config import Config
+from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
+from hil.trial.calibration_sequence import CalibrationSequence
 from hil.trial.live import TrialHooks
+from hil.trial.live_runner import emulated, run_live
 from hil.trial.outcome import TrialSetupError
 from hil.trial.viewer_feed import ViewerOptions
 
@@ -27,10 +30,6 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
                     quiet: bool = False) -> tuple[CalibrationOutcome, object]:
     """Run the schedule and calibrate; returns the outcome (with the calibration when the schedule
     completed; its :meth:`~CalibrationOutcome.write` writes the calibration outputs too) and the viewer."""
-    from hil.trial.calibration_feed import sequence_views
-    from hil.trial.calibration_sequence import CalibrationSequence
-    from hil.trial.live_runner import emulated, run_live
-
     schedule = checked_schedule(cfg, str(config_path))
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "

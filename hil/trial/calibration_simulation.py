@@ -22,10 +22,14 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from drivers.table_controller import InterlockError, LimitError, TableError
+from emulators.servo_simulation import ServoSimulation
 from hil.config import Config
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
+from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
+from hil.trial.calibration_sequence import CalibrationSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
@@ -34,11 +38,6 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
                                ) -> tuple[CalibrationOutcome, Viewer | None]:
     """The simulated calibration trial (module docstring); its outcome (with the calibration when the
     schedule completed) and the viewer ``options`` ask for (none by default)."""
-    from drivers.table_controller import InterlockError, LimitError, TableError
-    from emulators.servo_simulation import ServoSimulation
-    from hil.trial.calibration_feed import sequence_views
-    from hil.trial.calibration_sequence import CalibrationSequence
-
     schedule = checked_schedule(cfg)
     sim = ServoSimulation.from_config(cfg)
     rate = cfg.imu_rate_hz

@@ -9,10 +9,15 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from drivers.table_controller import InterlockError, LimitError, TableError
+from emulators.process import EmulatorError, parse_speed, spawn_emulator, stop_emulator
 from hil.config import Config
 from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
+from hil.trial.stop_signals import StopSignals
+from hil.trial.table_control import MotionCheck, TableControl, check_controller, motion_needs
 from hil.trial.viewer_feed import ViewerOptions, open_viewer
+from hil.viewer.console_progress import ConsoleProgress
 
 
 def emulated(cfg: Config) -> bool:
@@ -35,9 +40,6 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     """Acquire, record and estimate until the trial ends; returns the outcome and the viewer (still open
     for a ``serve`` viewer to keep serving). ``commanded``: how the harness drives the table (see
     :data:`Commanded`)."""
-    from emulators.process import parse_speed
-    from hil.trial.stop_signals import StopSignals
-
     is_emulated = emulated(cfg)
     if commanded is None and cfg.turntable.command_port:
         _check_motion(cfg)
@@ -60,11 +62,6 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
 def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
              time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested, commanded: Commanded):
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
-    from drivers.table_controller import InterlockError, LimitError, TableError
-    from emulators.process import EmulatorError, spawn_emulator, stop_emulator
-    from hil.trial.table_control import TableControl
-    from hil.viewer.progress import ConsoleProgress
-
     emulator, ports, control, viewer = None, None, None, None
     try:
         if emulated(cfg):
@@ -104,9 +101,6 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
 
 def _check_motion(cfg: Config) -> None:
     """Refuse, before anything starts, a configured motion the controller cannot perform."""
-    from drivers.table_controller import TableError
-    from hil.trial.table_control import check_controller, motion_needs
-
     try:
         check_controller(cfg.turntable, *motion_needs(cfg.turntable))
     except TableError as exc:
@@ -115,8 +109,6 @@ def _check_motion(cfg: Config) -> None:
 
 def _arm(control, cfg: Config, viewer) -> TrialHooks:
     """``hil run``: the configured motion, checked against what the table reports."""
-    from hil.trial.table_control import MotionCheck
-
     control.arm()
     return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))
 

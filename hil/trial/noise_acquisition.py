@@ -11,6 +11,8 @@ from hil.config import Config
 from hil.inputs import InputError
 from hil.outputs.measurements import FAIL, STREAM_MEASUREMENTS, format_value, measurements
 from hil.outputs.result import COMPLETED
+from hil.trial.live_runner import run_live
+from hil.trial.viewer_feed import ViewerOptions
 
 ACQUISITION_DIR = "acquisition"
 
@@ -36,9 +38,6 @@ def acquire(cfg: Config, config_path: Path, out: Path, duration: float | None, q
     """Acquire and record ``duration`` s (default ``trial.duration_s``) from the devices into
     ``OUT/acquisition`` and write its trial outputs; returns that directory. Raises :class:`AcquisitionFailed`
     when the trial ended early or a stream measurement FAILs its limit."""
-    from hil.trial.live_runner import run_live
-    from hil.trial.viewer_feed import ViewerOptions
-
     if duration is None and cfg.trial.duration_s is None:
         raise AcquisitionFailed(f"{config_path}: trial.duration_s or --duration: how long a record to acquire", 2)
     directory = out / ACQUISITION_DIR

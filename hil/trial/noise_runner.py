@@ -15,13 +15,20 @@ from pathlib import Path
 
 import numpy as np
 
+from emulators.simulation import Simulation
 from hil.config import Config, ImuErrors, load_config
-from hil.inputs import resolve_path
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
+from hil.estimation.allan_taus import parse_taus
 from hil.frames import Earth, TableGeometry
-from hil.outputs.noise import SENSORS
+from hil.inputs import resolve_path
+from hil.outputs.noise import SENSORS, noise_document, write_noise
+from hil.outputs.trial_report import write_noise_report
+from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.table_motion import motion_residuals
 from hil.recording.csv_input import DataError, read_increments_csv, write_increments_csv
+from hil.recording.replay import open_recording, recorded_pace
 from hil.samples import AlignedBatch
+from hil.trial.noise_acquisition import acquire
 from hil.trial.outcome import TrialSetupError
 from hil.units import DEG, DEG_PER_H, SQRT_HOUR, UG
 
@@ -53,23 +60,17 @@ def read_source(source: str | Path, out: Path, config: str | Path | None = None,
     cfg = load_config(resolve_path(path))
     if cfg.imu.source == cfg.turntable.source == "emulator":
         return simulated(cfg)
-    from hil.trial.noise_acquisition import acquire
 
     return NoiseRecord(_replayed(acquire(cfg, path, out, duration, quiet))[0], "devices", cfg)
 
 
 def simulated(cfg: Config) -> NoiseRecord:
     """The emulator's increments of a trial config, as ``hil simulate`` draws them."""
-    from emulators.simulation import Simulation
-
     return NoiseRecord(_concatenated(list(Simulation.from_config(cfg).batches())), "simulation", cfg)
 
 
 def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
     """The samples the estimator took in a replay of the recording, and the recorded config."""
-    from hil.pipeline.processor import TrialProcessor
-    from hil.recording.replay import open_recording, recorded_pace
-
     recording, cfg = open_recording(path)
     runs: list[AlignedBatch] = []
     time_scale = recorded_pace(recording)[1]
@@ -155,9 +156,6 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
     """The Allan deviation on the ``taus`` grid and the noise terms of a record (the table's motion taken out
     first if it moved; samples missing in gaps left out, ``missing`` in the document); ``label`` names the
     source in errors. Nothing is written."""
-    from hil.outputs.noise import noise_document
-    from hil.pipeline.table_motion import motion_residuals
-
     batch = record.batch
     period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
     is_moving = moving(batch, period)
@@ -188,10 +186,6 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     separated) and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
     :mod:`hil.trial.noise_acquisition`). ``record`` gives noise.json's ``record`` once the analysis is done."""
-    from hil.estimation.allan_taus import parse_taus
-    from hil.outputs.noise import write_noise
-    from hil.outputs.trial_report import write_noise_report
-
     try:
         grid = parse_taus(taus)
     except ValueError as exc:

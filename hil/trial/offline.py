@@ -8,12 +8,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from emulators.simulation import Simulation
 from hil.config import Config
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
+from hil.recording.csv_input import read_increments_csv
 from hil.recording.recorder import Recording, RecordingReader
-from hil.recording.replay import recorded_pace
+from hil.recording.replay import open_recording, recorded_pace, recording_path
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
@@ -24,8 +26,6 @@ if TYPE_CHECKING:
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
                ) -> tuple[TrialOutcome, Viewer | None]:
     """A recording's chunks through the processing of the live run, in the same order, read as they are fed."""
-    from hil.recording.replay import open_recording, recording_path
-
     out = Path(out) if out else recording_path(source).parent / "replay"
     recording, cfg = open_recording(source)
     with recording:
@@ -64,8 +64,6 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
     The batches are computed by ``process`` ahead of the estimator, on another core (``hil simulate``), or
     without one in line (a campaign's run: its worker has no core to spare)."""
     if process is None:
-        from emulators.simulation import Simulation
-
         batches = Simulation.from_config(cfg).batches()
     else:
         batches = process.batches(cfg)
@@ -81,8 +79,6 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
 
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
     """Increments (and table angles, if present) from a CSV into the processor; no truth."""
-    from hil.recording.csv_input import read_increments_csv
-
     processor = TrialProcessor(cfg)
     processor.feed_batch(read_increments_csv(data))
     return TrialOutcome.of(processor.finished(), cfg, config_text, out)

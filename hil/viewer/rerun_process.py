@@ -64,7 +64,7 @@ def start_viewer(mode: str, bind: str, telemetry: bool) -> tuple[subprocess.Pope
 def rerun_executable() -> str:
     """The ``rerun`` binary of the installed rerun-sdk (the one whose version matches the SDK)."""
     try:
-        import rerun_cli
+        import rerun_cli  # the viewer's binary, only when a viewer is started
 
         path = Path(rerun_cli.__file__).parent / "rerun"
         if path.exists():

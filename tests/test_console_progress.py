@@ -6,7 +6,7 @@ import io
 
 from rich.console import Console
 
-from hil.viewer.progress import ConsoleProgress, fitted
+from hil.viewer.console_progress import ConsoleProgress, fitted
 
 HEALTH = {"imu": {"frames": 0, "corrupt": 3, "missing": 0}, "table": {"frames": 0, "corrupt": 0, "missing": 0},
           "aligner": {"age_p99_ms": 4.2}}
