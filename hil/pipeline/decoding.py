@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from drivers.codec import Codec, RawChunk, StreamEvent
+from drivers.codec import Codec, Counters, RawChunk, StreamEvent
 from drivers.controllers import data_codec
 from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec
@@ -49,6 +49,14 @@ class Decoding:
     def flush(self) -> list[tuple[str, Samples | None]]:
         """End of data: every stream's samples still held."""
         return [(stream, decoder.flush()) for stream, decoder in self.decoders.items()]
+
+    def counters(self, stream: str) -> Counters:
+        """A stream's framer counters (frames, corrupt, missing, skipped bytes, gaps)."""
+        return self.decoders[stream].counters
+
+    def outages(self, stream: str) -> int:
+        """A stream's ``outage`` events."""
+        return self.decoders[stream].outages
 
     def frames(self) -> dict[str, int]:
         """Frames decoded per stream."""

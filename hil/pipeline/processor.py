@@ -201,11 +201,11 @@ class TrialProcessor:
         """The stream counters so far (those of result.json but the sync offset)."""
         if self._batched[0]:
             return StreamCounts(self._batched[0], self._batched[1], self._batched[0])
-        imu, table = (self._decoding.decoders[s].counters for s in (IMU, TABLE))
+        imu, table = (self._decoding.counters(s) for s in (IMU, TABLE))
         estimator = self._estimation.estimator
         extra = {
-            "imu_outages": self._decoding.decoders[IMU].outages,
-            "table_outages": self._decoding.decoders[TABLE].outages,
+            "imu_outages": self._decoding.outages(IMU),
+            "table_outages": self._decoding.outages(TABLE),
             "skipped_bytes": imu.skipped_bytes + table.skipped_bytes,
             "imu_missing": imu.missing,
             **self._judge.counts(),
@@ -224,8 +224,8 @@ class TrialProcessor:
         if self._batched[0]:
             return {"aligner": {"aligned": counts.aligned}}
         out: Health = {}
-        for name, decoder in self._decoding.decoders.items():
-            c = decoder.counters
+        for name in (IMU, TABLE):
+            c = self._decoding.counters(name)
             out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
                          "outages": counts.extra[f"{name}_outages"]}
         out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
