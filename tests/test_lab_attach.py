@@ -17,6 +17,7 @@ from drivers.acl import parse_message
 from hil.cli import main
 from hil.config import parse_config
 from hil.outputs.calibration_report import comparison, observed_truth
+from hil.pytest_plugin import read_cases
 from tests.helpers import processed
 
 TRIAL_S = 10.0
@@ -124,7 +125,8 @@ def test_a_harness_stopped_for_half_a_second_notices_the_lost_wraps_and_complete
         harness.send_signal(signal.SIGCONT)
         code = harness.wait(60)
     doc = result(out)
-    assert code == 0, (harness.stderr.read().decode(), {k: v for k, v in doc["streams"].items() if v})
+    failed = [case for case in read_cases(out / "junit.xml") if case.outcome != "passed"] if code == 3 else []
+    assert code == 0, (harness.stderr.read().decode(), failed, {k: v for k, v in doc["streams"].items() if v})
     streams = doc["streams"]
     assert doc["ended"] == "completed"
     assert streams["imu_missing"] + streams["sync"]["unpaired"] > 0  # the stall lost frames
