@@ -80,11 +80,8 @@ class DeviceWriter:
             return False
         if not port.plugged:
             port.replug()
-            if self.wait_readers and wait_for_readers([port], self.stop, 0.0):
-                deadline = time.monotonic() + REOPEN_SETTLE_S
-                while not port.configured() and time.monotonic() < deadline and not self.stop.wait(0.005):
-                    pass
-                self.stop.wait(0.02)  # the reader's flush follows its set-up
+            if self.wait_readers:
+                wait_for_readers([port], self.stop, settle_s=0.02, configure_s=REOPEN_SETTLE_S)
         return True
 
     def _send(self, frames: list, due: float | None) -> bool:

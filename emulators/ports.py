@@ -176,10 +176,16 @@ class CanPort:
         self.bus.shutdown()
 
 
-def wait_for_readers(ports: list, stop: threading.Event, settle_s: float = 0.2) -> bool:
-    """Wait until every port has a reader, then ``settle_s`` more (a client flushes its input while it
-    opens the port); False if stopped first."""
+def wait_for_readers(ports: list, stop: threading.Event, settle_s: float = 0.2, configure_s: float = 2.0) -> bool:
+    """Wait until every port has a reader, then until each reader has set its line up (at most
+    ``configure_s``: a reader such as ``cat`` never does), then ``settle_s`` more: a serial library flushes
+    its input just after it configures the port, and a frame written before that flush is lost to it.
+    False if stopped first."""
     while not all(p.has_reader() for p in ports):
         if stop.wait(WAIT_S / 5):
+            return False
+    deadline = time.monotonic() + configure_s
+    while not all(p.configured() for p in ports) and time.monotonic() < deadline:
+        if stop.wait(0.005):
             return False
     return not stop.wait(settle_s)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -13,8 +15,10 @@ import can
 import pytest
 import serial
 import yaml
+from emulators.in_process import EmulatorThread
+from hil.config import parse_config
 from tests.helpers import interruptible
-from test_emulated_shutdown import CONFIG
+from test_emulated_shutdown import CONFIG, tts1_counters
 
 KVH_HEADER = b"\xfe\x81\xff\x55"
 
@@ -99,3 +103,32 @@ def test_hil_run_reads_the_default_emulated_can_imu_from_the_emulators_process(t
     # UDP has no flow control: with the suite's other worker busy beside it, a few % of the datagrams can go
     # (1128 of 1200 seen); a harness that fell behind for good would lose far more
     assert result["streams"]["imu_frames"] >= 0.9 * 1200 and result["estimate"]["gram_rank"] == 12
+
+
+def test_readers_slow_to_set_their_ports_up_lose_no_frame_to_their_own_flush():
+    """Held for its readers (``--wait-readers``, the harness's own emulator), the pulse train waits until each
+    reader has configured its port: a serial library flushes its input just after, and a frame written before
+    that flush would be lost to it. The readers here hold the ports open for longer than the settling time
+    before they configure them."""
+    cfg = parse_config({**CONFIG, "trial": {**CONFIG["trial"], "duration_s": 2.0}})
+    with EmulatorThread(cfg, speed=None, duration=2.0) as emulator:
+        held = [os.open(emulator.ports[name], os.O_RDONLY | os.O_NOCTTY) for name in ("imu", "turntable_data")]
+        try:
+            time.sleep(0.5)  # longer than the settling time: the readers are slow to set their lines up
+            data = {"imu": b"", "turntable_data": b""}
+            ports = {name: serial.Serial(emulator.ports[name], 921600, timeout=0.02) for name in data}
+            while emulator.thread.is_alive():  # it drains its ports into the readers before it closes them
+                for name, port in ports.items():
+                    with contextlib.suppress(serial.SerialException):  # closed after its last frame
+                        data[name] += port.read(1 << 16)
+            stats = emulator.join()
+        finally:
+            for fd in held:
+                os.close(fd)
+            for port in ports.values():
+                port.close()
+    kvh = data["imu"]
+    assert kvh.startswith(KVH_HEADER) and kvh.count(KVH_HEADER) == stats.devices["imu"].frames == 400
+    counters = tts1_counters(data["turntable_data"])
+    assert len(counters) == stats.devices["turntable_data"].frames == 400
+    assert counters == list(range(counters[0], counters[0] + 400))  # from the first pulse, none missing

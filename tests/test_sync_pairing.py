@@ -156,3 +156,32 @@ def test_unpaced_the_first_frames_give_the_coarse_offset_and_the_motion_the_exac
     pairing.add_table(_table(np.arange(150_000, 152_000)))
     pairing.add_imu(imu)
     assert pairing.report.paired_by == "motion" and pairing.report.offset_pulses == OFFSET
+
+
+def test_unpaced_a_receive_time_pairing_that_lost_frames_misled_is_set_right_once_the_table_moves():
+    """At ``--speed max`` a reader's flush on opening can take a stream's first frames, and the first counters
+    then put the coarse offset that many pulses off. On a table at rest that offset stands, by receive time;
+    the table's first motion is searched over the whole of the coarse offset's uncertainty and sets it right."""
+    start, lost, moves = 150_000, 60, 151_000
+
+    def inner(p: np.ndarray) -> np.ndarray:  # at rest, then the swing from zero
+        return np.where(p >= moves, AMPLITUDE * np.sin(2 * math.pi * (p - moves) / RATE / PERIOD), 0.0)
+
+    pairing = _pairing(None)
+    for first in range(start, start + 3000, PER):
+        p = np.arange(first, first + PER)
+        angles = np.zeros((PER, 3))
+        angles[:, 2] = inner(p)
+        pairing.add_table(TableSamples(p, angles, np.zeros(PER), np.zeros(PER), np.zeros(PER, dtype=np.int64)))
+        p = p[p >= start + lost]  # the IMU's first frames were flushed
+        dtheta = np.zeros((len(p), 3))
+        dtheta[:, 1] = inner(p) - inner(p - 1)
+        pairing.add_imu(ImuSamples(p - OFFSET, dtheta, np.zeros((len(p), 3)), np.zeros(len(p)),
+                                   np.zeros(len(p), dtype=np.int64)))
+        if first == moves - PER:  # still at rest: paired by the first counters, 60 pulses off
+            assert pairing.report.paired_by == "receive_time" and pairing.report.offset_pulses == OFFSET - lost
+    report = pairing.report
+    assert report.paired_by == "motion" and report.offset_pulses == OFFSET
+    assert [r["cause"] for r in report.repairs] == [f"imu: gyro/table disagreement ({lost:+d} pulses)"]
+    moved_at = (moves - start - lost) / RATE  # trial time counts from the first IMU sample paired
+    assert moved_at < report.repairs[0]["at_s"] < moved_at + 2 * 2.0  # within two checks

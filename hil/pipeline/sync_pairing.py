@@ -95,6 +95,7 @@ class SyncPairing:
         self.report = SyncReport()
         self._checked = 0  # IMU pulse of the last motion check
         self._first_pulse: int | None = None  # the first IMU pulse paired: trial times count from it
+        self._unconfirmed = 0  # pulses either side of a receive-time pairing that its motion checks search
 
     @property
     def failure(self) -> str | None:
@@ -154,7 +155,8 @@ class SyncPairing:
         if s.offset is None:
             s.held.append(samples)
             s.segment.append((h, e))
-            self._trim_held(s)
+            dropped = s.trim(HOLD_S * self.rate)  # at most HOLD_S of a waiting stream's samples are held
+            self.report.unpaired += dropped if s is self.imu else 0  # older IMU samples are unpaired
             return self._settle(s)
         late = e - s.offset
         baseline = s.baseline() if self.host_rate is not None else None
@@ -204,6 +206,7 @@ class SyncPairing:
             return self._paired(s, match.offset, MOTION)
         table_span = (pulses[-1] - pulses[0]) / self.rate
         if (not match.moving and table_span >= STILL_S) or s.waited(self.rate) >= HOLD_S:
+            self._unconfirmed = search  # the motion checks search this much until the motion decides
             return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
         return None
 
@@ -241,11 +244,13 @@ class SyncPairing:
 
     def _check_motion(self, released: ImuSamples) -> None:
         """Every ``CHECK_S``, the gyros against the table: a better offset nearby re-pairs the IMU; a pairing
-        by receive time that the motion confirms becomes one by motion."""
+        by receive time, searched over the whole of its coarse offset's uncertainty, becomes one by motion
+        once the motion decides (at the offset it had or at a better one)."""
         newest = int(released.sync_index[-1])
         if newest - self._checked < CHECK_S * self.rate or not len(self.motion.table[0]):
             return
-        search = math.ceil(self.receive.tolerance()) + 2 if self.host_rate is not None else 3
+        near = math.ceil(self.receive.tolerance()) + 2 if self.host_rate is not None else 3
+        search = near if self.report.paired_by == MOTION else self._unconfirmed
         match = self.motion.match(*self.motion.imu, np.arange(-search, search + 1))
         if match.moving and match.intervals < MIN_INTERVALS:
             return  # too little data since a break: again at the next read
@@ -268,8 +273,3 @@ class SyncPairing:
         if self._first_pulse is None:
             self._first_pulse = pulse
         return (pulse - self._first_pulse) / self.rate
-
-    def _trim_held(self, s: StreamPairing) -> None:
-        """At most ``HOLD_S`` of a waiting stream's samples are held; older IMU samples are unpaired."""
-        dropped = s.trim(HOLD_S * self.rate)
-        self.report.unpaired += dropped if s is self.imu else 0
