@@ -38,6 +38,7 @@ from hil.estimation.calibration_model import (
     forward_jacobian,
     inverse,
     least_squares,
+    measured_noise,
     misalignment_matrix,
     triad_matrix,
     window_means,
@@ -91,7 +92,8 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
         raise ValueError("accelerometer calibration needs dwell windows (zero gimbal rates)")
     y = np.array([w.specific_force for w in static])
     samples = np.array([w.samples for w in static], dtype=float)
-    ones = np.ones_like(y)
+    noise = measured_noise(static, "force")  # each sample's variance, measured in its window
+    prior = noise if noise is not None else np.ones_like(y)
 
     def reference_at(zero: np.ndarray) -> np.ndarray:
         return specific_force_reference(static, earth, geometry, zero)
@@ -105,18 +107,20 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
 
     def vector_fit(theta0: np.ndarray, groups: Sequence[str]) -> Fit:
         chosen = names(groups)
-        result = least_squares(theta0, _unit_basis(chosen), chosen, vector_model, samples, ones, tolerance)
+        result = least_squares(theta0, _unit_basis(chosen), chosen, vector_model, samples, prior, tolerance,
+                               measured=noise is not None)
         return _with_outer_reason(result)
 
     coarse = vector_fit(np.zeros(len(TERMS)), [g for g in fit if g != "nonlinearity"])
-    fine = _fine_stage(coarse, y, samples, earth.g, fit, tolerance)
+    fine = _fine_stage(coarse, y, samples, earth.g, fit, tolerance, noise)
     refined = vector_fit(fine.theta, fit)
     return AccelCalibration(coarse, fine, refined, earth.g, raw_force_residuals(static, earth, geometry))
 
 
 def _fine_stage(coarse: Fit, y: np.ndarray, samples: np.ndarray, gravity: float, fit: Sequence[str],
-                tolerance: float) -> Fit:
-    """Eq. (16) iterated: magnitudes against gravity, from the coarse solution."""
+                tolerance: float, noise: np.ndarray | None) -> Fit:
+    """Eq. (16) iterated: magnitudes against gravity, from the coarse solution; ``noise`` (N, 3) each sample's
+    variance per axis as measured in its window (None: the coarse fit's per-axis noise)."""
     columns, chosen = [], []
     for name in TERMS:
         group = name.rsplit("_", 1)[0]
@@ -129,16 +133,22 @@ def _fine_stage(coarse: Fit, y: np.ndarray, samples: np.ndarray, gravity: float,
             column[INDEX[first]], column[INDEX[second]] = 0.5, 0.5 * sign
             columns.append(column)
             chosen.append(pair)
-    # per-window variance of a magnitude from the coarse per-axis noise, along the measured direction
+    # per-window variance of a magnitude from the per-axis noise, along the measured direction
     direction = y / np.linalg.norm(y, axis=1, keepdims=True)
-    axis_noise = np.where(np.isfinite(coarse.noise) & (coarse.noise > 0), coarse.noise, 1.0)
-    prior = (direction**2 @ axis_noise**2)[:, None] * gravity**2
+    if noise is None:
+        axis_noise = np.where(np.isfinite(coarse.noise) & (coarse.noise > 0), coarse.noise, 1.0)
+        noise = np.broadcast_to(axis_noise**2, y.shape)
+        measured = False
+    else:
+        measured = True
+    prior = np.sum(direction**2 * noise, axis=1)[:, None] * gravity**2
 
     def magnitude_model(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return (0.5 * (gravity**2 - np.sum(inverse(theta, y) ** 2, axis=1)))[:, None], \
             magnitude_jacobian(theta, y)[:, None, :]
 
-    return least_squares(coarse.theta, np.array(columns).T, chosen, magnitude_model, samples, prior, tolerance)
+    return least_squares(coarse.theta, np.array(columns).T, chosen, magnitude_model, samples, prior, tolerance,
+                         measured=measured)
 
 
 def magnitude_jacobian(theta: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ TERMS = (
 INDEX = {name: k for k, name in enumerate(TERMS)}
 BIAS, SCALE, MIS, NONLIN, ZERO = (slice(0, 3), slice(3, 6), slice(6, 12), slice(12, 15), slice(15, 18))
 ZERO_STEP = 1e-6  # rad, central-difference step of the reference in the zero offsets
+NOISE_FLOOR = 1e-9  # a sample's noise below this fraction of its window's mean is rounding, not noise
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,8 @@ class Window:
     the window (plain mean = the window mean; a dwell may give one row, its mean); ``rates`` (3,) rad/s: the gimbal rates of a plateau (zero for a dwell);
     ``specific_force`` (3,) m/s^2 = sum(dv) / window length; ``angular_rate`` (3,) rad/s = sum(dtheta) /
     window length; ``samples``: IMU samples averaged (the weight of the window); ``duration_s``: its length.
+    ``force_noise`` and ``rate_noise`` (3,): the variance of one sample's specific force (m^2/s^4) and angular
+    rate (rad^2/s^2) measured in the window (:func:`sample_noise`), None where unknown.
     """
 
     angles: np.ndarray
@@ -56,6 +59,8 @@ class Window:
     angular_rate: np.ndarray
     samples: int
     duration_s: float
+    force_noise: np.ndarray | None = None
+    rate_noise: np.ndarray | None = None
 
     @property
     def static(self) -> bool:
@@ -67,8 +72,31 @@ def window_from_samples(dtheta: np.ndarray, dv: np.ndarray, dt: np.ndarray, angl
     """A :class:`Window` from the aligned samples inside it: increments (N, 3), their intervals dt (N,) s,
     and the encoder angles (M, 3) rad latched through the window."""
     span = float(np.sum(dt))
+    dt = np.asarray(dt, float)[:, None]
     return Window(np.atleast_2d(np.asarray(angles, float)), np.asarray(rates, float),
-                  np.sum(dv, axis=0) / span, np.sum(dtheta, axis=0) / span, len(dt), span)
+                  np.sum(dv, axis=0) / span, np.sum(dtheta, axis=0) / span, len(dt), span,
+                  sample_noise(np.asarray(dv) / dt), sample_noise(np.asarray(dtheta) / dt))
+
+
+def sample_noise(values: np.ndarray) -> np.ndarray | None:
+    """The variance of one sample's white noise (3,) from the successive differences of the window's samples
+    (N, 3), ``mean((x_k - x_k-1)^2) / 2``: blind to a slow change of the signal (the earth's rate turning in a
+    plateau), which a plain variance would count as noise. None for fewer than two samples."""
+    if len(values) < 2:
+        return None
+    return np.mean(np.diff(values, axis=0) ** 2, axis=0) / 2.0
+
+
+def measured_noise(windows: Sequence[Window], kind: str) -> np.ndarray | None:
+    """The windows' ``force_noise`` or ``rate_noise`` (``kind`` "force" / "rate") as (N, 3), when every window
+    has it above :data:`NOISE_FLOOR` of its mean's size; else None: noise-free data (a float64 simulation's
+    rounding) have no scale to weigh by."""
+    noise = [getattr(w, f"{kind}_noise") for w in windows]
+    if any(n is None for n in noise):
+        return None
+    size = np.linalg.norm([w.specific_force if kind == "force" else w.angular_rate for w in windows], axis=1)
+    noise = np.array(noise)
+    return noise if np.all(noise > (NOISE_FLOOR * size[:, None]) ** 2) else None
 
 
 def window_means(windows: Sequence[Window], zero_offsets: np.ndarray,
@@ -210,15 +238,19 @@ def select_terms(design: np.ndarray, names: Sequence[str], tolerance: float) -> 
 def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
                   model: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], samples: np.ndarray,
                   prior: np.ndarray, tolerance: float, iterations: int = 8,
-                  held_covariance: np.ndarray | None = None) -> Fit:
+                  held_covariance: np.ndarray | None = None, measured: bool = False) -> Fit:
     """Weighted Gauss-Newton over the coordinates ``basis`` (18, p) of theta, named ``names``.
 
     ``model(theta)`` gives the residuals (N, G) (observation minus prediction) and the Jacobian of the
     prediction (N, G, 18); column g of the residuals belongs to noise group g. A window's weight is
     ``samples / (prior * s_g^2)``: ``prior`` (N, G) is the relative per-sample variance, s_g^2 the
     group's variance factor from the residuals (dof from the leverages), re-estimated each iteration.
-    ``held_covariance`` (18, 18): the covariance of terms held at values estimated elsewhere (zero for the
-    others), carried into the fitted terms through the Jacobian.
+    ``measured``: ``prior`` is each sample's variance as measured inside the windows; s_g^2 then only
+    inflates it (residuals larger than that noise explains: an error the model lacks), never shrinks it.
+    A factor from the residuals alone rests on few degrees of freedom (18 windows, some 16 terms): the
+    errors over sigmas it gives follow Student's t with about a dozen, whose tails are far heavier than the
+    normal's. ``held_covariance`` (18, 18): the covariance of terms held at values estimated elsewhere (zero
+    for the others), carried into the fitted terms through the Jacobian.
     """
     theta = np.array(theta0, dtype=float)
     residual, jac = model(theta)
@@ -226,19 +258,23 @@ def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
     kept, unobservable = select_terms(design.reshape(-1, basis.shape[1]), names, tolerance)
     basis = basis[:, kept]
     factor = np.ones(residual.shape[1])
+
+    def usable(f: np.ndarray) -> np.ndarray:
+        return np.maximum(_usable(f), 1.0) if measured else _usable(f)
+
     for _ in range(iterations):
         h = (jac @ basis).reshape(-1, len(kept))
-        w = (samples[:, None] / (prior * _usable(factor))).reshape(-1)
+        w = (samples[:, None] / (prior * usable(factor))).reshape(-1)
         step = np.linalg.solve(h.T @ (w[:, None] * h), h.T @ (w * residual.reshape(-1)))
         theta = theta + basis @ step
         residual, jac = model(theta)
-        factor = _variance_factors(residual, jac @ basis, samples[:, None] / prior, _usable(factor))
+        factor = _variance_factors(residual, jac @ basis, samples[:, None] / prior, usable(factor))
         if np.max(np.abs(step)) < 1e-15:
             break
     h = (jac @ basis).reshape(-1, len(kept))
-    w = (samples[:, None] / (prior * _usable(factor))).reshape(-1)
+    w = (samples[:, None] / (prior * usable(factor))).reshape(-1)
     # sandwich form: a group whose residuals are zero (noise-free data) gets zero variance
-    ratio = np.broadcast_to(factor / _usable(factor), (len(samples), len(factor))).reshape(-1)
+    ratio = np.broadcast_to(1.0 if measured else factor / usable(factor), (len(samples), len(factor))).reshape(-1)
     root = np.linalg.inv(h.T @ (w[:, None] * h))
     cov_fit = root @ (h.T @ ((w * ratio)[:, None] * h)) @ root
     covariance = basis @ cov_fit @ basis.T

@@ -23,6 +23,7 @@ from hil.estimation.calibration_model import (
     forward,
     forward_jacobian,
     least_squares,
+    measured_noise,
     window_means,
 )
 from hil.frames import Earth, TableGeometry
@@ -77,4 +78,6 @@ def calibrate_gyros(windows: Sequence[Window], earth: Earth, geometry: TableGeom
         held[15:18, 15:18] = np.nan_to_num(zero_offset_covariance)
         if "zero_offset_outer" in names:
             held[15, :] = held[:, 15] = 0.0
-    return least_squares(theta0, basis, names, model, samples, np.ones_like(y), tolerance, held_covariance=held)
+    noise = measured_noise(windows, "rate")  # each sample's variance, measured in its window
+    return least_squares(theta0, basis, names, model, samples, noise if noise is not None else np.ones_like(y),
+                         tolerance, held_covariance=held, measured=noise is not None)
