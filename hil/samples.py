@@ -9,7 +9,9 @@ of aligned samples as batches, and a simulation or a CSV import feeds aligned ba
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -179,16 +181,17 @@ class AlignedBatch:
         return cls(t, dtheta, dv, angles, t0)
 
 
-@dataclass
+@dataclass(frozen=True)
 class StreamCounts:
-    """A trial's stream counters: result.json's ``streams`` (``extra``: the detailed counts, in order)."""
+    """A trial's stream counters: result.json's ``streams`` (``extra``: the detailed counts, in order; read-only
+    where the pipeline publishes them)."""
 
     imu_frames: int = 0
     table_frames: int = 0
     aligned: int = 0
     dropped: int = 0
     corrupt: int = 0
-    extra: dict[str, int | float | None] = field(default_factory=dict)
+    extra: Mapping[str, int | float | dict | None] = field(default_factory=lambda: MappingProxyType({}))
 
     def as_dict(self) -> dict[str, int | float | None]:
         return {

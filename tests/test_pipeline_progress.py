@@ -28,6 +28,11 @@ def test_every_listener_hears_each_progress_the_caller_gets_in_order():
     assert all(a is b is c for a, b, c in zip(returned, heard[0::2], heard[1::2]))
     with pytest.raises(dataclasses.FrozenInstanceError):
         returned[0].trial_time = 0.0  # type: ignore[misc]
+    # nor can a listener change what the next one hears through the counts or the health
+    with pytest.raises(TypeError):
+        returned[0].health["aligner"]["aligned"] = 0  # type: ignore[index]
+    with pytest.raises(TypeError):
+        returned[0].counts.extra["imu_missing"] = 0  # type: ignore[index]
 
 
 def test_the_blocks_taken_and_the_snapshots_published_are_all_the_estimator_had():

@@ -9,6 +9,8 @@ increments) enter at the estimate stage, in batches. After every item it publish
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -22,7 +24,7 @@ from hil.pipeline.decoding import IMU, TABLE, Decoding, Samples
 from hil.pipeline.estimate import Estimation
 from hil.pipeline.judge import Judge
 from hil.pipeline.motion_match import TableRotations
-from hil.pipeline.progress import Finished, Health, Listener, Progress, Taken
+from hil.pipeline.progress import Finished, Health, Listener, Progress, Taken, read_only
 from hil.pipeline.sync_pairing import SyncPairing
 from hil.samples import AlignedBatch, ImuGap, ImuSamples, StreamCounts, TableSamples
 
@@ -123,8 +125,9 @@ class TrialProcessor:
         streams = self._counts()
         if not self._batched[0]:
             offset = self._estimation.time_offset_s()
-            streams.extra["sync_offset_ms"] = None if offset is None else offset * 1e3
-            streams.extra["sync"] = None if self._pairing is None else self._pairing.report.as_dict()
+            streams = replace(streams, extra=MappingProxyType({
+                **streams.extra, "sync_offset_ms": None if offset is None else offset * 1e3,
+                "sync": None if self._pairing is None else self._pairing.report.as_dict()}))
         applied = self._compensation.applied if self._compensation is not None else None
         return Finished(self._estimation.estimator, streams, applied, self._last)
 
@@ -217,13 +220,13 @@ class TrialProcessor:
             **self._ignored,
         }
         return StreamCounts(imu.frames, table.frames, self._aligner.counters.aligned, imu.missing + table.missing,
-                            imu.corrupt + table.corrupt + self._judge.plausibility.rejected, extra)
+                            imu.corrupt + table.corrupt + self._judge.plausibility.rejected, MappingProxyType(extra))
 
     def _health(self, counts: StreamCounts) -> Health:
         """Per-stream counters for the viewer's stream-health panel and the console."""
         if self._batched[0]:
-            return {"aligner": {"aligned": counts.aligned}}
-        out: Health = {}
+            return read_only({"aligner": {"aligned": counts.aligned}})
+        out = {}
         for name in (IMU, TABLE):
             c = self._decoding.counters(name)
             out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
@@ -231,7 +234,7 @@ class TrialProcessor:
         out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
                           "bridged": counts.extra["aligner_imu_bridged"],
                           "without_angles": counts.extra["aligner_without_angles"]}
-        return out
+        return read_only(out)
 
 
 def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, earth: Earth,

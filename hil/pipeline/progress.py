@@ -7,13 +7,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.samples import AlignedBatch, StreamCounts
 
-Health = dict[str, dict[str, float]]
+Health = Mapping[str, Mapping[str, float]]
+
+
+def read_only(health: dict[str, dict[str, float]]) -> Health:
+    """The per-stream figures as a read-only mapping of read-only mappings, as a :class:`Progress` holds them."""
+    return MappingProxyType({stream: MappingProxyType(values) for stream, values in health.items()})
 
 
 @dataclass(frozen=True)
@@ -35,7 +41,8 @@ class Progress:
     held for the estimator's next block, ``updates`` the blocks the estimator has taken; ``complete``: the
     configured duration is processed; ``stalled``: why the trial cannot go on (every IMU sample rejected, or the
     streams cannot be paired), else None. ``frames`` the frames decoded per stream, ``counts`` result.json's
-    stream counters so far, ``health`` the per-stream figures of the viewer's panel and the console.
+    stream counters so far, ``health`` the per-stream figures of the viewer's panel and the console (both
+    read-only: a listener cannot change what the next one receives).
     ``taken`` the blocks the estimator took with this item, ``snapshots`` the solutions they gave, ``latest``
     the newest solution so far. ``time_offset_s``: the table's lag behind the IMU (s,
     :mod:`hil.pipeline.time_offset`), measured every ``offset_every_s`` of trial time when the pipeline was
@@ -65,7 +72,7 @@ class Progress:
         out = {stream: dict(values) for stream, values in self.health.items()}
         for stream, values in live.items():
             out.setdefault(stream, {}).update(values)
-        return out
+        return read_only(out)
 
 
 Listener = Callable[[Progress], None]

@@ -21,7 +21,7 @@ import queue
 import subprocess
 import threading
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Self
 
@@ -146,7 +146,7 @@ class TrialViewer:
         t_kept, angles_kept = t[keep], np.array(angles, dtype=float)[keep]
         self._submit(lambda: self._write_table(t_kept, angles_kept))
 
-    def log_health(self, t: float, health: dict[str, dict[str, float]]) -> None:
+    def log_health(self, t: float, health: Mapping[str, Mapping[str, float]]) -> None:
         """Stream counters at trial time t: {stream: {metric: value}}, e.g. rate_hz, dropped, latency_ms."""
         if self._rec is None:
             return
