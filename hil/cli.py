@@ -140,7 +140,8 @@ def cmd_noise(args: argparse.Namespace) -> int:
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
                         rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet,
-                        record=lambda: noise_record(given, args.source, args.started, datetime.now(timezone.utc)))
+                        record=lambda cfg: noise_record(given, args.source, cfg, args.started,
+                                                        datetime.now(timezone.utc)))
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -13,7 +13,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from hil.config import Config, RecordConfig, load_config
+from hil.config import Config, RecordConfig
 from hil.recording.recorder import package_version, read_start_record
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
@@ -68,12 +68,14 @@ def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None) ->
     return {**record, **_devices(cfg, ports)}
 
 
-def noise_record(given: dict[str, str | None], source: str | Path, started: datetime,
+def noise_record(given: dict[str, str | None], source: str | Path, config: Config | None, started: datetime,
                  ended: datetime) -> dict[str, Any]:
-    """noise.json's record: a config source's ``record`` block overridden by the options ``given`` (dut_serial,
-    operator, station), the source's digest when it is a file (a config, a CSV; None for a run directory), no ports or controller of its own."""
+    """noise.json's record: the ``record`` block of the source's ``config`` (a config source's, as loaded for the
+    run; None for a recording or CSV) overridden by the options ``given`` (dut_serial, operator, station), the
+    source's digest when it is a file (a config, a CSV; None for a run directory), no ports or controller of
+    its own."""
     path = Path(source)
-    config = load_config(path).record if path.suffix in (".yaml", ".yml") else RecordConfig()
-    fields = config.model_dump() | {key: value for key, value in given.items() if value is not None}
+    block = config.record if config is not None else RecordConfig()
+    fields = block.model_dump() | {key: value for key, value in given.items() if value is not None}
     text = path.read_text(errors="replace") if path.is_file() and path.suffix in (".yaml", ".yml", ".csv") else None
     return {**run_record(fields, text, started, ended), "source": str(source), "ports": None, "controller": None}

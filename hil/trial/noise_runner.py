@@ -44,6 +44,11 @@ class NoiseRecord:
     source: str  # "devices", "simulation", "recording" or "csv"
     cfg: Config | None  # the trial's config (site, table): --config, else the recorded or simulated one
 
+    @property
+    def source_config(self) -> Config | None:
+        """The config the source was (simulated or acquired from its devices); None for a recording or a CSV."""
+        return self.cfg if self.source in ("simulation", "devices") else None
+
 
 def read_source(source: str | Path, out: Path, config: str | Path | None = None, duration: float | None = None,
                 quiet: bool = False) -> NoiseRecord:
@@ -181,11 +186,13 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
               figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
-              duration: float | None = None, quiet: bool = False, record: Callable[[], dict] | None = None) -> dict:
+              duration: float | None = None, quiet: bool = False,
+              record: Callable[[Config | None], dict] | None = None) -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
     separated) and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
-    :mod:`hil.trial.noise_acquisition`). ``record`` gives noise.json's ``record`` once the analysis is done."""
+    :mod:`hil.trial.noise_acquisition`). ``record(source_config)`` gives noise.json's ``record`` once the analysis
+    is done (``source_config``: :attr:`NoiseRecord.source_config`)."""
     try:
         grid = parse_taus(taus)
     except ValueError as exc:
@@ -195,7 +202,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
         write_increments_csv(export, samples.batch)
     analysis = analyse_record(samples, str(source), level, grid)
     if record is not None:
-        analysis.doc["record"] = record()
+        analysis.doc["record"] = record(samples.source_config)
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
     if rerun:
