@@ -92,7 +92,8 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
         raise ValueError("accelerometer calibration needs dwell windows (zero gimbal rates)")
     y = np.array([w.specific_force for w in static])
     samples = np.array([w.samples for w in static], dtype=float)
-    noise = measured_noise(static, "force")  # each sample's variance, measured in its window
+    # each sample's variance, measured in its window
+    noise = measured_noise([w.force_noise for w in static], y)
     prior = noise if noise is not None else np.ones_like(y)
 
     def reference_at(zero: np.ndarray) -> np.ndarray:
@@ -135,12 +136,10 @@ def _fine_stage(coarse: Fit, y: np.ndarray, samples: np.ndarray, gravity: float,
             chosen.append(pair)
     # per-window variance of a magnitude from the per-axis noise, along the measured direction
     direction = y / np.linalg.norm(y, axis=1, keepdims=True)
-    if noise is None:
+    measured = noise is not None
+    if not measured:
         axis_noise = np.where(np.isfinite(coarse.noise) & (coarse.noise > 0), coarse.noise, 1.0)
         noise = np.broadcast_to(axis_noise**2, y.shape)
-        measured = False
-    else:
-        measured = True
     prior = np.sum(direction**2 * noise, axis=1)[:, None] * gravity**2
 
     def magnitude_model(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -87,16 +87,15 @@ def sample_noise(values: np.ndarray) -> np.ndarray | None:
     return np.mean(np.diff(values, axis=0) ** 2, axis=0) / 2.0
 
 
-def measured_noise(windows: Sequence[Window], kind: str) -> np.ndarray | None:
-    """The windows' ``force_noise`` or ``rate_noise`` (``kind`` "force" / "rate") as (N, 3), when every window
-    has it above :data:`NOISE_FLOOR` of its mean's size; else None: noise-free data (a float64 simulation's
-    rounding) have no scale to weigh by."""
-    noise = [getattr(w, f"{kind}_noise") for w in windows]
+def measured_noise(noise: Sequence[np.ndarray | None], means: np.ndarray) -> np.ndarray | None:
+    """The windows' measured sample variances (their ``force_noise`` or ``rate_noise``) as (N, 3), when every
+    window has them above :data:`NOISE_FLOOR` of its mean's size (``means`` (N, 3), the windows' specific force
+    or angular rate); else None: noise-free data (a float64 simulation's rounding) have no scale to weigh by."""
     if any(n is None for n in noise):
         return None
-    size = np.linalg.norm([w.specific_force if kind == "force" else w.angular_rate for w in windows], axis=1)
     noise = np.array(noise)
-    return noise if np.all(noise > (NOISE_FLOOR * size[:, None]) ** 2) else None
+    floor = (NOISE_FLOOR * np.linalg.norm(means, axis=1))[:, None] ** 2
+    return noise if np.all(noise > floor) else None
 
 
 def window_means(windows: Sequence[Window], zero_offsets: np.ndarray,

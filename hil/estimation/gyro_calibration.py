@@ -78,6 +78,7 @@ def calibrate_gyros(windows: Sequence[Window], earth: Earth, geometry: TableGeom
         held[15:18, 15:18] = np.nan_to_num(zero_offset_covariance)
         if "zero_offset_outer" in names:
             held[15, :] = held[:, 15] = 0.0
-    noise = measured_noise(windows, "rate")  # each sample's variance, measured in its window
+    # each sample's variance, measured in its window
+    noise = measured_noise([w.rate_noise for w in windows], y)
     return least_squares(theta0, basis, names, model, samples, noise if noise is not None else np.ones_like(y),
                          tolerance, held_covariance=held, measured=noise is not None)
