@@ -34,7 +34,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", default="1", type=speed_option, help="X times real time, or 'max' (default 1)")
     parser.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
     parser.add_argument("--wait-readers", action="store_true",
-                        help="hold the pulse train until every port has a reader that has set its line up "
+                        help="hold the pulse train until every port has a reader that has emptied its input "
                              "(default: stream at once, as hardware does; frames nobody reads are lost and counted)")
 
 

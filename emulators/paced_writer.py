@@ -19,7 +19,7 @@ from emulators.ports import WAIT_S, wait_for_readers
 from emulators.sources import Emission
 
 DRAIN_S = 5.0  # longest wait for a reader to take the bytes queued before an unplug, or at the end
-REOPEN_SETTLE_S = 0.5  # after a replug, the longest wait for a reader to finish opening the port
+REOPEN_FLUSH_S = 0.5  # after a replug, the longest wait for a reader to finish opening the port
 
 
 class DeviceWriter:
@@ -81,7 +81,7 @@ class DeviceWriter:
         if not port.plugged:
             port.replug()
             if self.wait_readers:
-                wait_for_readers([port], self.stop, settle_s=0.02, configure_s=REOPEN_SETTLE_S)
+                wait_for_readers([port], self.stop, flush_s=REOPEN_FLUSH_S)
         return True
 
     def _send(self, frames: list, due: float | None) -> bool:

@@ -1,7 +1,7 @@
 """The emulated devices' ports: a pseudo-terminal per serial device, a python-can bus for a CAN IMU.
 
 Both offer the same small interface to the device writers: ``path`` (what clients open), ``write``,
-``has_reader`` / ``accepting`` / ``configured`` (what a UART's far end would show), ``drain``, and
+``has_reader`` / ``accepting`` / ``flushed`` (what a UART's far end would show), ``drain``, and
 ``unplug`` / ``replug`` / ``close``.
 """
 
@@ -20,7 +20,7 @@ from pathlib import Path
 from drivers.transport import open_can_bus
 
 WAIT_S = 0.1  # longest blocking step, so a stop request is seen promptly
-PROBE_SPEED = termios.B50  # a fresh pty's line speed, so the reader's own settings show when it configures it
+PACKET_MODE = struct.pack("i", 1)  # TIOCPKT on the master: a flush of the reader's input is reported to it
 
 
 class PtyPort:
@@ -45,9 +45,8 @@ class PtyPort:
         os.close(slave)  # the slave stays valid while the master is open
         os.set_blocking(self.master, False)
         self.plugged = True
-        attrs = termios.tcgetattr(self.master)  # on a pty master: the slave's settings
-        attrs[4] = attrs[5] = PROBE_SPEED
-        termios.tcsetattr(self.master, termios.TCSANOW, attrs)
+        fcntl.ioctl(self.master, termios.TIOCPKT, PACKET_MODE)
+        self._flushed = False
         if self.link is not None:
             tmp = self.link.with_name(f"{self.link.name}.{os.getpid()}.new")
             tmp.unlink(missing_ok=True)
@@ -58,10 +57,10 @@ class PtyPort:
     def path(self) -> str:
         return str(self.link) if self.link is not None else self.tty
 
-    def _events(self, timeout_ms: float) -> list[int]:
+    def _events(self, timeout_ms: float, mask: int = select.POLLOUT) -> list[int]:
         """The master's poll events (a poll object per call: the writer thread and the drain may ask at once)."""
         poll = select.poll()
-        poll.register(self.master, select.POLLOUT)
+        poll.register(self.master, mask)
         return [events for _, events in poll.poll(timeout_ms)]
 
     def has_reader(self) -> bool:
@@ -72,9 +71,18 @@ class PtyPort:
         """True when a reader holds the port and its input queue has room: a UART's bytes would arrive."""
         return any(e & select.POLLOUT and not e & select.POLLHUP for e in self._events(0))
 
-    def configured(self) -> bool:
-        """True once a reader has set the line up (a serial library does, and then flushes its input)."""
-        return termios.tcgetattr(self.master)[5] != PROBE_SPEED
+    def flushed(self) -> bool:
+        """True once the reader has emptied its input (a serial library does as it opens the port, just after
+        setting the line up): bytes written from then on reach it. Packet mode reports the flush to the master
+        as a status byte; what the reader wrote to the port is read and dropped with it."""
+        while not self._flushed and any(e & (select.POLLIN | select.POLLPRI) for e in self._events(0, select.POLLIN
+                                                                                              | select.POLLPRI)):
+            try:
+                packet = os.read(self.master, 4096)
+            except OSError:  # EIO: no reader holds the port
+                break
+            self._flushed = bool(packet) and bool(packet[0] & termios.TIOCPKT_FLUSHREAD)
+        return self._flushed
 
     def write(self, data: bytes, stop: threading.Event) -> bool:
         """Write all of ``data``, waiting while the kernel buffer is full; False if stopped first."""
@@ -152,7 +160,7 @@ class CanPort:
     def accepting(self) -> bool:
         return True
 
-    def configured(self) -> bool:
+    def flushed(self) -> bool:
         return True
 
     def write(self, messages: list, stop: threading.Event) -> bool:
@@ -176,16 +184,16 @@ class CanPort:
         self.bus.shutdown()
 
 
-def wait_for_readers(ports: list, stop: threading.Event, settle_s: float = 0.2, configure_s: float = 2.0) -> bool:
-    """Wait until every port has a reader, then until each reader has set its line up (at most
-    ``configure_s``: a reader such as ``cat`` never does), then ``settle_s`` more: a serial library flushes
-    its input just after it configures the port, and a frame written before that flush is lost to it.
-    False if stopped first."""
+def wait_for_readers(ports: list, stop: threading.Event, flush_s: float = 2.0) -> bool:
+    """Wait until every port has a reader, then until each reader has emptied its input (at most ``flush_s``:
+    a reader such as ``cat`` never does): a serial library flushes its input as it opens the port, and a frame
+    written before that flush would be lost to it, however long the reader took to get there. False if
+    stopped first."""
     while not all(p.has_reader() for p in ports):
         if stop.wait(WAIT_S / 5):
             return False
-    deadline = time.monotonic() + configure_s
-    while not all(p.configured() for p in ports) and time.monotonic() < deadline:
+    deadline = time.monotonic() + flush_s
+    while not all(p.flushed() for p in ports) and time.monotonic() < deadline:
         if stop.wait(0.005):
             return False
-    return not stop.wait(settle_s)
+    return not stop.is_set()

@@ -5,9 +5,11 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
+import termios
 import time
 from pathlib import Path
 
@@ -107,26 +109,32 @@ def test_hil_run_reads_the_default_emulated_can_imu_from_the_emulators_process(t
 
 def test_readers_slow_to_set_their_ports_up_lose_no_frame_to_their_own_flush():
     """Held for its readers (``--wait-readers``, the harness's own emulator), the pulse train waits until each
-    reader has configured its port: a serial library flushes its input just after, and a frame written before
-    that flush would be lost to it. The readers here hold the ports open for longer than the settling time
-    before they configure them."""
+    reader has emptied its input, as a serial library does on opening a port: a frame written before that
+    flush would be lost to it. The readers here hold the ports open, set their lines up and only then, half a
+    second later each time (a host busy elsewhere), flush."""
     cfg = parse_config({**CONFIG, "trial": {**CONFIG["trial"], "duration_s": 2.0}})
+    names = ("imu", "turntable_data")
     with EmulatorThread(cfg, speed=None, duration=2.0) as emulator:
-        held = [os.open(emulator.ports[name], os.O_RDONLY | os.O_NOCTTY) for name in ("imu", "turntable_data")]
+        fds = {name: os.open(emulator.ports[name], os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK) for name in names}
         try:
-            time.sleep(0.5)  # longer than the settling time: the readers are slow to set their lines up
-            data = {"imu": b"", "turntable_data": b""}
-            ports = {name: serial.Serial(emulator.ports[name], 921600, timeout=0.02) for name in data}
+            time.sleep(0.5)
+            for fd in fds.values():
+                attrs = termios.tcgetattr(fd)
+                attrs[4] = attrs[5] = termios.B921600
+                termios.tcsetattr(fd, termios.TCSANOW, attrs)
+            time.sleep(0.5)
+            for fd in fds.values():
+                termios.tcflush(fd, termios.TCIFLUSH)
+            data = dict.fromkeys(names, b"")
             while emulator.thread.is_alive():  # it drains its ports into the readers before it closes them
-                for name, port in ports.items():
-                    with contextlib.suppress(serial.SerialException):  # closed after its last frame
-                        data[name] += port.read(1 << 16)
+                select.select(list(fds.values()), [], [], 0.02)
+                for name, fd in fds.items():
+                    with contextlib.suppress(BlockingIOError, OSError):  # EIO: closed after its last frame
+                        data[name] += os.read(fd, 1 << 16)
             stats = emulator.join()
         finally:
-            for fd in held:
+            for fd in fds.values():
                 os.close(fd)
-            for port in ports.values():
-                port.close()
     kvh = data["imu"]
     assert kvh.startswith(KVH_HEADER) and kvh.count(KVH_HEADER) == stats.devices["imu"].frames == 400
     counters = tts1_counters(data["turntable_data"])
