@@ -167,6 +167,12 @@ def test_report_rebuilds_the_html_and_names_a_missing_directory(tmp_path, capsys
     assert (out / "junit.xml").read_text().startswith("<?xml")
     assert main(["report", str(tmp_path / "nothing")]) == 2
     assert "nothing" in capsys.readouterr().err
+    result = json.loads((out / "result.json").read_text())
+    result["estimate"]["accel_bias_sigma_ug"] = [str(v) for v in result["estimate"]["accel_bias_sigma_ug"]]
+    (out / "result.json").write_text(json.dumps(result))
+    assert main(["report", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "estimate.accel_bias_sigma_ug.0: input should be a valid number" in err
 
 
 @pytest.fixture

@@ -18,9 +18,12 @@ from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES
 from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, measurements, overall
 from hil.outputs.trial_report import ReportError, write_report
-from hil.outputs.result import build_result, summary_text
+from hil.outputs.result import build_result, summary_text, write_result
 from hil.outputs.trial_outputs import write_trial_outputs
 from hil.samples import StreamCounts
+
+
+TRUTH = {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"], "accel_drift_ug_per_h": [0.0] * 3}  # as emulated_truth
 
 
 @pytest.fixture(scope="module")
@@ -29,10 +32,16 @@ def trial_dir(tmp_path_factory):
     cfg = make_config(duration=60.0, rate=100.0, errors=PAPER_ERRORS)
     est = run_estimator(cfg, solve_period=1.0)
     n = est.solution().samples
-    result = build_result("report-test", est, StreamCounts(n, n, n, dropped=3), {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"]})
+    result = _document(build_result("report-test", est, StreamCounts(n, n, n, dropped=3), TRUTH))
     out = tmp_path_factory.mktemp("trial")
     write_trial_outputs(out, result, est.snapshots, ReportLimits(), figures=True)
     return out, result
+
+
+def _document(result: dict) -> dict:
+    """``build_result``'s document as a completed trial files it: with how it ended and the calibration it
+    applied."""
+    return {"trial": result["trial"], "ended": "completed", "calibration_applied": None, **result}
 
 
 def _outcomes(page: str) -> dict[str, str]:
@@ -179,6 +188,23 @@ def test_a_result_json_that_is_not_a_result_is_refused(tmp_path, content, reason
         write_report(tmp_path)
 
 
+@pytest.mark.parametrize("block, key, value, field", [
+    ("estimate", "accel_bias_sigma_ug", ["2.0", "2.0", "2.0"], "estimate.accel_bias_sigma_ug.0"),
+    ("estimate", "observable", None, "estimate.observable"),
+    ("trial", "samples", 1.5, "trial.samples"),
+])
+def test_a_result_json_of_another_shape_is_refused_naming_its_field(trial_dir, tmp_path, block, key, value, field):
+    """Judged as it stands, a sigma written as a string would stop the report half-way, and a block this
+    version does not know would be ignored: the report names the first field it cannot read instead."""
+    shutil.copytree(trial_dir[0], tmp_path / "run")
+    result = trial_dir[1]
+    (tmp_path / "run" / "result.json").write_text(json.dumps({**result, block: {**result[block], key: value}}))
+    with pytest.raises(ReportError, match=rf"not a trial result of this version \({re.escape(field)}: "):
+        write_report(tmp_path / "run", ReportLimits(bias_sigma_ug_max=10.0))
+    assert not (tmp_path / "run" / "report.html").exists() or (tmp_path / "run" / "report.html").read_bytes() == \
+        (trial_dir[0] / "report.html").read_bytes()
+
+
 def _no_constant(name):
     raise ValueError(f"result.json holds {name}, which is not JSON")
 
@@ -187,14 +213,16 @@ def test_result_json_is_strict_json_and_the_report_reads_its_nulls(tmp_path):
     cfg = make_config(duration=60.0, rate=100.0, kind="static", errors=PAPER_ERRORS)
     est = run_estimator(cfg, solve_period=1.0)
     n = est.solution().samples
-    result = build_result("static", est, StreamCounts(n, n, n), {"accel_bias_ug": PAPER_ERRORS["accel_bias_ug"]})
+    result = _document(build_result("static", est, StreamCounts(n, n, n), TRUTH))
     assert result["estimate"]["observable"] is False  # static: a singular Gram matrix
     result["estimate"]["gram_condition"] = math.inf  # what a Gram matrix with a zero eigenvalue reports
-    result["nested"] = {"values": [math.nan, {"low": -math.inf}, 1.5]}
     write_trial_outputs(tmp_path, result, est.snapshots, ReportLimits(), figures=False)
     loaded = json.loads((tmp_path / "result.json").read_text(), parse_constant=_no_constant)
     assert loaded["estimate"]["gram_condition"] is None and loaded["estimate"]["observable"] is False
-    assert loaded["nested"] == {"values": [None, {"low": None}, 1.5]}
+    (tmp_path / "nested").mkdir()
+    write_result(tmp_path / "nested", {"values": [math.nan, {"low": -math.inf}, 1.5]})
+    nested = json.loads((tmp_path / "nested" / "result.json").read_text(), parse_constant=_no_constant)
+    assert nested == {"values": [None, {"low": None}, 1.5]}
 
     page = write_report(tmp_path, ReportLimits(bias_sigma_ug_max=10.0)).read_text()  # figures drawn from the series
     outcomes = _outcomes(page)
@@ -261,8 +289,9 @@ def test_a_sync_offset_without_motion_is_not_judged_and_a_simulation_judges_no_s
 
 
 @pytest.mark.parametrize("ended", ["completed", "early: no data from any device for 10 s", "interrupted: SIGTERM"])
-def test_the_report_says_first_how_the_trial_ended(tmp_path, ended):
-    (tmp_path / "result.json").write_text(json.dumps({"trial": {"name": "t"}, "ended": ended}))
-    page = write_report(tmp_path, ReportLimits()).read_text()
+def test_the_report_says_first_how_the_trial_ended(trial_dir, tmp_path, ended):
+    shutil.copytree(trial_dir[0], tmp_path / "run")
+    (tmp_path / "run" / "result.json").write_text(json.dumps({**trial_dir[1], "ended": ended}))
+    page = write_report(tmp_path / "run", ReportLimits()).read_text()
     body = page[page.index("<body"):]
     assert re.search(r"<p class=\"ended [a-z]+\">Trial ([^<]+)\.</p>", body).group(1) == html.escape(ended)

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 SCHEMA_FILE = Path(__file__).resolve().parents[2] / "docs" / "result.schema.json"
 Vector3 = list[float | None]
@@ -120,6 +120,17 @@ class Result(_Block):
 def read_result(path: str | Path) -> Result:
     """The result.json at ``path``, validated."""
     return Result.model_validate_json(Path(path).read_bytes())
+
+
+def result_problem(doc: dict) -> str | None:
+    """Why ``doc`` is not a result.json of this version: the first field the schema refuses, as
+    ``"<dotted path>: <reason>"``; None when it is one."""
+    try:
+        Result.model_validate(doc, strict=True)  # a number written as a string is not one
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        return f"{'.'.join(map(str, error['loc'])) or 'the document'}: {error['msg'][:1].lower()}{error['msg'][1:]}"
+    return None
 
 
 def schema_text() -> str:

@@ -32,6 +32,7 @@ from hil.outputs.noise_section import noise_section
 from hil.outputs.page_header import page_header
 from hil.outputs.record import PROPERTIES
 from hil.outputs.result import calibration_applied_text
+from hil.outputs.result_schema import result_problem
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
 REPORT_NAME = "report.html"
@@ -67,6 +68,10 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None,
         raise ReportError(f"{result_path}: not valid JSON ({exc}); run the trial again to rewrite it") from None
     if not isinstance(result, dict):
         raise ReportError(f"{result_path}: not a trial result (a JSON object is expected)")
+    problem = result_problem(result)
+    if problem is not None:  # judged as it stands, a value of another shape could pass a limit unread
+        raise ReportError(f"{result_path}: not a trial result of this version ({problem}; "
+                          'docs/contracts.md, "result.json")')
     notes = []
     if limits is None:
         config = out_dir / "config.yaml"
