@@ -75,13 +75,13 @@ class PtyPort:
         """True once the reader has emptied its input (a serial library does as it opens the port, just after
         setting the line up): bytes written from then on reach it. Packet mode reports the flush to the master
         as a status byte; what the reader wrote to the port is read and dropped with it."""
-        while not self._flushed and any(e & (select.POLLIN | select.POLLPRI) for e in self._events(0, select.POLLIN
-                                                                                              | select.POLLPRI)):
+        readable = select.POLLIN | select.POLLPRI
+        while not self._flushed and any(e & readable for e in self._events(0, readable)):
             try:
                 packet = os.read(self.master, 4096)
             except OSError:  # EIO: no reader holds the port
                 break
-            self._flushed = bool(packet) and bool(packet[0] & termios.TIOCPKT_FLUSHREAD)
+            self._flushed = bool(packet) and (packet[0] & termios.TIOCPKT_FLUSHREAD) != 0
         return self._flushed
 
     def write(self, data: bytes, stop: threading.Event) -> bool:
