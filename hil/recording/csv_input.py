@@ -8,9 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import InputError
+from hil.config import Config, InputError, LimitsConfig
+from hil.frames import Earth
+from hil.pipeline.plausibility import RATE_MARGIN, ImuPlausibility
 from hil.samples import AlignedBatch
-from hil.units import DEG
+from hil.units import DEG, G0
 
 INCREMENT_COLUMNS = ("t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_x_mps", "dv_y_mps", "dv_z_mps")
 ANGLE_COLUMNS = ("outer_deg", "middle_deg", "inner_deg")
@@ -25,8 +27,10 @@ class DataError(InputError, ValueError):
         return cls(f"{path}: cannot read: {exc.strerror or exc}")
 
 
-def read_increments_csv(path: str | Path) -> AlignedBatch:
-    """Rows of increments (each covering the interval that ends at t_s) and, if present, table angles."""
+def read_increments_csv(path: str | Path, cfg: Config | None = None) -> AlignedBatch:
+    """Rows of increments (each covering the interval that ends at t_s) and, if present, table angles. Increments
+    beyond what an IMU on ``cfg``'s turntable can measure are refused like malformed ones
+    (:func:`refuse_implausible`)."""
     path = Path(path)
     try:
         fh = open(path, newline="", encoding="utf-8")
@@ -41,7 +45,7 @@ def read_increments_csv(path: str | Path) -> AlignedBatch:
         has_angles = all(c in header for c in ANGLE_COLUMNS)
         wanted = INCREMENT_COLUMNS + (ANGLE_COLUMNS if has_angles else ())
         index = [header.index(c) for c in wanted]
-        rows = []
+        rows, lines = [], []
         for line_no, row in enumerate(reader, start=2):
             if not row or all(not cell.strip() for cell in row):
                 continue
@@ -50,16 +54,51 @@ def read_increments_csv(path: str | Path) -> AlignedBatch:
             except (ValueError, IndexError):
                 raise DataError(f"{path}:{line_no}: expected numbers in columns {', '.join(wanted)}") from None
             if not np.all(np.isfinite(values)):
-                raise DataError(f"{path}:{line_no}: value is not finite")
+                bad = int(np.argmin(np.isfinite(values)))
+                raise DataError(f"{path}:{line_no}: {wanted[bad]} {values[bad]} is not finite")
             if rows and values[0] <= rows[-1][0]:
                 raise DataError(f"{path}:{line_no}: t_s {values[0]} is not after the previous row's {rows[-1][0]}")
             rows.append(values)
+            lines.append(line_no)
     if len(rows) < 2:
         raise DataError(f"{path}: needs at least two data rows, got {len(rows)}")
     data = np.array(rows)
+    refuse_implausible(path, data, lines, cfg)
     t = data[:, 0]
     angles = data[:, 7:10] * DEG if has_angles else None
     return AlignedBatch(t, data[:, 1:4], data[:, 4:7], angles, t0=float(t[0] - (t[1] - t[0])))
+
+
+def refuse_implausible(path: Path, data: np.ndarray, lines: list[int], cfg: Config | None) -> None:
+    """Raises :class:`DataError` naming the first row (line, column, value) whose increments the live trial's
+    plausibility check (:class:`~hil.pipeline.plausibility.ImuPlausibility`) would reject: over the file's sample
+    interval (the median spacing of t_s, which a gap does not change), a rotation faster than the table's rate
+    limits allow or a specific force not near gravity. Without ``cfg``, standard gravity and the default limits."""
+    period = float(np.median(np.diff(data[:, 0])))
+    limits = (cfg.turntable.limits if cfg else LimitsConfig()).rate_dps
+    gravity = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m).g if cfg else G0
+    check = ImuPlausibility(1.0 / period, gravity, RATE_MARGIN * max(limits) * DEG)
+    with np.errstate(over="ignore", invalid="ignore"):  # 1e308 squared is inf: implausible, not a warning
+        good = check.ok(data[:, 1:4], data[:, 4:7])
+        if good.all():
+            return
+        k = int(np.argmin(good))
+        check.ok(data[k:k + 1, 1:4], data[k:k + 1, 4:7])
+    force_g, rate = check.last_rejected
+    if rate > 1.0:
+        where = _largest(data[k], 1)
+        reason = f"a rotation {rate:.3g} times the fastest the table allows ({RATE_MARGIN:g} x {max(limits):g} deg/s)"
+    else:
+        where = _largest(data[k], 4) if force_g > 1.0 else "dv_x_mps, dv_y_mps, dv_z_mps"
+        reason = f"a specific force of {force_g:.3g} g, not within {check.force_tolerance / gravity:g} g of gravity"
+    raise DataError(f"{path}:{lines[k]}: {where} is physically implausible: {reason} over the {period:.6g} s "
+                    f"sample interval")
+
+
+def _largest(row: np.ndarray, first: int) -> str:
+    """The column of the largest magnitude among the three from ``first``, and its value."""
+    column = first + int(np.argmax(np.abs(row[first:first + 3])))
+    return f"{INCREMENT_COLUMNS[column]} {float(row[column])!r}"
 
 
 def write_increments_csv(path: Path, batch: AlignedBatch) -> None:

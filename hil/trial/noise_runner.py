@@ -61,7 +61,7 @@ def read_source(source: str | Path, out: Path, config: str | Path | None = None,
         batch, recorded = _replayed(path)
         return NoiseRecord(batch, "recording", given or recorded)
     if path.suffix == ".csv":
-        return NoiseRecord(read_increments_csv(path), "csv", given)
+        return NoiseRecord(read_increments_csv(path, given), "csv", given)
     cfg = load_config(resolve_path(path))
     if cfg.imu.source == cfg.turntable.source == "emulator":
         return simulated(cfg)

@@ -80,5 +80,5 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
     """Increments (and table angles, if present) from a CSV into the processor; no truth."""
     processor = TrialProcessor(cfg)
-    processor.feed_batch(read_increments_csv(data))
+    processor.feed_batch(read_increments_csv(data, cfg))
     return TrialOutcome.of(processor.finished(), cfg, config_text, out)
