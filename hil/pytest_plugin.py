@@ -51,6 +51,14 @@ class TrialOutcome:
         """The cases that failed (a limit not met, or the trial not completed)."""
         return [c for c in self.cases if c.outcome in ("failed", "error")]
 
+    @property
+    def measurement_names(self) -> frozenset[str]:
+        """The names of the trial's measurements (result.json's, judged or not, and junit.xml's cases)."""
+        from hil.config import ReportLimits
+        from hil.outputs.measurements import measurements
+
+        return frozenset(m.name for m in measurements(self.result, ReportLimits())) | {c.name for c in self.cases}
+
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "hil_limits(*names): fail the test when a trial run with hil_trial fails "
@@ -87,7 +95,12 @@ def _config_file(config: str | Path, overrides: dict[str, Any] | None, where: Pa
 
 
 def _judge(outcome: TrialOutcome, names: tuple[str, ...]) -> None:
-    """pytest.fail naming every failed case (of ``names``, when given)."""
+    """pytest.fail naming every failed case (of ``names``, when given); a name that is not one of the trial's
+    measurements (a typo would otherwise pass for ever) fails it naming the measurements there are."""
+    unknown = [name for name in names if name not in outcome.measurement_names]
+    if unknown:
+        pytest.fail(f"hil_limits: {', '.join(map(repr, unknown))} not a measurement of the trial; its measurements: "
+                    f"{', '.join(sorted(outcome.measurement_names))}", pytrace=False)
     failed = [c for c in outcome.failures if not names or c.name in names or c.name == "trial_completed"]
     if failed:
         pytest.fail("; ".join(c.message or c.name for c in failed), pytrace=False)

@@ -13,6 +13,8 @@ import pytest
 from hil.pytest_plugin import read_cases
 from tests.wheel_venv import install_wheel
 
+pytest_plugins = ["pytester"]
+
 LAB_TESTS = '''
 import os
 import pytest
@@ -66,3 +68,31 @@ def test_junit_cases_are_read_with_their_outcome_and_message(tmp_path):
                      "</testsuite></testsuites>")
     assert [(c.name, c.outcome, c.message) for c in read_cases(junit)] == [
         ("a", "passed", ""), ("b", "failed", "b = 3 µg, limit ≤ 1 µg"), ("c", "skipped", "no truth")]
+
+
+TOO_TIGHT = '''
+import pytest
+
+TIGHT = {"trial.duration_s": 60, "output.limits": {"bias_sigma_ug_max": 0.01}}
+
+
+@pytest.mark.hil_limits("accel_bias_sigma_X")
+def test_a_typo(hil_trial):
+    hil_trial("liu2019_sim.yaml", overrides=TIGHT)
+
+
+@pytest.mark.hil_limits("accel_bias_sigma_x", "accel_noise")
+def test_named_right(hil_trial):
+    hil_trial("liu2019_sim.yaml", overrides=TIGHT)
+'''
+
+
+def test_a_marker_naming_no_measurement_fails_the_test_naming_it_and_the_known_names(pytester):
+    """On a trial that fails accel_bias_sigma_x/y/z, a typo of the name fails too, never passes unjudged."""
+    pytester.makepyfile(test_lab=TOO_TIGHT)
+    run = pytester.runpytest("-p", "no:cacheprovider")
+    run.assert_outcomes(failed=2)
+    text = run.stdout.str()
+    assert "hil_limits: 'accel_bias_sigma_X' not a measurement of the trial; its measurements: " in text
+    assert "accel_bias_sigma_x, accel_bias_sigma_y, accel_bias_sigma_z" in text and ", gram_rank, " in text
+    assert "accel_bias_sigma_x = " in text and "accel_bias_sigma_y = " not in text  # only the names asked for
