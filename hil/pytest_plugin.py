@@ -78,7 +78,8 @@ def read_cases(junit: Path) -> tuple[Case, ...]:
 
 
 def _config_file(config: str | Path, overrides: dict[str, Any] | None, where: Path) -> str:
-    """The config as given, or a copy in ``where`` with the dotted ``overrides`` set."""
+    """The config as given, or a copy in ``where`` with the dotted ``overrides`` set; a config that cannot be
+    read fails the test in one line naming it, as the command line would."""
     if not overrides:
         return str(config)
     import yaml
@@ -86,7 +87,12 @@ def _config_file(config: str | Path, overrides: dict[str, Any] | None, where: Pa
     from hil.campaign.spec import set_key  # a campaign's sweep sets its keys alike
     from hil.inputs import resolve_path
 
-    doc = yaml.safe_load(resolve_path(str(config)).read_text())
+    try:
+        doc = yaml.safe_load(resolve_path(str(config)).read_text(encoding="utf-8"))
+    except OSError as exc:
+        pytest.fail(f"hil_trial: {config}: cannot read: {exc.strerror or exc}", pytrace=False)
+    except yaml.YAMLError as exc:
+        pytest.fail(f"hil_trial: {config}: not valid YAML: {getattr(exc, 'problem', None) or exc}", pytrace=False)
     for key, value in overrides.items():
         set_key(doc, key, value)
     path = where / f"{Path(str(config)).stem}-overridden.yaml"

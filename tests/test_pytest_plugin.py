@@ -96,3 +96,14 @@ def test_a_marker_naming_no_measurement_fails_the_test_naming_it_and_the_known_n
     assert "hil_limits: 'accel_bias_sigma_X' not a measurement of the trial; its measurements: " in text
     assert "accel_bias_sigma_x, accel_bias_sigma_y, accel_bias_sigma_z" in text and ", gram_rank, " in text
     assert "accel_bias_sigma_x = " in text and "accel_bias_sigma_y = " not in text  # only the names asked for
+
+
+def test_a_missing_config_with_overrides_fails_the_test_in_one_line_naming_it(pytester):
+    pytester.makepyfile(test_lab='''
+def test_missing(hil_trial):
+    hil_trial("no_such.yaml", overrides={"trial.duration_s": 60})
+''')
+    run = pytester.runpytest("-p", "no:cacheprovider")
+    run.assert_outcomes(failed=1)
+    assert "hil_trial: no_such.yaml: cannot read: No such file or directory" in run.stdout.str()
+    assert "FileNotFoundError" not in run.stdout.str() and "Traceback" not in run.stdout.str()
