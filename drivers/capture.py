@@ -45,7 +45,7 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
     One CSV row per valid frame: ``sync_index`` then the frame's fields in device units (unit in each
     column name). ``rate_hz`` only matters for unwrapping counters; ``codec_options`` are the codec's
     own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so). Raises :class:`CaptureError`
-    when the capture, the protocol, the DBC or the CSV cannot be used.
+    when the capture, the protocol, the DBC or the CSV cannot be used, or no valid frame is found.
     """
     cls = _codec_class(protocol)
     if dbc and cls.link != "can":
@@ -72,7 +72,13 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
                                      for k, row in zip(frames.sync_index, frames.rows))
     except OSError as exc:
         raise CaptureError(f"{exc.filename or path}: {exc.strerror or exc}") from None
-    return decoder.counters.as_dict()
+    counters = decoder.counters
+    if not counters.frames:
+        if out_csv:
+            Path(out_csv).unlink()  # a header and no row: no output rather than an empty one
+        raise CaptureError(f"{path}: no valid {protocol} frame found ({counters.corrupt} corrupt, "
+                           f"{counters.skipped_bytes} bytes skipped); is it a {protocol} capture?")
+    return counters.as_dict()
 
 
 def detect_capture(path: str | Path) -> str:

@@ -65,3 +65,15 @@ def test_decode_auto_names_and_decodes_each_capture(tmp_path, capsys, protocol):
     assert counters["protocol"] == protocol and counters["frames"] == 500 and counters["skipped_bytes"] >= 300
     rows = list(csv.reader(open(tmp_path / "out.csv")))
     assert len(rows) == 501
+
+
+@pytest.mark.parametrize("content", ["garbage", "xsens-mtdata2"])
+def test_decoding_a_file_without_a_frame_of_the_protocol_is_one_line_and_exit_2(tmp_path, capsys, content):
+    """Random bytes, or another protocol's capture, decoded as kvh1750: bad input, and no empty CSV left."""
+    capture = tmp_path / "capture.bin"
+    capture.write_bytes(garbage(5000) if content == "garbage" else stream(content, 200))
+    assert main(["decode", "kvh1750", str(capture), "--out", str(tmp_path / "out.csv")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+    assert f"{capture}: no valid kvh1750 frame found" in captured.err
+    assert not (tmp_path / "out.csv").exists()
