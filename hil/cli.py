@@ -150,7 +150,7 @@ def cmd_noise(args: argparse.Namespace) -> int:
         from hil.history.entry import NOISE, noise_figures, trial_row
         from hil.history.filing import file_trial
 
-        result = {"trial": {"name": Path(args.source).stem}, "ended": "completed", "record": doc["record"]}
+        result = {"trial": doc["trial"], "ended": "completed", "record": doc["record"]}
         file_trial(args.history, trial_row(NOISE, out, result, None, noise_figures(doc)))
     return 0
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sqlite3
 
 import numpy as np
 import pytest
@@ -91,3 +92,23 @@ def test_bad_sources_get_one_line(tmp_path, capsys):
     assert main(["noise", str(moving), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no table angles" in err
+
+
+def test_a_shipped_config_run_from_elsewhere_has_its_digest_and_its_trial_name(tmp_path, monkeypatch,
+                                                                              history_in_tmp):
+    """The config named as shipped (not a path from the working directory) is the file the record digests, and
+    the page and the history name the trial by its trial.name, not by the file."""
+    import hashlib
+
+    from hil.inputs import resolve_path
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["noise", "emulated_swing.yaml", "--out", "out", "--no-figures", "--taus", "decade"]) == 0
+    doc = json.loads((tmp_path / "out" / "noise.json").read_text())
+    shipped = resolve_path("emulated_swing.yaml").read_bytes()
+    assert doc["record"]["config_sha256"] == hashlib.sha256(shipped).hexdigest()
+    assert doc["trial"] == {"name": "emulated-swing"}
+    assert "<h1>emulated-swing</h1>" in (tmp_path / "out" / "report.html").read_text()
+    with sqlite3.connect(history_in_tmp) as db:
+        assert db.execute("SELECT name, config_sha256 FROM trials").fetchall() == [
+            ("emulated-swing", doc["record"]["config_sha256"])]

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.config import Config, RecordConfig
+from hil.inputs import resolve_path
 from hil.recording.recorder import package_version, read_start_record
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
@@ -74,7 +75,7 @@ def noise_record(given: dict[str, str | None], source: str | Path, config: Confi
     run; None for a recording or CSV) overridden by the options ``given`` (dut_serial, operator, station), the
     source's digest when it is a file (a config, a CSV; None for a run directory), no ports or controller of
     its own."""
-    path = Path(source)
+    path = resolve_path(source)
     block = config.record if config is not None else RecordConfig()
     fields = block.model_dump() | {key: value for key, value in given.items() if value is not None}
     text = path.read_text(errors="replace") if path.is_file() and path.suffix in (".yaml", ".yml", ".csv") else None

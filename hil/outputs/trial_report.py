@@ -99,7 +99,7 @@ def write_noise_report(out_dir: Path) -> Path:
     figures = _figure_html(_figures(out_dir, None, {}))
     doc = json.loads((out_dir / NOISE_JSON).read_text())
     record = doc.get("record") or {}
-    name = Path(record.get("source") or out_dir.name).stem
+    name = (doc.get("trial") or {}).get("name") or Path(record.get("source") or out_dir.name).stem
     header = page_header("Noise characterisation", name, record)
     page = html_page(header, f"{name}: noise", f"{noise_section(doc)}<h2>Figures</h2>{figures}")
     path = out_dir / REPORT_NAME

@@ -201,6 +201,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     if export is not None:
         write_increments_csv(export, samples.batch)
     analysis = analyse_record(samples, str(source), level, grid)
+    analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source).stem}
     if record is not None:
         analysis.doc["record"] = record(samples.source_config)
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
