@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,10 +18,9 @@ from mcap.stream_reader import StreamReader
 from hil.campaign.runs import task_columns
 from hil.campaign.task import RunTask
 from hil.outputs.result_schema import read_result
+from tests.pages import WINDOW_PX, layout_width, needs_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
-CHROMIUM = shutil.which("chromium")
-WINDOW_PX = 1400
 
 
 def hil(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
@@ -96,22 +94,11 @@ def test_campaign_rows_carry_the_unit_and_the_config_digest_and_the_summary_the_
     assert "<h1>spec</h1>" in (outputs / "campaign" / "campaign.html").read_text()
 
 
-def scroll_width(page: Path, tmp_path: Path) -> int:
-    """The page's layout width in a 1400 px wide headless Chromium window."""
-    probe = tmp_path / f"probe-{page.parent.name}-{page.name}"
-    text = page.read_text().replace("</body>", "<script>document.title = 'width ' + "
-                                    "document.documentElement.scrollWidth;</script></body>")
-    probe.write_text(text)
-    dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", f"--window-size={WINDOW_PX},900",
-                          "--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=120).stdout
-    return int(re.search(r"<title>width (\d+)</title>", dom).group(1))
-
-
-@pytest.mark.skipif(CHROMIUM is None, reason="needs chromium (apt-get install chromium; .ci/run installs it)")
+@needs_chromium
 def test_every_page_opens_with_the_header_and_fits_1400_px(outputs, tmp_path):
     pages = [outputs / "cal" / "report.html", outputs / "cal" / "calibration.html", outputs / "run" / "report.html",
              outputs / "noise" / "report.html", outputs / "campaign" / "campaign.html"]
     for page in pages:
         text = page.read_text()
         assert text.index('<header class="run">') < text.index("<h1>") < text.index("</header>"), page
-        assert scroll_width(page, tmp_path) <= WINDOW_PX, page
+        assert layout_width(page, tmp_path) <= WINDOW_PX, page
