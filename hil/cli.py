@@ -175,10 +175,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from hil.outputs.trial_report import write_report
+    from hil.outputs.result import verdict_exit_code
+    from hil.outputs.trial_report import rebuild_report
 
-    print(write_report(Path(args.dir)))
-    return 0
+    path, verdict = rebuild_report(Path(args.dir))
+    print(path)
+    return verdict_exit_code(verdict)
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -303,7 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "simulated), run or CSV")
     p.add_argument("source", help="a trial config (devices on ports: a static record acquired into OUT/acquisition; "
                                   "emulated: simulated), a run directory or recording, or a CSV of increments")
-    p.add_argument("--duration", type=float, help="seconds to acquire from devices (default: trial.duration_s)")
+    p.add_argument("--duration", type=float, help="seconds to acquire from devices, or to simulate (default: "
+                                                   "trial.duration_s)")
     p.add_argument("--quiet", action="store_true", help="no progress line while acquiring")
     p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
     p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
@@ -352,8 +355,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_emulate_options(p)
     p.set_defaults(func=cmd_emulate)
 
-    p = sub.add_parser("report", help="rebuild a trial's report.html from its outputs")
-    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml)")
+    p = sub.add_parser("report", help="rebuild a trial's report.html and junit.xml from its outputs (exit as its "
+                                      "verdict), or a noise characterisation's report.html")
+    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml) or hil noise's "
+                               "(noise.json)")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "

@@ -13,12 +13,16 @@ import numpy as np
 from hil.estimation.apparent_gravity import DriftCheck
 from hil.estimation.online import OnlineEstimator, Snapshot
 from hil.outputs.conversions import to_ug, to_ug_per_h
-from hil.outputs.measurements import drift_not_the_accelerometer
+from hil.outputs.measurements import FAIL, drift_not_the_accelerometer
 from hil.samples import StreamCounts
 from hil.units import DEG, UG
 
 RESULT_NAME = "result.json"
 COMPLETED = "completed"  # result.json "ended" of a trial that ran its course
+INTERRUPTED, ENDED_EARLY = "INTERRUPTED", "ENDED EARLY"  # the verdicts of a trial that did not complete
+# the figures of an observable estimate, every one finite in a completed trial
+ESTIMATE_FIGURES = ("accel_bias_ug", "accel_bias_sigma_ug", "accel_bias_t0_ug", "accel_bias_t0_sigma_ug",
+                    "accel_bias_drift_ug_per_h", "accel_bias_drift_sigma_ug_per_h", "noise_ug")
 
 
 @dataclass(frozen=True)
@@ -39,6 +43,32 @@ class TrialEnd:
 
     def __str__(self) -> str:
         return self.kind if self.kind == COMPLETED else f"{self.kind}: {self.reason}"
+
+
+def trial_verdict(ended: str, judged: str) -> str:
+    """The verdict a lab signs: ``judged`` (PASS or FAIL against ``output.limits``) for a completed trial, else
+    how it ended (INTERRUPTED, ENDED EARLY): a trial that did not complete is neither PASS nor FAIL."""
+    if ended == COMPLETED:
+        return judged
+    return INTERRUPTED if ended.startswith("interrupted") else ENDED_EARLY
+
+
+def verdict_exit_code(verdict: str | None) -> int:
+    """The exit code of a trial of ``verdict`` (docs/contracts.md, "Exit codes"): 1 one that did not complete,
+    3 a FAIL, 0 a PASS (or no verdict: a noise characterisation)."""
+    return {INTERRUPTED: 1, ENDED_EARLY: 1, FAIL: 3}.get(verdict, 0)
+
+
+def non_finite_figure(result: dict) -> str | None:
+    """The first figure of an observable estimate (``estimate.KEY``) that holds NaN or infinity; None when
+    every one is finite (an unobservable estimate has none to hold)."""
+    estimate = result.get("estimate") or {}
+    if not estimate.get("observable"):
+        return None
+    for key in ESTIMATE_FIGURES:
+        if estimate.get(key) is not None and not np.all(np.isfinite(np.asarray(estimate[key], dtype=float))):
+            return f"estimate.{key}"
+    return None
 
 
 def _angles(v: np.ndarray | None, names=("pitch", "roll", "yaw")) -> dict[str, float] | None:

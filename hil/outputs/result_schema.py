@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -107,6 +107,8 @@ class Result(_Block):
 
     trial: Trial
     ended: str
+    # PASS or FAIL against output.limits for a completed trial, else how it ended; null: not judged yet
+    verdict: Literal["PASS", "FAIL", "INTERRUPTED", "ENDED EARLY"] | None = None
     calibration_applied: dict[str, Any] | None
     streams: dict[str, Any]
     estimate: Estimate | None

@@ -31,7 +31,7 @@ from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
 from hil.outputs.page_header import page_header
 from hil.outputs.record import PROPERTIES
-from hil.outputs.result import calibration_applied_text
+from hil.outputs.result import COMPLETED, calibration_applied_text, trial_verdict
 from hil.outputs.result_schema import result_problem
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
@@ -58,7 +58,22 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None,
     Without ``limits`` the limits come from ``out_dir/config.yaml`` (the trial config's copy);
     without that file nothing is judged.
     """
+    return _write_report(Path(out_dir), limits, draw)[0]
+
+
+def rebuild_report(out_dir: Path) -> tuple[Path, str | None]:
+    """``hil report``: the report of a trial's outputs (:func:`write_report`), or of a noise characterisation's
+    (:func:`write_noise_report`) when the directory holds noise.json without a trial's result.json; the page
+    and the trial's verdict (None for a noise characterisation, which has none)."""
     out_dir = Path(out_dir)
+    if (out_dir / NOISE_JSON).exists() and not (out_dir / "result.json").exists():
+        return write_noise_report(out_dir), None
+    return _write_report(out_dir)
+
+
+def _write_report(out_dir: Path, limits: ReportLimits | None = None,
+                  draw: Draw = write_figures) -> tuple[Path, str]:
+    """:func:`write_report`; the page and the trial's verdict (:func:`~hil.outputs.result.trial_verdict`)."""
     result_path = out_dir / "result.json"
     try:
         result = json.loads(result_path.read_text(encoding="utf-8"))
@@ -84,11 +99,12 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None,
     if not any(m.outcome != NOT_JUDGED for m in results):
         notes.append("No limits are set (output.limits in the trial config): the verdict judges nothing.")
     series = read_series(out_dir / SERIES_NAME)
-    page = _render(result, results, _figures(out_dir, series, result, draw), series, notes, _noise(out_dir))
+    verdict = trial_verdict(result["ended"], overall(results))
+    page = _render(result, results, verdict, _figures(out_dir, series, result, draw), series, notes, _noise(out_dir))
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     write_junit(out_dir, result, results)
-    return path
+    return path, verdict
 
 
 def write_noise_report(out_dir: Path) -> Path:
@@ -162,6 +178,7 @@ header.run h1 { margin-top: 0.1em; } header.run .facts b { color: #1b1b1b; font-
 .verdict { display: inline-block; padding: 0.3em 1em; font-size: 1.6em; font-weight: bold; border-radius: 6px;
            color: white; margin: 0.5em 0; }
 .verdict.PASS { background: #2e7d32; } .verdict.FAIL { background: #c62828; }
+.verdict.INTERRUPTED, .verdict.ENDED.EARLY { background: #5d4037; }
 table { border-collapse: collapse; width: 100%; font-size: 0.92em; }
 th, td { border-bottom: 1px solid #e2e2e2; padding: 0.3em 0.6em; text-align: left; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
@@ -175,10 +192,13 @@ figcaption { color: #555; font-size: 0.9em; }
 """
 
 
-def _render(result: dict, results: list[Measurement], figures: list[tuple[str, bytes]],
+def _render(result: dict, results: list[Measurement], verdict: str, figures: list[tuple[str, bytes]],
             series: dict[str, np.ndarray] | None, notes: list[str], noise: str = "") -> str:  # fmt: skip
     trial = result.get("trial", {})
-    verdict = overall(results)
+    ended = result["ended"]
+    if ended != COMPLETED:
+        notes = [f"The trial did not complete ({ended}): its verdict is {verdict}, neither PASS nor FAIL; the "
+                 "measurements are of the data received.", *notes]
     judged = [m for m in results if m.outcome != NOT_JUDGED]
     failed = [m for m in judged if m.outcome == FAIL]
     e = html.escape
@@ -192,7 +212,6 @@ def _render(result: dict, results: list[Measurement], figures: list[tuple[str, b
         )
     summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
                + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
-    ended = result.get("ended", "completed")
     what = ("Multi-position calibration (2018 three-stage paper): the terms in calibration.html"
             if "calibration" in result else "Accelerometer bias from swinging motion (Liu et al. 2019)")
     body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.

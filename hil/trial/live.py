@@ -195,11 +195,12 @@ class LiveTrial:
         self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
+        self.acquiring = True  # until acquisition ends: the motion check then no longer listens (the table is off)
         self.progress: Progress | None = None  # the pipeline's, after the last item it took
         self.finished: Finished | None = None  # ... and at the end
         listeners = [ViewerFeed(viewer, self._live_health).on_progress, *hooks.listeners]
         if hooks.motion_check is not None:
-            listeners.append(hooks.motion_check.on_progress)
+            listeners.append(self._check_motion)
         self.processor = TrialProcessor(cfg, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         opened = transports(cfg, ports)
@@ -229,6 +230,7 @@ class LiveTrial:
                 ended = TrialEnd.interrupted(self.interrupted) if self.interrupted else TrialEnd(COMPLETED)
             return str(ended)
         finally:
+            self.acquiring = False
             self.hooks.on_end()
             for reader in self.readers:
                 reader.stop()
@@ -238,6 +240,12 @@ class LiveTrial:
             self.finished = self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
+
+    def _check_motion(self, progress: Progress) -> None:
+        """The motion check's listener while the table is commanded: the backlog processed after the table is
+        turned off is not checked, nor commanded on from (its port is closed)."""
+        if self.acquiring:
+            self.hooks.motion_check.on_progress(progress)
 
     def _live_health(self) -> Health:
         """The live trial's own figures (queue length, latency), added to the pipeline's health."""

@@ -53,8 +53,8 @@ class NoiseRecord:
 def read_source(source: str | Path, out: Path, config: str | Path | None = None, duration: float | None = None,
                 quiet: bool = False) -> NoiseRecord:
     """The increments of ``source``: a run directory or recording, a CSV (with ``config`` for its site and table,
-    needed when it moves), or a config: simulated, or, when its devices are read from ports, acquired from them
-    for ``duration`` s into ``out`` (:mod:`hil.trial.noise_acquisition`)."""
+    needed when it moves), or a config: simulated (for ``duration`` s when given), or, when its devices are read
+    from ports, acquired from them for ``duration`` s into ``out`` (:mod:`hil.trial.noise_acquisition`)."""
     path = Path(source)
     given = None if config is None else load_config(config)
     if path.is_dir() or path.suffix == ".mcap":
@@ -64,6 +64,8 @@ def read_source(source: str | Path, out: Path, config: str | Path | None = None,
         return NoiseRecord(read_increments_csv(path, given), "csv", given)
     cfg = load_config(resolve_path(path))
     if cfg.imu.source == cfg.turntable.source == "emulator":
+        if duration is not None:  # --duration: the simulated trial's length too
+            cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": duration})})
         return simulated(cfg)
 
     return NoiseRecord(_replayed(acquire(cfg, path, out, duration, quiet))[0], "devices", cfg)

@@ -9,8 +9,8 @@ from pathlib import Path
 from hil.config import Config, InputError
 from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
-from hil.outputs.measurements import FAIL
-from hil.outputs.result import COMPLETED, summary_text, trial_result
+from hil.outputs.result import (COMPLETED, TrialEnd, non_finite_figure, summary_text, trial_result,
+                               verdict_exit_code)
 from hil.outputs.trial_outputs import write_trial_outputs
 from hil.pipeline.progress import Finished
 
@@ -55,24 +55,27 @@ class TrialOutcome:
     def of(cls, finished: Finished, cfg: Config, config_text: str, out: Path, ended: str = COMPLETED,
            truth: dict | None = None) -> TrialOutcome:
         """The outcome of a pipeline's end; ``ended`` says how the trial ended, ``calibration_applied``
-        which ``imu.calibration`` file and terms the pipeline applied (null: none)."""
+        which ``imu.calibration`` file and terms the pipeline applied (null: none). A trial that ran its course to
+        an estimate holding NaN or infinity ended early: it has no figure to judge."""
         result = trial_result(cfg.trial.name, finished.estimator, finished.streams, truth, cfg.estimator.bias_model)
+        figure = non_finite_figure(result) if ended == COMPLETED else None
+        if figure is not None:
+            ended = str(TrialEnd.early(f"{figure} is not finite: the data holds values the estimator cannot take"))
         result = {"trial": result["trial"], "ended": ended, "calibration_applied": finished.calibration_applied,
                   **{k: v for k, v in result.items() if k != "trial"}}
         return cls(cfg, config_text, out, result, finished.snapshots)
 
     def exit_code(self, verdict: str) -> int:
-        """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that completed but
-        FAILs its limits, 0 otherwise."""
-        if self.ended != COMPLETED:
-            return 1
-        return 3 if verdict == FAIL else 0
+        """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that
+        completed but FAILs its limits, 0 otherwise."""
+        return verdict_exit_code(verdict)
 
     def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
-        """Write every output and print the summary (the figures drawn by ``draw``); returns PASS or FAIL
-        against ``output.limits``."""
-        outcome = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
+        """Write every output and print the summary (the figures drawn by ``draw``); returns the verdict: PASS or
+        FAIL against ``output.limits`` for a completed trial, else INTERRUPTED or ENDED EARLY."""
+        verdict = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
                                       self.config_text, figures=figures and self.cfg.output.figures, draw=draw)
         print(summary_text(self.result, self.out))
-        print(f"  report: {outcome} against output.limits ({self.out / 'report.html'})")
-        return outcome
+        judged = "against output.limits" if self.ended == COMPLETED else f"(trial {self.ended}: not judged)"
+        print(f"  report: {verdict} {judged} ({self.out / 'report.html'})")
+        return verdict
