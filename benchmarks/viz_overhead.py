@@ -5,14 +5,16 @@
 The trial's snapshots (1 Hz) and gimbal angles are computed first; then the live call pattern is
 replayed as fast as possible, once with non-blocking calls and once waiting for the logging
 thread: every 1/batch_hz s of trial time a ``log_table`` with the samples of that interval
-(decimated to 20 Hz inside), every second a ``log_snapshot`` and a ``log_health``. Running far
+(decimated to ``TABLE_RATE_HZ`` inside), every second a ``log_snapshot`` and a ``log_health`` with the
+figures a live trial gives (the pipeline's and the live queue's and latencies). Running far
 faster than real time, the caller competes with the logging thread for the interpreter, so its
 figure is pessimistic.
 Prints, per IMU sample:
   caller   time spent inside the (non-blocking) TrialViewer calls: what the processing thread pays,
   total    CPU time of the whole process from opening to a complete .rrd with nothing dropped
            (logging thread and Rerun's own threads included): what the trial costs the machine,
-and the same for the batched path (``log_snapshots``, simulate and replay) and the .rrd sizes.
+and the same for the batched path (``log_snapshots``, simulate and replay) and the .rrd sizes (MB per
+trial minute: docs/viewer.md states the live one).
 """
 
 from __future__ import annotations
@@ -30,10 +32,12 @@ from hil.estimation.online import OnlineEstimator
 from hil.units import UG
 from hil.viewer.trial_viewer import TABLE_RATE_HZ, TrialViewer
 
-HEALTH = {
-    "imu": {"rate_hz": 200.0, "frames": 0, "dropped": 0, "corrupt": 0, "latency_ms": 2.0},
-    "table": {"rate_hz": 200.0, "frames": 0, "dropped": 0, "corrupt": 0, "sync_offset_ms": 0.05},
-    "aligner": {"rate_hz": 200.0, "dropped": 0},
+HEALTH = {  # what a live trial gives (hil.pipeline.processor and hil.trial.live)
+    "imu": {"frames": 0, "corrupt": 0, "missing": 0, "outages": 0},
+    "table": {"frames": 0, "corrupt": 0, "missing": 0, "outages": 0},
+    "aligner": {"aligned": 0, "filled": 0, "bridged": 0, "without_angles": 0, "queue": 1,
+                "latency_p50_ms": 2.0, "latency_p99_ms": 4.5, "latency_max_ms": 9.0,
+                "age_p50_ms": 3.0, "age_p99_ms": 6.0, "age_max_ms": 12.0},
 }
 
 
@@ -112,10 +116,11 @@ def main() -> None:
           f"({100 * trial_live['cpu'] / args.duration:.2f} % of one core in real time)")  # fmt: skip
     print(f"  wall time, 600x+ real time   {trial_live['wall']:7.2f} s (dropped calls: {trial_live['dropped']})")
     print(f"  recording.rrd                {trial_live['size'] / 1e6:7.2f} MB "
-          f"({trial_live['size'] / 1e3 / (args.duration / 60):.0f} kB per trial minute)")  # fmt: skip
+          f"({trial_live['size'] / 1e6 / (args.duration / 60):.3f} MB per trial minute)")  # fmt: skip
     print("batched (log_snapshots, table in 20000-sample batches: simulate, replay)")
     print(f"  total CPU, all threads       {trial_batch['cpu'] * us:7.2f} us/sample, wall {trial_batch['wall']:.2f} s")
-    print(f"  recording.rrd                {trial_batch['size'] / 1e6:7.2f} MB")
+    print(f"  recording.rrd                {trial_batch['size'] / 1e6:7.2f} MB "
+          f"({trial_batch['size'] / 1e6 / (args.duration / 60):.3f} MB per trial minute)")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -65,8 +65,9 @@ def log_trial(out: Path) -> TrialViewer:
     for batch in batches:
         viewer.log_table(batch.t, batch.angles)
     for k in range(1, 61):
-        health = {"imu": {"rate_hz": 200.0, "frames": 200 * k, "dropped": k // 20, "corrupt": 0, "latency_ms": 2.0},
-                  "table": {"rate_hz": 200.0, "frames": 200 * k, "sync_offset_ms": 0.05}}  # fmt: skip
+        health = {"imu": {"frames": 200 * k, "corrupt": 0, "missing": k // 20, "outages": 0},
+                  "table": {"frames": 200 * k, "corrupt": 0, "missing": 0, "outages": 0},
+                  "aligner": {"aligned": 200 * k, "queue": 1, "latency_p99_ms": 2.0}}  # fmt: skip
         viewer.log_health(float(k), health)
     viewer.close()
     return viewer

@@ -20,10 +20,19 @@ from hil.viewer import blueprint, rerun_process, trial_viewer
 from hil.viewer.modes import default_viewer_mode
 from hil.viewer.trial_viewer import TrialViewer
 
-HEALTH = {
-    "imu": {"rate_hz": 199.5, "frames": 12000, "dropped": 2, "corrupt": 1, "latency_ms": 3.25},
-    "table": {"rate_hz": 200.0, "frames": 12000, "dropped": 0, "corrupt": 0, "sync_offset_ms": 0.125},
-    "aligner": {"rate_hz": 199.0, "dropped": 3},
+HEALTH = {  # the pipeline's figures and a live trial's
+    "imu": {"frames": 12000, "corrupt": 1, "missing": 2, "outages": 0},
+    "table": {"frames": 12000, "corrupt": 0, "missing": 0, "outages": 1},
+    "aligner": {"aligned": 11990, "filled": 3, "bridged": 0, "without_angles": 4, "queue": 2,
+                "latency_p50_ms": 3.25, "latency_p99_ms": 7.5, "latency_max_ms": 12.0, "age_p50_ms": 4.0,
+                "age_p99_ms": 8.0, "age_max_ms": 15.5},
+}
+HEALTH_ENTITIES = {  # entity: its series, in order of appearance
+    "/health/frames": [("imu", "frames"), ("table", "frames"), ("aligner", "aligned")],
+    "/health/faults": [(s, m) for s in ("imu", "table") for m in ("corrupt", "missing", "outages")]
+                      + [("aligner", m) for m in ("filled", "bridged", "without_angles")],
+    "/health/queue": [("aligner", "queue")],
+    "/health/latency_ms": [("aligner", f"{m}_{p}_ms") for m in ("latency", "age") for p in ("p50", "p99", "max")],
 }
 
 
@@ -109,27 +118,25 @@ def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
             expected.append(final.error_theoretical[k])
         assert values == pytest.approx(np.array(expected) / DEG, rel=1e-12)
 
-    for stream, metrics in HEALTH.items():
-        for metric, value in metrics.items():
-            t, values = series[f"/health/{metric}"]  # one series per stream reporting the metric, in order
-            assert len(t) == 60 and t[-1] == 60.0
-            assert values[-1, [s for s in HEALTH if metric in HEALTH[s]].index(stream)] == value
-    assert np.isnan(series["/health/latency_ms"][1][-1]).tolist() == [False]  # only the imu reports latency
-    assert np.isnan(series["/health/dropped"][1][-1]).tolist() == [False, False, False]
+    assert {path for path in series if path.startswith("/health/")} == set(HEALTH_ENTITIES)
+    for path, names in HEALTH_ENTITIES.items():
+        t, values = series[path]  # one series per stream and metric, in order of appearance
+        assert len(t) == 60 and t[-1] == 60.0
+        assert values[-1].tolist() == [HEALTH[stream][metric] for stream, metric in names]
 
 
 def test_table_angles_are_decimated_for_the_3d_view(saved, trial):
     path, _ = saved
     _, _, batches = trial
     t, angles = _series(path)["/table/angles_deg"]
-    assert len(t) == 60 * trial_viewer.TABLE_RATE_HZ + 1  # one per 50 ms tick from 0.01 s to 60 s
+    assert len(t) == 60 * trial_viewer.TABLE_RATE_HZ + 1  # one per 100 ms tick from 0.01 s to 60 s
     assert t[0] == pytest.approx(0.01) and np.diff(t)[1:] == pytest.approx(1.0 / trial_viewer.TABLE_RATE_HZ)
     k = np.searchsorted(batches[-1].t, t[-1])
     assert angles[-1] == pytest.approx(batches[-1].angles[k] / DEG)
     entities = _entities(path)
     for gimbal in ("outer", "outer/middle", "outer/middle/inner"):
         assert entities[f"/world/table/{gimbal}"] == len(t)
-    assert entities["/world/ib0/cone"] >= 6  # redrawn every 10 s of trial time
+    assert 6 <= entities["/world/ib0/cone"] <= 7  # redrawn every 10 s of trial time, and the last
     assert {"/world/table/outer/middle/inner/imu/case", "/world/ib0"} <= set(entities)
 
 
@@ -212,4 +219,5 @@ def test_serve_mode_binds_loopback_prints_the_url_and_keeps_analytics_off(trial,
     finally:
         viewer.stop()
     assert viewer.viewer_process is None
-    assert (tmp_path / "recording.rrd").stat().st_size > 0
+    t, _ = _series(tmp_path / "recording.rrd")["/observability/rank"]  # the file has its own stream
+    assert t.tolist() == [s.t for s in snapshots[:5]]

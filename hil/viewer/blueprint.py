@@ -12,9 +12,13 @@ import rerun.blueprint as rrb
 TIMELINE = "trial_time"
 AXES = ("x", "y", "z")
 ANGLES = ("pitch", "roll", "yaw")
-HEALTH_VIEWS = (("rate_hz", "frame rate (Hz)"), ("frames", "frames"), ("dropped", "dropped frames"),
-                ("corrupt", "corrupt frames (CRC, framing)"), ("latency_ms", "latency (ms)"),
-                ("sync_offset_ms", "sync offset (ms)"))
+# the stream-health figures (the pipeline's and a live trial's) by entity: /health/<entity>, a series per stream
+HEALTH_GROUPS = {"frames": "frames", "aligned": "frames", "corrupt": "faults", "missing": "faults",
+                 "outages": "faults", "filled": "faults", "bridged": "faults", "without_angles": "faults",
+                 "queue": "queue"}  # fmt: skip
+HEALTH_VIEWS = (("frames", "frames decoded, samples aligned"),
+                ("faults", "corrupt, missing, outages; filled, bridged, without angles"),
+                ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"))
 
 AXIS_COLORS = {"x": (228, 26, 28), "y": (77, 175, 74), "z": (55, 126, 184)}
 _BAND = 0.55  # band lines: the axis colour mixed with grey
@@ -22,6 +26,19 @@ TRUTH_COLOR = (255, 170, 0)
 _METHOD_COLORS = {"method1": (230, 85, 13), "method2": (49, 163, 84), "theoretical": (170, 170, 170)}
 _METHOD_NAMES = {"method1": "method 1", "method2": "method 2", "theoretical": "theoretical"}
 STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (255, 127, 0))
+
+
+def health_entity(metric: str) -> str:
+    """The health entity of a metric: its group of ``HEALTH_GROUPS``, ``latency_ms`` for a figure in ms
+    (``*_ms``), else one of its own (its name, escaped)."""
+    if metric.endswith("_ms"):
+        return "latency_ms"
+    return HEALTH_GROUPS.get(metric) or rr.escape_entity_path_part(metric)
+
+
+def health_series(stream: str, metric: str) -> str:
+    """The name of one stream's metric in its entity: ``imu corrupt``, ``aligner latency p99``."""
+    return f"{stream} {metric.removesuffix('_ms').replace('_', ' ')}"
 
 
 def band_color(axis: str) -> tuple[int, int, int]:

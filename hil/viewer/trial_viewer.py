@@ -5,9 +5,11 @@ Rerun recording with the default blueprint (:mod:`hil.viewer.blueprint`: the 201
 3/6 and 4/7, live).
 
 Logging never blocks the caller: each call hands its data to one background thread that converts it
-and passes it to the Rerun SDK (which batches and writes from its own threads). When that thread
-falls behind, live calls are dropped and counted (:attr:`TrialViewer.dropped`) rather than waited
-for; offline producers (simulate, replay) pass ``blocking=True`` so nothing is lost.
+and passes it to the Rerun SDK (which writes from its own threads). When that thread falls behind, live
+calls are dropped and counted (:attr:`TrialViewer.dropped`) rather than waited for; offline producers
+(simulate, replay) pass ``blocking=True`` so nothing is lost. The time series and the gimbal poses reach
+the .rrd as one chunk per entity every ``FILE_FLUSH_S`` of trial time and a live view at once
+(:mod:`hil.viewer.chunks`); the poses at ``TABLE_RATE_HZ``, the rest at the estimator's rate (1 Hz).
 
 Viewer modes (:mod:`hil.viewer.modes`): ``spawn`` starts the native viewer, ``serve`` a web viewer
 (the URL is printed), both as a child process (:mod:`hil.viewer.rerun_process`); ``save`` writes
@@ -35,11 +37,13 @@ from hil.viewer.blueprint import (
     ANGLES,
     AXES,
     STREAM_COLORS,
-    TIMELINE,
     default_blueprint,
+    health_entity,
+    health_series,
     log_series_styles,
 )
 from hil.viewer.calibration_view import CalibrationLog, calibration_views
+from hil.viewer.chunks import Columns, Streams
 from hil.viewer.modes import VIEWER_MODES
 from hil.viewer.rerun_process import start_viewer, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
@@ -48,10 +52,10 @@ log = logging.getLogger(__name__)
 
 APPLICATION_ID = "turntable-hil"
 RRD_NAME = "recording.rrd"
-TABLE_RATE_HZ = 20.0  # gimbal angles in the 3D view; the viewer draws at display rate anyway
+TABLE_RATE_HZ = 10.0  # gimbal poses in the 3D view: a step of 1 deg at 10 deg/s, a few pixels on screen
 CONE_PERIOD_S = 10.0  # the reconstructed cone is redrawn at most this often (trial time)
+FILE_FLUSH_S = 30.0  # the .rrd gets each time series as one chunk this often (trial time)
 QUEUE_ITEMS = 1024
-SMALL_BATCH = 8  # rows up to this many are logged one by one (merged by the SDK), more as columns
 
 
 class TrialViewer:
@@ -91,25 +95,32 @@ class TrialViewer:
         self._closed = False
         self._next_table_tick = -np.inf
         self._next_cone_t = 0.0
+        self._cone_pending: Snapshot | None = None  # the newest observable snapshot whose cone is not drawn
         self._ib0_logged = False
+        self._t_latest = 0.0  # the latest trial time logged
+        self._file: rr.RecordingStream | None = None  # the .rrd's stream, its rows held FILE_FLUSH_S
+        self._view: rr.RecordingStream | None = None  # the live view's (spawn, serve), its rows sent at once
         self._calibration: CalibrationLog | None = None
         if mode == "none":
             self._rec = None
             return
 
-        self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-        rr.set_log_time_enabled(False, recording=self._rec)
-        rr.set_log_tick_enabled(False, recording=self._rec)
+        recording_id = uuid.uuid4()
         blueprint = default_blueprint(calibration_views() if layout == "calibration" else None)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
-        if mode == "save":
-            self._rec.save(self.rrd_path, default_blueprint=blueprint)
-        else:
+        self._file = _recording_stream(recording_id)
+        self._file.save(self.rrd_path, default_blueprint=blueprint)
+        self._columns = [Columns(self._file, FILE_FLUSH_S)]
+        if mode != "save":
             self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry)
-            self._rec.set_sinks(rr.GrpcSink(grpc_url), rr.FileSink(self.rrd_path), default_blueprint=blueprint)
-        self._rec.send_recording_name(recording_name)
-        self._health_streams: dict[str, list[str]] = {}
+            self._view = _recording_stream(recording_id)
+            self._view.set_sinks(rr.GrpcSink(grpc_url), default_blueprint=blueprint)
+            self._columns.append(Columns(self._view, 0.0))
+        self._rec = Streams([self._file] + ([self._view] if self._view is not None else []))
+        for rec in self._rec.recs:
+            rec.send_recording_name(recording_name)
+        self._health_series: dict[str, list[str]] = {}
         log_series_styles(self._rec, self.truth_bias is not None)
         log_turntable(self._rec, geometry)
         self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
@@ -147,7 +158,8 @@ class TrialViewer:
         self._submit(lambda: self._write_table(t_kept, angles_kept))
 
     def log_health(self, t: float, health: Mapping[str, Mapping[str, float]]) -> None:
-        """Stream counters at trial time t: {stream: {metric: value}}, e.g. rate_hz, dropped, latency_ms."""
+        """Stream figures at trial time t: {stream: {metric: value}}, e.g. frames, corrupt, latency_p99_ms
+        (:func:`hil.viewer.blueprint.health_entity`)."""
         if self._rec is None:
             return
         rows = [(stream, metric, float(value)) for stream, metrics in health.items() for metric, value in metrics.items()
@@ -175,17 +187,18 @@ class TrialViewer:
         self._closed = True
         self._queue.put(None)
         self._worker.join()
-        self._rec.flush()
-        if self.mode == "save":
-            self._rec.disconnect()
+        self._file.flush()
+        self._file.disconnect()  # the .rrd is complete
+        if self._view is not None:
+            self._view.flush()
         if self.error is not None:
             log.warning("Rerun logging failed: %s", self.error)
 
     def stop(self) -> None:
         """Close, and stop the web viewer server of ``serve`` mode."""
         self.close()
-        if self._rec is not None and self.mode != "save":
-            self._rec.disconnect()
+        if self._view is not None:
+            self._view.disconnect()
         process, self.viewer_process = self.viewer_process, None
         if process is not None and self.mode == "serve" and process.poll() is None:
             process.terminate()
@@ -212,30 +225,35 @@ class TrialViewer:
 
     def _work(self) -> None:
         while (job := self._queue.get()) is not None:
-            try:
-                job()
-            except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
-                if self.error is None:
-                    self.error = exc
-                    log.warning("Rerun logging error (further errors not reported): %s", exc)
+            self._run(job)
+            for columns in self._columns:
+                self._run(lambda c=columns: c.due(self._t_latest))
+        self._run(self._finish)
+
+    def _run(self, job: Callable[[], object]) -> None:
+        try:
+            job()
+        except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
+            if self.error is None:
+                self.error = exc
+                log.warning("Rerun logging error (further errors not reported): %s", exc)
+
+    def _finish(self) -> None:
+        """The last cone, and every row held."""
+        if self._cone_pending is not None:
+            self._draw_cone(self._cone_pending)
+        for columns in self._columns:
+            columns.flush()
 
     def _scalars(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
-        """Rows of a multi-series entity: values (N, K), one series per column; all-NaN rows left out.
-
-        A few rows go through ``log`` (the SDK merges them into large chunks), many through
-        ``send_columns``; one Rerun call costs tens of microseconds either way, hence few entities."""
+        """Rows of a multi-series entity: values (N, K), one series per column; all-NaN rows left out."""
         values = np.asarray(values, dtype=float).reshape(len(t), -1)
         rows = ~np.all(np.isnan(values), axis=1)
         if not rows.any():
             return
-        t, values = t[rows], values[rows]
-        if len(t) <= SMALL_BATCH:
-            for ti, row in zip(t, values):
-                self._rec.set_time(TIMELINE, duration=float(ti))
-                self._rec.log(path, rr.Scalars(row))
-        else:
-            columns = rr.Scalars.columns(scalars=values).partition([values.shape[1]] * len(t))
-            self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=columns)
+        for columns in self._columns:
+            columns.scalars(path, t[rows], values[rows])
+        self._t_latest = max(self._t_latest, float(t[rows].max()))
 
     def _write_snapshots(self, snaps: list[Snapshot]) -> None:
         n = len(snaps)
@@ -272,12 +290,18 @@ class TrialViewer:
         self._write_cones(snaps)
 
     def _write_cones(self, snaps: list[Snapshot]) -> None:
-        for i, s in enumerate(snaps):
-            solution = s.full if s.full.observable else s.gravity_only
-            if s.t < self._next_cone_t and i != len(snaps) - 1 or not solution.observable:
+        """The cone every ``CONE_PERIOD_S`` of trial time; the newest one not drawn is drawn at the end."""
+        for s in snaps:
+            if not (s.full.observable or s.gravity_only.observable):
                 continue
-            self._next_cone_t = s.t + CONE_PERIOD_S
-            log_cone(self._rec, solution, s.t)
+            self._cone_pending = s
+            if s.t >= self._next_cone_t:
+                self._draw_cone(s)
+
+    def _draw_cone(self, s: Snapshot) -> None:
+        log_cone(self._rec, s.full if s.full.observable else s.gravity_only, s.t)
+        self._next_cone_t = s.t + CONE_PERIOD_S
+        self._cone_pending = None
 
     def _write_table(self, t: np.ndarray, angles: np.ndarray) -> None:
         if not self._ib0_logged:
@@ -286,14 +310,8 @@ class TrialViewer:
             self._rec.log("world/ib0", rr.Transform3D(mat3x3=start), rr.TransformAxes3D(0.3), static=True)
             self._ib0_logged = True
         for path, k, axis in GIMBALS:
-            q = axis_quaternions(angles[:, k], axis)
-            if len(t) <= SMALL_BATCH:
-                for ti, qi in zip(t, q):
-                    self._rec.set_time(TIMELINE, duration=float(ti))
-                    self._rec.log(path, rr.Transform3D(quaternion=qi))
-            else:
-                self._rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
-                                       columns=rr.Transform3D.columns(quaternion=q))  # fmt: skip
+            for columns in self._columns:
+                columns.quaternions(path, t, axis_quaternions(angles[:, k], axis))
         self._scalars("table/angles_deg", t, angles / DEG)
 
     def _write_calibration(self, steps: list) -> CalibrationLog:
@@ -302,15 +320,24 @@ class TrialViewer:
         return self._calibration
 
     def _write_health(self, t: float, rows: list[tuple[str, str, float]]) -> None:
-        by_metric: dict[str, dict[str, float]] = {}
+        """One row per health entity, a series per stream and metric in order of appearance."""
+        by_entity: dict[str, dict[str, float]] = {}
         for stream, metric, value in rows:
-            by_metric.setdefault(metric, {})[stream] = value
-        for metric, values in by_metric.items():
-            path = f"health/{rr.escape_entity_path_part(metric)}"
-            streams = self._health_streams.setdefault(path, [])
-            if any(stream not in streams for stream in values):
-                streams.extend(stream for stream in values if stream not in streams)
-                colors = [STREAM_COLORS[k % len(STREAM_COLORS)] for k in range(len(streams))]
-                self._rec.log(path, rr.SeriesLines(names=streams, colors=colors), static=True)
-            row = np.array([values.get(stream, np.nan) for stream in streams])
+            by_entity.setdefault(health_entity(metric), {})[health_series(stream, metric)] = value
+        for entity, values in by_entity.items():
+            path = f"health/{entity}"
+            series = self._health_series.setdefault(path, [])
+            if any(name not in series for name in values):
+                series.extend(name for name in values if name not in series)
+                colors = [STREAM_COLORS[k % len(STREAM_COLORS)] for k in range(len(series))]
+                self._rec.log(path, rr.SeriesLines(names=series, colors=colors), static=True)
+            row = np.array([values.get(name, np.nan) for name in series])
             self._scalars(path, np.array([t]), row[None, :])
+
+
+def _recording_stream(recording_id: uuid.UUID) -> rr.RecordingStream:
+    """A stream of the trial's recording, on trial time alone."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    rr.set_log_time_enabled(False, recording=rec)
+    rr.set_log_tick_enabled(False, recording=rec)
+    return rec

@@ -1,0 +1,93 @@
+"""The recording a trial writes is the one docs/viewer.md describes: the same entity paths, and the size it
+states for a 60 s trial."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from hil.cli import main
+from hil.estimation.calibration_schedule import default_schedule
+from hil.frames import TableGeometry
+from hil.viewer.trial_viewer import TrialViewer
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "viewer.md"
+
+
+def _recorded(path: Path) -> set[str]:
+    """The entity paths of the recording (not the blueprint) in a .rrd."""
+    reader = RrdReader(path)
+    (recording,) = reader.recordings()
+    return {chunk.entity_path for chunk in reader.stream(store=recording)} - {"/__properties"}
+
+
+def _documented() -> tuple[set[str], set[str]]:
+    """The entity paths docs/viewer.md's "Entity paths" names: the trial's table and ``hil calibrate``'s."""
+    section = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
+    trial, calibration = section.split("`hil calibrate` adds", 1)
+
+    def paths(text: str) -> set[str]:
+        cells = [line.split("|")[1] for line in text.splitlines() if line.startswith("| `/")]
+        return {p for cell in cells for p in re.findall(r"`(/[^`<>…]*)`", cell)}
+
+    return paths(trial), paths(calibration)
+
+
+def _stated_mb_per_60_s() -> float:
+    """The size docs/viewer.md states for the .rrd of a 60 s emulated trial."""
+    found = re.search(r"a 60 s trial \(`[^`]+`\) writes ([0-9.]+) MB", DOCS.read_text())
+    assert found, "docs/viewer.md states no size of a 60 s trial's .rrd"
+    return float(found.group(1))
+
+
+@pytest.fixture(scope="module")
+def trial_rrd(tmp_path_factory) -> Path:
+    """The .rrd of a 60 s emulated swing run as fast as it goes."""
+    out = tmp_path_factory.mktemp("trial") / "out"
+    main(["run", "--duration", "60", "--speed", "max", "--viewer", "save", "--no-figures", "--no-history",
+          "--quiet", "--out", str(out)])  # fmt: skip
+    return out / "recording.rrd"
+
+
+def test_a_trials_recording_holds_exactly_the_entities_docs_viewer_names(trial_rrd):
+    documented, _ = _documented()
+    assert _recorded(trial_rrd) == documented
+
+
+def test_a_60_s_trials_recording_is_the_size_docs_viewer_states(trial_rrd):
+    stated = _stated_mb_per_60_s()
+    measured = trial_rrd.stat().st_size / 1e6
+    assert stated <= 0.5  # the MCAP of the raw bytes of such a trial is 0.75 MB
+    assert measured == pytest.approx(stated, rel=0.15)
+
+
+def test_a_trials_recording_holds_a_few_chunks_per_entity_whatever_its_pace(trial_rrd):
+    reader = RrdReader(trial_rrd)
+    (recording,) = reader.recordings()
+    chunks: dict[str, int] = {}
+    rows: dict[str, int] = {}
+    for chunk in reader.stream(store=recording):
+        if not chunk.is_static:
+            chunks[chunk.entity_path] = chunks.get(chunk.entity_path, 0) + 1
+            rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows["/table/angles_deg"] == 601  # 10 Hz, 0 to 60 s
+    assert chunks["/table/angles_deg"] <= 3  # flushed at 30 s and 60 s of trial time, and the rest at the end
+    assert max(n for path, n in chunks.items() if not path.startswith("/world/ib0/")) <= 4
+    assert 5 <= rows["/world/ib0/cone"] <= 7  # every 10 s of trial time and the last
+
+
+def test_a_calibrations_recording_adds_exactly_the_entities_docs_viewer_names(tmp_path):
+    trial, calibration = _documented()
+    schedule = default_schedule()
+    steps = list(schedule.dwells) + list(schedule.plateaus)
+    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True, layout="calibration")
+    viewer.log_table(np.array([0.0]), np.zeros((1, 3)))
+    viewer.log_calibration_step(0.0, 0, steps)
+    viewer.log_calibration_window(30.0, [100.0, -20.0, 5.0], [0.01, 0.02, -0.03])
+    viewer.close()
+    recorded = _recorded(tmp_path / "recording.rrd")
+    assert recorded - trial == calibration
