@@ -36,6 +36,7 @@ from hil.estimation.calibration_model import (
     Window,
     forward,
     forward_jacobian,
+    full_scale_effects,
     inverse,
     least_squares,
     measured_noise,
@@ -103,13 +104,15 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
         reference = reference_at(theta[15:18])
         return y - forward(theta, reference), forward_jacobian(theta, reference, reference_at)
 
+    effects = full_scale_effects(reference_at(np.zeros(3)))
+
     def names(groups: Sequence[str]) -> list[str]:
         return [t for t in TERMS if t.rsplit("_", 1)[0] in groups and t != "zero_offset_outer"]
 
     def vector_fit(theta0: np.ndarray, groups: Sequence[str]) -> Fit:
         chosen = names(groups)
         result = least_squares(theta0, _unit_basis(chosen), chosen, vector_model, samples, prior, tolerance,
-                               measured=noise is not None)
+                               measured=noise is not None, effects=effects)
         return _with_outer_reason(result)
 
     coarse = vector_fit(np.zeros(len(TERMS)), [g for g in fit if g != "nonlinearity"])

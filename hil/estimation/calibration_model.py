@@ -13,6 +13,9 @@ The parameter vector theta holds, in this order, the terms of :data:`TERMS`. A f
 estimates; the others stay at their given values. Observability is judged term by term in priority
 order on the column-scaled design: a term whose column is, to within ``tolerance`` of its squared norm,
 a combination of the columns already kept cannot be separated by the schedule; the reason names them.
+A sensor term whose 1-sigma effect at the schedule's full scale is beyond ``1 / sqrt(tolerance)`` times
+the resolution of its outputs is too weakly excited to observe (:func:`weakly_excited`). Either is held
+at zero, and the fit repeated without it.
 """
 
 from __future__ import annotations
@@ -234,10 +237,22 @@ def select_terms(design: np.ndarray, names: Sequence[str], tolerance: float) -> 
     return kept, reasons
 
 
+def full_scale_effects(reference: np.ndarray) -> np.ndarray:
+    """Per term (18,), the size of its effect per unit at the schedule's full scale R, the largest reference
+    magnitude of its windows (g, or the largest rate): R for scale and misalignment, R^2 for the nonlinearity,
+    0 (not judged by excitation) for the bias and the zero offsets, which act on what the schedule spans."""
+    top = float(np.max(np.linalg.norm(reference, axis=1)))
+    effects = np.zeros(len(TERMS))
+    effects[SCALE] = effects[MIS] = top
+    effects[NONLIN] = top**2
+    return effects
+
+
 def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
                   model: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], samples: np.ndarray,
                   prior: np.ndarray, tolerance: float, iterations: int = 8,
-                  held_covariance: np.ndarray | None = None, measured: bool = False) -> Fit:
+                  held_covariance: np.ndarray | None = None, measured: bool = False,
+                  effects: np.ndarray | None = None) -> Fit:
     """Weighted Gauss-Newton over the coordinates ``basis`` (18, p) of theta, named ``names``.
 
     ``model(theta)`` gives the residuals (N, G) (observation minus prediction) and the Jacobian of the
@@ -250,19 +265,75 @@ def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
     errors over sigmas it gives follow Student's t with about a dozen, whose tails are far heavier than the
     normal's. ``held_covariance`` (18, 18): the covariance of terms held at values estimated elsewhere (zero
     for the others), carried into the fitted terms through the Jacobian.
+
+    Terms the schedule cannot observe are left out, held at zero (uncompensated) with NaN sigma and the
+    reason: first by rank (:func:`select_terms`), then, with ``effects`` (:func:`full_scale_effects`), by
+    excitation (:func:`weakly_excited`), the fit repeated without them.
     """
-    theta = np.array(theta0, dtype=float)
-    residual, jac = model(theta)
+    theta0 = np.array(theta0, dtype=float)
+    residual, jac = model(theta0)
     design = (jac @ basis) * np.sqrt(samples[:, None, None] / prior[:, :, None])
     kept, unobservable = select_terms(design.reshape(-1, basis.shape[1]), names, tolerance)
-    basis = basis[:, kept]
+    while True:
+        theta0[[INDEX[n] for n in unobservable if n in INDEX]] = 0.0
+        solution = _solve(theta0, basis[:, kept], model, samples, prior, iterations, measured)
+        weak = {} if effects is None else weakly_excited(solution, [names[k] for k in kept], effects, tolerance)
+        if not weak:
+            break
+        unobservable.update(weak)
+        kept = [k for k in kept if names[k] not in weak]
+    return solution.fit(unobservable, held_covariance, prior)
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """A converged Gauss-Newton solution over ``basis``: theta, the residuals and Jacobian there, the
+    variance factors, the final weights (N * G,), the fit's own covariance over the basis coordinates and the
+    inverse normal matrix."""
+
+    theta: np.ndarray
+    residual: np.ndarray
+    jac: np.ndarray
+    basis: np.ndarray
+    factor: np.ndarray
+    weights: np.ndarray
+    cov_fit: np.ndarray
+    root: np.ndarray
+
+    def own_sigma(self) -> np.ndarray:
+        """1-sigma (18,) of the fitted terms from the fit alone (no held covariance carried in)."""
+        return np.sqrt(np.maximum(np.diag(self.basis @ self.cov_fit @ self.basis.T), 0.0))
+
+    def fit(self, unobservable: dict[str, str], held_covariance: np.ndarray | None, prior: np.ndarray) -> Fit:
+        """The :class:`Fit`, with the covariance of held terms carried in."""
+        basis = self.basis
+        covariance = basis @ self.cov_fit @ basis.T
+        if held_covariance is not None:
+            h = (self.jac @ basis).reshape(-1, basis.shape[1])
+            carry = basis @ (-self.root @ h.T @ (self.weights[:, None] * self.jac.reshape(-1, len(TERMS)))) \
+                + np.eye(len(TERMS))
+            covariance = covariance + carry @ held_covariance @ carry.T
+        sigma = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+        for name in unobservable:
+            if name in INDEX:
+                sigma[INDEX[name]] = np.nan
+        fitted = tuple(TERMS[k] for k in np.flatnonzero(np.any(basis != 0, axis=1)))
+        noise = np.sqrt(self.factor * np.mean(prior, axis=0))
+        return Fit(self.theta, sigma, covariance, fitted, unobservable, noise, self.residual)
+
+
+def _solve(theta0: np.ndarray, basis: np.ndarray, model: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+           samples: np.ndarray, prior: np.ndarray, iterations: int, measured: bool) -> _Solution:
+    """Gauss-Newton from theta0 over ``basis`` (see :func:`least_squares`)."""
+    theta = np.array(theta0, dtype=float)
+    residual, jac = model(theta)
     factor = np.ones(residual.shape[1])
 
     def usable(f: np.ndarray) -> np.ndarray:
         return np.maximum(_usable(f), 1.0) if measured else _usable(f)
 
     for _ in range(iterations):
-        h = (jac @ basis).reshape(-1, len(kept))
+        h = (jac @ basis).reshape(-1, basis.shape[1])
         w = (samples[:, None] / (prior * usable(factor))).reshape(-1)
         step = np.linalg.solve(h.T @ (w[:, None] * h), h.T @ (w * residual.reshape(-1)))
         theta = theta + basis @ step
@@ -270,23 +341,41 @@ def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
         factor = _variance_factors(residual, jac @ basis, samples[:, None] / prior, usable(factor))
         if np.max(np.abs(step)) < 1e-15:
             break
-    h = (jac @ basis).reshape(-1, len(kept))
+    h = (jac @ basis).reshape(-1, basis.shape[1])
     w = (samples[:, None] / (prior * usable(factor))).reshape(-1)
     # sandwich form: a group whose residuals are zero (noise-free data) gets zero variance
     ratio = np.broadcast_to(1.0 if measured else factor / usable(factor), (len(samples), len(factor))).reshape(-1)
     root = np.linalg.inv(h.T @ (w[:, None] * h))
     cov_fit = root @ (h.T @ ((w * ratio)[:, None] * h)) @ root
-    covariance = basis @ cov_fit @ basis.T
-    if held_covariance is not None:
-        carry = basis @ (-root @ h.T @ (w[:, None] * jac.reshape(-1, len(TERMS)))) + np.eye(len(TERMS))
-        covariance = covariance + carry @ held_covariance @ carry.T
-    sigma = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-    for name in unobservable:
-        if name in INDEX:
-            sigma[INDEX[name]] = np.nan
-    fitted = tuple(TERMS[k] for k in np.flatnonzero(np.any(basis != 0, axis=1)))
-    noise = np.sqrt(factor * np.mean(prior, axis=0))
-    return Fit(theta, sigma, covariance, fitted, unobservable, noise, residual)
+    return _Solution(theta, residual, jac, basis, factor, w, cov_fit, root)
+
+
+def weakly_excited(solution: _Solution, names: Sequence[str], effects: np.ndarray, tolerance: float) -> dict[str, str]:
+    """The fitted terms the schedule excites too weakly to observe, with the reason.
+
+    A term's own 1-sigma (without held covariance) times ``effects`` (its effect at the schedule's full scale,
+    :func:`full_scale_effects`) is compared with the resolution of the outputs it acts on, ``1 / sqrt(sum w)``: the
+    1-sigma of a constant fitted alone to them. Beyond ``1 / sqrt(tolerance)`` times that, the term's
+    information is below ``tolerance`` of a fully excited term's: the physically scaled normal matrix is
+    rank-deficient there, however independent the term's column looks scaled to its own norm (a scale factor
+    seen only through the earth's rate).
+    """
+    sigma = solution.own_sigma()
+    weights = solution.weights.reshape(solution.jac.shape[:2])
+    limit = 1.0 / math.sqrt(tolerance)
+    reasons = {}
+    for name in names:
+        k = INDEX.get(name)
+        if k is None or effects[k] <= 0.0:
+            continue
+        touched = np.any(solution.jac[:, :, k] != 0.0, axis=0)
+        ratio = sigma[k] * effects[k] * math.sqrt(float(np.sum(weights[:, touched])))
+        if ratio > limit:
+            reasons[name] = (f"too weakly excited by this schedule (estimate {solution.theta[k]:.3g} +- "
+                             f"{sigma[k]:.2g}, SI, not applied): its 1-sigma effect at the schedule's full scale is "
+                             f"{ratio:.3g} times the 1-sigma of a constant fitted to the same outputs (limit "
+                             f"{limit:.3g} = 1/sqrt(calibration.rank_tolerance))")
+    return reasons
 
 
 def _usable(factor: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ from hil.estimation.calibration_model import (
     Window,
     forward,
     forward_jacobian,
+    full_scale_effects,
     least_squares,
     measured_noise,
     window_means,
@@ -81,4 +82,5 @@ def calibrate_gyros(windows: Sequence[Window], earth: Earth, geometry: TableGeom
     # each sample's variance, measured in its window
     noise = measured_noise([w.rate_noise for w in windows], y)
     return least_squares(theta0, basis, names, model, samples, noise if noise is not None else np.ones_like(y),
-                         tolerance, held_covariance=held, measured=noise is not None)
+                         tolerance, held_covariance=held, measured=noise is not None,
+                         effects=full_scale_effects(reference_at(theta0[15:18])))
