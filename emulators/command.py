@@ -4,6 +4,7 @@ reports on stderr, one line a device, whether it ends by itself or on a signal."
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,6 +25,17 @@ def speed_option(text: str) -> str:
     return text
 
 
+def positive(text: str) -> float:
+    """A duration or a rate: a finite number above 0, checked as it is parsed (anything else is a usage error)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a number above 0, got {text}")
+    return value
+
+
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of the command, after its config argument."""
     parser.add_argument("--ports-file", type=Path, help="write the ports as JSON here once they are open")
@@ -32,7 +44,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
                              "the ports (a later emulator on the same DIR points them at its own ports)")
     parser.add_argument("--stats-file", type=Path, help="write the run's statistics here as JSON at the end")
     parser.add_argument("--speed", default="1", type=speed_option, help="X times real time, or 'max' (default 1)")
-    parser.add_argument("--duration", type=float, help="seconds of trial time (default: trial.duration_s)")
+    parser.add_argument("--duration", type=positive, help="seconds of trial time (default: trial.duration_s)")
     parser.add_argument("--wait-readers", action="store_true",
                         help="hold the pulse train until every port has a reader that has emptied its input "
                              "(default: stream at once, as hardware does; frames nobody reads are lost and counted)")

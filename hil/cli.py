@@ -251,10 +251,18 @@ def _history_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-history", action="store_true", help="do not file the trial in the history")
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose refusal is one line on stderr naming the argument and the reason, exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"hil: error: {message} ({self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
+    from emulators.command import positive
 
-    parser = argparse.ArgumentParser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
+    parser = _Parser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
                                      epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -263,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     _trial_options(p)
     _record_options(p)
     _history_options(p)
-    p.add_argument("--duration", type=float, help="seconds (default: trial.duration_s)")
+    p.add_argument("--duration", type=positive, help="seconds (default: trial.duration_s)")
     _live_options(p)
     p.set_defaults(func=cmd_run)
 
@@ -305,7 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "simulated), run or CSV")
     p.add_argument("source", help="a trial config (devices on ports: a static record acquired into OUT/acquisition; "
                                   "emulated: simulated), a run directory or recording, or a CSV of increments")
-    p.add_argument("--duration", type=float, help="seconds to acquire from devices, or to simulate (default: "
+    p.add_argument("--duration", type=positive, help="seconds to acquire from devices, or to simulate (default: "
                                                    "trial.duration_s)")
     p.add_argument("--quiet", action="store_true", help="no progress line while acquiring")
     p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
@@ -369,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
     p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
     p.add_argument("--dbc", help="DBC file for can-dbc")
-    p.add_argument("--rate", type=float, default=200.0, help="the device's output rate, Hz (default 200; a STIM300 "
+    p.add_argument("--rate", type=positive, default=200.0, help="the device's output rate, Hz (default 200; a STIM300 "
                                                             "needs its sample rate)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="one of the device's output settings, as imu.options takes it (repeatable)")

@@ -237,3 +237,27 @@ def test_campaign_help_lists_every_kind(capsys):
         main(["campaign", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "kind: " + "|".join(KINDS) in text
+
+
+@pytest.mark.parametrize("args, named", [
+    (["run", "--duration", "-5"], "--duration"),
+    (["run", "--duration", "0"], "--duration"),
+    (["run", "--duration", "inf"], "--duration"),
+    (["emulate", "--duration", "-3"], "--duration"),
+    (["noise", "configs/noise_static.yaml", "--duration", "nan"], "--duration"),
+    (["decode", "kvh1750", "capture.bin", "--rate", "-5"], "--rate"),
+])
+def test_a_duration_or_rate_that_cannot_be_is_one_line_and_exit_2(tmp_path, capsys, args, named):
+    with pytest.raises(SystemExit) as stopped:
+        main([*args, "--out", str(tmp_path / "out")] if args[0] != "emulate" else args)
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and err.count("\n") == 1 and err.startswith(f"hil: error: argument {named}: ")
+    assert not (tmp_path / "out").exists()
+
+
+def test_noise_of_a_simulated_config_lasts_its_duration(tmp_path):
+    out = tmp_path / "noise"
+    assert main(["noise", "configs/noise_static.yaml", "--duration", "120", "--out", str(out), "--no-figures",
+                 "--no-history"]) == 0
+    doc = json.loads((out / "noise.json").read_text())
+    assert doc["samples"] == 120 * 100 and doc["duration_s"] == pytest.approx(120.0, abs=0.01)
