@@ -149,30 +149,47 @@ def _num(v: Any) -> str:
     return "–" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
 
 
-def _vec(p: dict, key: str) -> str:
-    return " ".join(_num(v) for v in p[key]) if key in p else "–"
-
-
 def _band(p: dict, key: str) -> str:
-    return f"{p[key][0]:.3f}–{p[key][1]:.3f}" if key in p else "–"
+    """A band's ends, one a line (its cell spans a point's three rows)."""
+    return f"{p[key][0]:.3f} to<br>{p[key][1]:.3f}" if key in p else "–"
+
+
+def _stat(p: dict, key: str, k: int | None, inside: bool, span: str = "") -> str:
+    """The cell of statistic ``key`` of point ``p`` (of axis ``k``), in bold when it falls outside its band."""
+    value = _num(p[key] if k is None else p[key][k]) if key in p else "–"
+    return f"<td class='num'{span}>{value if inside else f'<strong>{value}</strong>'}</td>"
+
+
+def _point_rows(p: dict) -> str:
+    """A sweep point's three rows, one an axis; what holds for the whole point spans them."""
+    e = html.escape
+    ratio_inside = p.get("ratio_inside", [True] * 3)
+    nees_inside = p.get("nees_inside", True)
+    flag = "" if nees_inside and all(ratio_inside) else " class='row-FAIL'"
+    label = e(point_label(p["values"])).replace(".", ".<wbr>")
+    conv = "<br>".join(_num(p["converged_at_s"][n]) for n in ("q05", "q50", "q95"))  # one a line, beside x y z
+    rows = []
+    for k, axis in enumerate(AXES):
+        cells = "".join(_stat(p, key, k, True) for key in ("error_mean_ug", "error_std_ug", "sigma_mean_ug"))
+        cells += _stat(p, "ratio", k, ratio_inside[k])
+        point = spans = ""
+        if k == 0:
+            point = (f"<td rowspan='3'>{label}</td><td class='num' rowspan='3'>{p['runs']}</td>"
+                     f"<td class='num' rowspan='3'>{p['failed']}</td>")  # fmt: skip
+            spans = (f"<td class='num' rowspan='3'>{_band(p, 'ratio_band')}</td>"
+                     + _stat(p, "nees_mean", None, nees_inside, " rowspan='3'")
+                     + f"<td class='num' rowspan='3'>{_band(p, 'nees_band')}</td>"
+                     f"<td class='num' rowspan='3'>{conv}</td>")  # fmt: skip
+        rows.append(f"<tr{flag}>{point}<td>{axis}</td>{cells}{spans}</tr>")
+    return "".join(rows)
 
 
 def _table(summary: dict) -> str:
-    e = html.escape
-    head = ("<tr><th>sweep point</th><th>runs</th><th>failed</th><th>error mean (µg)</th><th>error std (µg)</th>"
-            "<th>mean σ (µg)</th><th>std/σ x y z</th><th>band</th><th>mean NEES</th><th>band</th>"
-            "<th>converged (s) 5/50/95 %</th></tr>")
-    body = []
-    for p in summary["points"]:
-        conv = "/".join(_num(p["converged_at_s"][n]) for n in ("q05", "q50", "q95"))
-        flag = "" if p.get("nees_inside", True) and all(p.get("ratio_inside", [True])) else " class='row-FAIL'"
-        body.append(f"<tr{flag}><td>{e(point_label(p['values']))}</td><td class='num'>{p['runs']}</td>"
-                    f"<td class='num'>{p['failed']}</td><td class='num'>{_vec(p, 'error_mean_ug')}</td>"
-                    f"<td class='num'>{_vec(p, 'error_std_ug')}</td><td class='num'>{_vec(p, 'sigma_mean_ug')}</td>"
-                    f"<td class='num'>{_vec(p, 'ratio')}</td><td class='num'>{_band(p, 'ratio_band')}</td>"
-                    f"<td class='num'>{_num(p.get('nees_mean'))}</td><td class='num'>{_band(p, 'nees_band')}</td>"
-                    f"<td class='num'>{conv}</td></tr>")
-    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
+    head = ("<tr><th>sweep point</th><th>runs</th><th>failed</th><th>axis</th><th>error mean (µg)</th>"
+            "<th>error std (µg)</th><th>mean σ (µg)</th><th>std/σ</th><th>std/σ band</th><th>mean NEES</th>"
+            "<th>NEES band</th><th>converged (s) 5/50/95 %</th></tr>")
+    body = "".join(_point_rows(p) for p in summary["points"])
+    return f"<div class='wide'><table><thead>{head}</thead><tbody>{body}</tbody></table></div>"
 
 
 def swing_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
@@ -181,7 +198,8 @@ def swing_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
                ("std(error)/mean(sigma) per axis with the 95 % band of a consistent estimator", _ratios(summary, plt)),
                ("Mean NEES with its 95 % chi-square band", _nees(summary, plt)),
                ("Convergence time against the swept value", _convergence(summary, plt))]
-    return f"<h2>Consistency per sweep point</h2>{_table(summary)}<h2>Figures</h2>{figures_html(figures)}"
+    return (f"<h2>Consistency per sweep point</h2><p class='meta'>The statistic outside its band is in bold.</p>"
+            f"{_table(summary)}<h2>Figures</h2>{figures_html(figures)}")
 
 
 def write_campaign_report(out: Path, summary: dict, rows: list[dict[str, Any]],
