@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.config import ConfigError
-from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate
+from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate, inverse
 from hil.samples import AlignedBatch, ImuSamples, TableSamples
 from hil.units import ARCSEC, DEG_PER_H, PPM, UG, UG_PER_G2
 
@@ -74,6 +74,19 @@ def load_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     Raises :class:`CalibrationFileError` naming the file, key and reason.
     """
     return _thetas(Path(path), _read(Path(path))[1])
+
+
+def compensated_bias(accel: np.ndarray, bias: np.ndarray, drift: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bias (3,) m/s^2 and drift (3,) m/s^2 per hour of the compensated accelerometer output, for an
+    injected bias and drift (the same units) under the applied theta ``accel`` (18,).
+
+    The bias is the compensated output at zero specific force: the sensor then outputs its bias alone (``v = 0``
+    in the forward model), so it is :func:`~hil.estimation.calibration_model.inverse` of the injected bias,
+    ``K^-1 (b - b_hat)`` to first order with the applied scale, misalignment and nonlinearity. The drift is that
+    output's change over an hour of injected drift.
+    """
+    seen = inverse(accel, np.asarray(bias, dtype=float))[0]
+    return seen, inverse(accel, np.asarray(bias, dtype=float) + drift)[0] - seen
 
 
 def applied_terms(doc: dict) -> dict:

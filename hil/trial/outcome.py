@@ -6,13 +6,17 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from hil.config import Config, InputError
 from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import (COMPLETED, TrialEnd, non_finite_figure, summary_text, trial_result,
                                verdict_exit_code)
 from hil.outputs.trial_outputs import write_trial_outputs
+from hil.pipeline.compensation import compensated_bias, load_calibration
 from hil.pipeline.progress import Finished
+from hil.units import UG
 
 
 class TrialSetupError(InputError, ValueError):
@@ -20,12 +24,18 @@ class TrialSetupError(InputError, ValueError):
 
 
 def emulated_truth(cfg: Config) -> dict | None:
-    """result.json's ``truth``: the accelerometer bias (µg) and its drift (µg/h) the emulator injects, for
-    comparison in the outputs; None for real devices."""
+    """result.json's ``truth``: the accelerometer bias (µg) and its drift (µg/h) of the output the estimator sees,
+    for comparison in the outputs; None for real devices. That is what the emulator injects, through the
+    ``imu.calibration`` applied to it when one is (:func:`hil.pipeline.compensation.compensated_bias`)."""
     if cfg.imu.source != "emulator":
         return None
     errors = cfg.imu.errors
-    return {"accel_bias_ug": list(errors.accel_bias_ug), "accel_drift_ug_per_h": list(errors.accel_drift_ug_per_h)}
+    if not cfg.imu.calibration:
+        return {"accel_bias_ug": list(errors.accel_bias_ug), "accel_drift_ug_per_h": list(errors.accel_drift_ug_per_h)}
+    accel, _ = load_calibration(cfg.imu.calibration)
+    bias, drift = compensated_bias(accel, np.array(errors.accel_bias_ug) * UG,
+                                   np.array(errors.accel_drift_ug_per_h) * UG)
+    return {"accel_bias_ug": [float(b) for b in bias / UG], "accel_drift_ug_per_h": [float(d) for d in drift / UG]}
 
 
 def output_dir(out: str | Path | None, cfg: Config) -> Path:
