@@ -5,6 +5,7 @@ measurement, its value and the limit."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import xml.etree.ElementTree as ET
 
@@ -96,6 +97,7 @@ def test_a_marker_naming_no_measurement_fails_the_test_naming_it_and_the_known_n
     assert "hil_limits: 'accel_bias_sigma_X' not a measurement of the trial; its measurements: " in text
     assert "accel_bias_sigma_x, accel_bias_sigma_y, accel_bias_sigma_z" in text and ", gram_rank, " in text
     assert "accel_bias_sigma_x = " in text and "accel_bias_sigma_y = " not in text  # only the names asked for
+    assert re.search(r"accel_bias_sigma_x = \d\.\d\d µg, limit ≤ 0\.01 µg", text)  # three digits, as docs/ci.md
 
 
 def test_a_missing_config_with_overrides_fails_the_test_in_one_line_naming_it(pytester):

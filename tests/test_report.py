@@ -16,7 +16,7 @@ from tests.helpers import PAPER_ERRORS, make_config, run_estimator
 
 from hil.config import ReportLimits
 from hil.outputs.figures import FIGURES
-from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, measurements, overall
+from hil.outputs.measurements import FAIL, NOT_JUDGED, PASS, format_value, measurements, overall
 from hil.outputs.trial_report import ReportError, write_report
 from hil.outputs.result import build_result, summary_text, write_result
 from hil.outputs.trial_outputs import write_trial_outputs
@@ -135,7 +135,7 @@ def test_junit_xml_has_a_testcase_per_judged_measurement(trial_dir):
     assert cases["frames_dropped"].find("failure").get("message") == "frames_dropped = 3 frames, limit ≤ 2 frames"
     worst = "xyz"[sigma.index(max(sigma))]
     message = cases[f"accel_bias_sigma_{worst}"].find("failure").get("message")
-    assert str(max(sigma)) in message and f"limit ≤ {min(sigma):.5g} µg" in message
+    assert f"= {format_value(max(sigma))} µg" in message and f"limit ≤ {format_value(min(sigma))} µg" in message
     assert len(cases["accel_bias_sigma_" + "xyz"[sigma.index(min(sigma))]]) == 0
 
 

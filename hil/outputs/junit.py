@@ -51,7 +51,7 @@ def write_junit(out_dir: Path, result: dict, results: list[Measurement]) -> Path
     for m in cases:
         case = ET.SubElement(suite, "testcase", name=m.name, classname=f"hil.{name}")
         if m.outcome == FAIL:
-            value = "no value" if m.value is None else f"{m.value} {m.unit}".rstrip()
+            value = "no value" if m.value is None else f"{m.shown} {m.unit}".rstrip()
             failure = ET.SubElement(case, "failure", message=f"{m.name} = {value}, limit {m.limit} {m.unit}".rstrip(),
                                     type="limit")  # fmt: skip
             failure.text = m.description

@@ -14,6 +14,8 @@ from hil.config import ReportLimits
 from hil.estimation.table_reference import drifts_agree
 
 PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
+SIGMA_DIGITS = 2  # significant digits of a value's sigma that set the decimals it is shown with
+SIGNIFICANT = 3  # significant digits of a value shown without a sigma
 # the measurements of the streams themselves, whatever the estimators made of them
 STREAM_MEASUREMENTS = frozenset({"frames_dropped", "frames_corrupt", "imu_missing_fraction", "imu_gated_fraction",
                                  "imu_without_angles_fraction", "sync_offset"})
@@ -29,21 +31,27 @@ class Measurement:
     limit: str  # human-readable validator, "" when not judged
     outcome: str  # PASS, FAIL or NOT_JUDGED
     description: str = ""
+    sigma: float | None = None  # 1-sigma of the value, in its unit, when the trial knows it
+
+    @property
+    def shown(self) -> str:
+        """The value as every output shows it (:func:`format_value`: to its sigma's precision)."""
+        return format_value(self.value, self.sigma)
 
 
-def _at_most(name, value, unit, bound, description="", absolute=False) -> Measurement:
+def _at_most(name, value, unit, bound, description="", absolute=False, sigma=None) -> Measurement:
     """A measurement judged by ``value <= bound`` (``|value| <= bound`` when absolute); bound None: not judged."""
     if bound is None:
-        return Measurement(name, value, unit, "", NOT_JUDGED, description)
+        return Measurement(name, value, unit, "", NOT_JUDGED, description, sigma)
     limit = f"{'|x| ' if absolute else ''}≤ {format_value(bound)}"
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return Measurement(name, value, unit, limit, FAIL, description)
+        return Measurement(name, value, unit, limit, FAIL, description, sigma)
     ok = (abs(value) if absolute else value) <= bound
-    return Measurement(name, value, unit, limit, PASS if ok else FAIL, description)
+    return Measurement(name, value, unit, limit, PASS if ok else FAIL, description, sigma)
 
 
-def _info(name, value, unit, description="") -> Measurement:
-    return Measurement(name, value, unit, "", NOT_JUDGED, description)
+def _info(name, value, unit, description="", sigma=None) -> Measurement:
+    return Measurement(name, value, unit, "", NOT_JUDGED, description, sigma)
 
 
 def drift_not_the_accelerometer(result: dict) -> bool | None:
@@ -68,17 +76,20 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
     truth = (result.get("truth") or {}).get("accel_bias_ug")
     out: list[Measurement] = []
     for k, axis in enumerate("xyz"):
-        out.append(_info(f"accel_bias_{axis}", bias[k], "µg", f"accelerometer bias estimate, {axis} axis"))
+        out.append(_info(f"accel_bias_{axis}", bias[k], "µg", f"accelerometer bias estimate, {axis} axis", sigma[k]))
     for k, axis in enumerate("xyz"):
         out.append(_at_most(f"accel_bias_sigma_{axis}", sigma[k], "µg", limits.bias_sigma_ug_max,
                             f"1σ of the bias estimate, {axis} axis"))  # fmt: skip
     if truth is not None:
         # the truth is the bias at the start: with the drift model, compare the estimate of b_s
-        start = (est.get("accel_bias_t0_ug") or [None] * 3) if est.get("bias_model") == "drift" else bias
+        drift_model = est.get("bias_model") == "drift"
+        start = (est.get("accel_bias_t0_ug") or [None] * 3) if drift_model else bias
+        start_sigma = (est.get("accel_bias_t0_sigma_ug") or [None] * 3) if drift_model else sigma
         for k, axis in enumerate("xyz"):
             error = None if start[k] is None else start[k] - truth[k]
             out.append(_at_most(f"accel_bias_error_{axis}", error, "µg", limits.bias_error_ug_max,
-                                f"estimate − truth ({format_value(truth[k])} µg), {axis} axis", absolute=True))  # fmt: skip
+                                f"estimate − truth ({format_value(truth[k])} µg), {axis} axis", absolute=True,
+                                sigma=start_sigma[k]))  # fmt: skip
     elif limits.bias_error_ug_max is not None:
         out.append(Measurement("accel_bias_error", None, "µg", f"|x| ≤ {format_value(limits.bias_error_ug_max)}", NOT_JUDGED,
                                "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
@@ -100,7 +111,7 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         sigma_k = est.get("accel_bias_drift_sigma_ug_per_h") or [None] * 3
         for k, axis in enumerate("xyz"):
             out.append(_info(f"accel_bias_drift_{axis}", drift[k], "µg/h", f"bias drift rate ±{format_value(sigma_k[k])} "
-                             f"(1σ), {axis} axis (2018 gravity-vector paper, b = b_s + k t)"))
+                             f"(1σ), {axis} axis (2018 gravity-vector paper, b = b_s + k t)", sigma_k[k]))
     check = est.get("drift_check")
     if check is not None:
         out.append(_info("bias_drift_significant", check["significant"], "",
@@ -133,8 +144,10 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
 
     table = (result.get("table_reference") or {}).get("accel_bias_ug")
     if table is not None:
+        table_sigma = result["table_reference"].get("accel_bias_sigma_ug") or [None] * 3
         for k, axis in enumerate("xyz"):
-            out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude"))
+            out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude",
+                             table_sigma[k]))
 
     calibration = result.get("calibration")
     if calibration is not None:
@@ -185,8 +198,10 @@ def overall(results: list[Measurement]) -> str:
     return FAIL if any(m.outcome == FAIL for m in results) else PASS
 
 
-def format_value(value) -> str:
-    """A value as the report and the limits show it."""
+def format_value(value, sigma: float | None = None) -> str:
+    """A value as report.html, junit.xml (and so the CI plugin) and the limits show it: with a ``sigma``, to the
+    decimals of the sigma's first ``SIGMA_DIGITS`` significant digits (60.3 with a sigma of 1.5, 60.31 with
+    0.15); without one, to ``SIGNIFICANT`` significant digits (1.53), in powers of ten below 1e-3 and from 1e5."""
     if value is None:
         return "—"
     if isinstance(value, bool):
@@ -197,6 +212,16 @@ def format_value(value) -> str:
         return str(value)
     if not math.isfinite(value):
         return str(value)
-    if value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e5):
-        return f"{value:.3e}"
-    return f"{value:.5g}"
+    if sigma is not None and math.isfinite(sigma) and sigma > 0:
+        text = f"{value:.{_decimals(sigma, SIGMA_DIGITS)}f}"
+    elif value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e5):
+        return f"{value:.{SIGNIFICANT - 1}e}"
+    else:
+        text = f"{value:.{_decimals(value, SIGNIFICANT)}f}"
+        text = text.rstrip("0").rstrip(".") if "." in text else text  # no sigma: its zeros say nothing
+    return text.lstrip("-") if float(text) == 0 else text  # never -0
+
+
+def _decimals(x: float, digits: int) -> int:
+    """The decimals that show ``x`` to ``digits`` significant digits (none for the units of a large x)."""
+    return max(0, digits - 1 - math.floor(math.log10(abs(x)))) if x else digits - 1

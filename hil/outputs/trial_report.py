@@ -154,7 +154,7 @@ def _history(series: dict[str, np.ndarray] | None) -> str:
     for frac in (0.1, 0.25, 0.5, 1.0):
         k = min(int(np.searchsorted(t, frac * t[-1])), len(t) - 1)
         cells = "".join(
-            f"<td>{format_value(float(series[f'bias_{a}_ug'][k]))} ± "
+            f"<td>{format_value(float(series[f'bias_{a}_ug'][k]), float(series[f'sigma_{a}_ug'][k]))} ± "
             f"{format_value(float(series[f'sigma_{a}_ug'][k]))}</td>"
             if np.isfinite(series[f"bias_{a}_ug"][k]) else "<td>not observable</td>"
             for a in "xyz"
@@ -207,7 +207,7 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
         outcome_class = m.outcome if m.outcome in (PASS, FAIL) else "none"
         rows.append(
             f"<tr class='row-{outcome_class}'><td><code>{e(m.name)}</code><br><small>{e(m.description)}</small></td>"
-            f"<td class='num'>{e(format_value(m.value))}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
+            f"<td class='num'>{e(m.shown)}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
             f"<td class='outcome {outcome_class}'>{e(m.outcome)}</td></tr>"
         )
     summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
