@@ -7,7 +7,7 @@
   (the ports JSON), stopping it when the test ends;
 - ``@pytest.mark.hil_limits`` (or ``hil_limits("name", ...)``) fails the test on the trial's failed judged
   measurements (all, or those named), each named with its value and limit; a trial that did not complete fails it
-  too.
+  too, and so does a name that is not one of the trial's measurements.
 """
 
 from __future__ import annotations
