@@ -15,17 +15,20 @@ HEADER = "t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps"
 T = 0.01  # s, the sample interval
 
 
-def _static_csv(path, n=3000, rate_x=0.0, bad=None):
-    """``n`` rows of a static IMU at 100 Hz turning at ``rate_x`` rad/s about x; ``bad`` (line, column, value)
-    written over one cell (line 2 is the first data row)."""
+def _static_csv(path, n=3000, rate_x=0.0, bad=None, outer_dps=None):
+    """``n`` rows of a static IMU at 100 Hz turning at ``rate_x`` rad/s about x (with ``outer_dps``, table angles:
+    the outer gimbal turning at that rate from 170 deg, wrapped to +-180); ``bad`` (line, column, value) written
+    over one cell (line 2 is the first data row)."""
     rng = np.random.default_rng(5)
-    rows = [HEADER]
+    header = HEADER + ("" if outer_dps is None else ",outer_deg,middle_deg,inner_deg")
+    rows = [header]
     for k in range(n):
         d = rng.standard_normal(6) * 1e-6
-        rows.append([(k + 1) * T, rate_x * T + d[0], d[1], d[2], d[3], d[4], 9.8 * T + d[5]])
+        angles = [] if outer_dps is None else [(170.0 + outer_dps * (k + 1) * T + 180.0) % 360.0 - 180.0, 0.0, 0.0]
+        rows.append([(k + 1) * T, rate_x * T + d[0], d[1], d[2], d[3], d[4], 9.8 * T + d[5], *angles])
     if bad is not None:
         line, column, value = bad
-        rows[line - 1][HEADER.split(",").index(column)] = value
+        rows[line - 1][header.split(",").index(column)] = value
     path.write_text("\n".join(r if isinstance(r, str) else ",".join(repr(float(v)) for v in r) for r in rows) + "\n")
     return path
 
@@ -66,3 +69,13 @@ def test_a_specific_force_far_from_gravity_is_refused_and_a_gap_is_not(tmp_path)
     with pytest.raises(DataError, match=r"zero\.csv:80: dv_x_mps, dv_y_mps, dv_z_mps is physically implausible: "
                                         r"a specific force of 1\.83e-05 g, not within 0\.2 g of gravity"):
         read_increments_csv(zero)
+
+
+def test_a_table_angle_beyond_the_tables_rate_is_refused_and_a_wrapped_one_is_not(tmp_path):
+    turning = _static_csv(tmp_path / "turning.csv", n=200, outer_dps=50.0)  # crosses +-180 deg at t = 0.2 s
+    batch = read_increments_csv(turning)
+    assert batch.angles[:, 0].max() > np.radians(179) and batch.angles[:, 0].min() < np.radians(-179)
+    absurd = _static_csv(tmp_path / "absurd.csv", n=200, outer_dps=50.0, bad=(120, "outer_deg", 1e308))
+    with pytest.raises(DataError, match=r"absurd\.csv:120: outer_deg 1e\+308 is physically implausible: a turn of "
+                                        r"[\d.]+ deg in the 0\.01 s since the row before, beyond the 2 x 100 deg/s"):
+        read_increments_csv(absurd)

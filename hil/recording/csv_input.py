@@ -70,18 +70,32 @@ def read_increments_csv(path: str | Path, cfg: Config | None = None) -> AlignedB
 
 
 def refuse_implausible(path: Path, data: np.ndarray, lines: list[int], cfg: Config | None) -> None:
-    """Raises :class:`DataError` naming the first row (line, column, value) whose increments the live trial's
-    plausibility check (:class:`~hil.pipeline.plausibility.ImuPlausibility`) would reject: over the file's sample
-    interval (the median spacing of t_s, which a gap does not change), a rotation faster than the table's rate
-    limits allow or a specific force not near gravity. Without ``cfg``, standard gravity and the default limits."""
-    period = float(np.median(np.diff(data[:, 0])))
+    """Raises :class:`DataError` naming the first row (line, column, value) that no IMU on ``cfg``'s turntable gives:
+    increments the live trial's plausibility check would reject (:func:`_implausible_increments`), else table angles
+    that turn faster than the table can (:func:`_implausible_angles`). Without ``cfg``, standard gravity and the
+    default rate limits."""
     limits = (cfg.turntable.limits if cfg else LimitsConfig()).rate_dps
     gravity = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m).g if cfg else G0
+    problem = _implausible_increments(data, limits, gravity)
+    if problem is None and data.shape[1] > len(INCREMENT_COLUMNS):
+        problem = _implausible_angles(data, limits)
+    if problem is not None:
+        k, where, reason = problem
+        raise DataError(f"{path}:{lines[k]}: {where} is physically implausible: {reason}")
+
+
+def _implausible_increments(data: np.ndarray, limits: tuple[float, ...], gravity: float
+                            ) -> tuple[int, str, str] | None:
+    """(row, column and value, reason) of the first row whose increments
+    :class:`~hil.pipeline.plausibility.ImuPlausibility` rejects over the file's sample interval (the median spacing
+    of t_s, which a gap does not change): a rotation faster than the table's rate limits allow, or a specific force
+    not near gravity."""
+    period = float(np.median(np.diff(data[:, 0])))
     check = ImuPlausibility(1.0 / period, gravity, RATE_MARGIN * max(limits) * DEG)
     with np.errstate(over="ignore", invalid="ignore"):  # 1e308 squared is inf: implausible, not a warning
         good = check.ok(data[:, 1:4], data[:, 4:7])
         if good.all():
-            return
+            return None
         k = int(np.argmin(good))
         check.ok(data[k:k + 1, 1:4], data[k:k + 1, 4:7])
     force_g, rate = check.last_rejected
@@ -91,8 +105,23 @@ def refuse_implausible(path: Path, data: np.ndarray, lines: list[int], cfg: Conf
     else:
         where = _largest(data[k], 4) if force_g > 1.0 else "dv_x_mps, dv_y_mps, dv_z_mps"
         reason = f"a specific force of {force_g:.3g} g, not within {check.force_tolerance / gravity:g} g of gravity"
-    raise DataError(f"{path}:{lines[k]}: {where} is physically implausible: {reason} over the {period:.6g} s "
-                    f"sample interval")
+    return k, where, f"{reason} over the {period:.6g} s sample interval"
+
+
+def _implausible_angles(data: np.ndarray, limits: tuple[float, ...]) -> tuple[int, str, str] | None:
+    """(row, column and value, reason) of the first row whose table angle turned since the row before (the
+    shorter way round: angles may be wrapped) further than its gimbal's rate limit, with the plausibility check's
+    margin, allows in their interval."""
+    interval = np.diff(data[:, 0])
+    with np.errstate(over="ignore", invalid="ignore"):  # an absurd angle's difference may overflow: implausible
+        turn = np.abs((np.diff(data[:, 7:10], axis=0) + 180.0) % 360.0 - 180.0)
+        good = turn <= RATE_MARGIN * np.asarray(limits) * interval[:, None]
+    if good.all():
+        return None
+    k, axis = (int(i) for i in np.argwhere(~good)[0])
+    return (k + 1, f"{ANGLE_COLUMNS[axis]} {float(data[k + 1, 7 + axis])!r}",
+            f"a turn of {turn[k, axis]:.3g} deg in the {interval[k]:.6g} s since the row before, beyond the "
+            f"{RATE_MARGIN:g} x {limits[axis]:g} deg/s the table allows")
 
 
 def _largest(row: np.ndarray, first: int) -> str:
