@@ -10,7 +10,7 @@ import pytest
 from tests.helpers import PAPER_ERRORS, make_config, run_estimator
 
 from hil.config import ReportLimits
-from hil.outputs.measurements import format_value, measurements
+from hil.outputs.measurements import format_value
 from hil.outputs.result import build_result
 from hil.outputs.trial_outputs import write_trial_outputs
 from hil.outputs.trial_report import write_report
