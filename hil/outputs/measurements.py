@@ -166,6 +166,10 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         if key == "sync" and value:
             out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
                     for k, v in value.items()]
+        elif key == "gyro_rate_error_dph":
+            out += [_info(f"gyro_rate_error_{axis}", v, "°/h", f"gyro rate minus the table's, {axis} axis: the gyro "
+                          "bias, plus scale factor and misalignment times the rate of a turning axis")
+                    for axis, v in zip("xyz", value or ())]  # fmt: skip
         elif key not in ("dropped", "corrupt", "sync"):
             out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
     return out

@@ -228,7 +228,16 @@ def _estimate_lines(result: dict) -> list[str]:
     m2 = result["alignment_deg"]["method2"]
     if m2:
         lines.append(f"  method-2 alignment error (deg): pitch {m2['pitch']:.2e}, roll {m2['roll']:.2e}")
-    return lines
+    return lines + _gyro_lines(result["streams"])
+
+
+def _gyro_lines(streams: dict) -> list[str]:
+    """What the trial says of the gyros: their rate against the table's, where the table moved."""
+    error = streams.get("gyro_rate_error_dph")
+    if error is None:
+        return []
+    return ["  gyro rate minus the table's (deg/h): " + ", ".join(f"{e:.3g}" for e in error),
+            "    the gyro bias, plus scale factor and misalignment times the rate of a turning axis (not separated)"]
 
 
 def calibration_applied_text(applied: dict | None) -> str:

@@ -66,3 +66,8 @@ class Estimation:
     def time_offset_s(self) -> float | None:
         """The table's lag behind the IMU (s) over the data so far; None before it can be measured."""
         return self.time_offset.estimate() if self.estimator is not None else None
+
+    def gyro_rate_error(self) -> np.ndarray | None:
+        """The gyros' rate minus the table's per body axis (3,) rad/s over the data so far; None before it can
+        be measured."""
+        return self.time_offset.gyro_rate_error() if self.estimator is not None else None

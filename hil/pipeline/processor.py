@@ -27,6 +27,7 @@ from hil.pipeline.motion_match import TableRotations
 from hil.pipeline.progress import Finished, Health, Listener, Progress, Taken, read_only
 from hil.pipeline.sync_pairing import SyncPairing
 from hil.samples import AlignedBatch, ImuGap, ImuSamples, StreamCounts, TableSamples
+from hil.units import DEG_PER_H
 
 TABLE_WAIT_S = 5.0  # s of the host's clock the IMU may run ahead of a silent table before it goes on without it
 UNPACED_TABLE_WAIT_S = 120.0  # s of trial time, at --speed max (see table_wait)
@@ -124,9 +125,10 @@ class TrialProcessor:
         result (its estimator keeps no final solution)."""
         streams = self._counts()
         if not self._batched[0]:
-            offset = self._estimation.time_offset_s()
+            offset, rate_error = self._estimation.time_offset_s(), self._estimation.gyro_rate_error()
             streams = replace(streams, extra=MappingProxyType({
                 **streams.extra, "sync_offset_ms": None if offset is None else offset * 1e3,
+                "gyro_rate_error_dph": None if rate_error is None else (rate_error / DEG_PER_H).tolist(),
                 "sync": None if self._pairing is None else self._pairing.report.as_dict()}))
         applied = self._compensation.applied if self._compensation is not None else None
         return Finished(self._estimation.estimator, streams, applied, self._last)

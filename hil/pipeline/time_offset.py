@@ -6,7 +6,9 @@ cross-correlation (whole samples) and refined by Gauss-Newton on the cubic splin
 rate, ``omega_gyro(t) = omega_table(t + d)``.
 A positive offset means the table's angles lag the IMU (they show an instant that much earlier than
 the one they are placed at: a latch delay configured too short by it). The earth rate is added to
-the table's body rate; the gyro biases are estimated alongside as constants.
+the table's body rate; the gyros' constant difference from it is estimated alongside, per body axis: their
+rate error against the table (:meth:`TimeOffsetEstimator.gyro_rate_error`, the gyro bias, plus the scale
+factor and misalignment times the rate of an axis the table turns at a steady rate).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ NEWTON_STEPS = 4
 
 
 class TimeOffsetEstimator:
-    """Keeps the last ``WINDOW_S`` of gyro increments and table angles; :meth:`estimate` gives the offset (s)."""
+    """Keeps the last ``WINDOW_S`` of gyro increments and table angles; :meth:`estimate` gives the offset (s),
+    :meth:`gyro_rate_error` the gyros' rate error against the table (rad/s)."""
 
     def __init__(self, earth: Earth, geometry: TableGeometry, rate_hz: float) -> None:
         self.earth = earth
@@ -34,7 +37,7 @@ class TimeOffsetEstimator:
         self._t: deque[float] = deque(maxlen=size)
         self._dtheta: deque[list[float]] = deque(maxlen=size)
         self._angles: deque[list[float]] = deque(maxlen=size)
-        self._done: list[tuple[float, int]] = []  # (offset, samples) of finished windows
+        self._done: list[tuple[np.ndarray, int]] = []  # ([offset s, rate errors rad/s], samples) of finished windows
 
     def add(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
         """Consecutive aligned samples: times (N,), gyro increments and angles (N, 3); a sample without
@@ -51,9 +54,9 @@ class TimeOffsetEstimator:
 
     def restart(self) -> None:
         """A discontinuity (gap): keep the estimate of the window so far, and start a new one."""
-        offset = self._window_estimate()
-        if offset is not None:
-            self._done.append((offset, len(self._t)))
+        fit = self._window_estimate()
+        if fit is not None:
+            self._done.append((fit, len(self._t)))
         self._t.clear()
         self._dtheta.clear()
         self._angles.clear()
@@ -61,16 +64,27 @@ class TimeOffsetEstimator:
     def estimate(self) -> float | None:
         """The lag of the table behind the IMU (s): the sample-weighted mean over the continuous windows
         of at least ``MIN_WINDOW_S`` of moving data (the last ``WINDOW_S`` of each); None without one."""
+        fit = self._fit()
+        return None if fit is None else float(fit[0])
+
+    def gyro_rate_error(self) -> np.ndarray | None:
+        """The gyros' rate minus the table's (earth rate included) per body axis (3,) rad/s, a constant per
+        window weighted as :meth:`estimate`; None without a window."""
+        fit = self._fit()
+        return None if fit is None else fit[1:]
+
+    def _fit(self) -> np.ndarray | None:
+        """[offset s, rate error x, y, z rad/s], the windows' sample-weighted mean; None without one."""
         results = list(self._done)
-        offset = self._window_estimate()
-        if offset is not None:
-            results.append((offset, len(self._t)))
+        fit = self._window_estimate()
+        if fit is not None:
+            results.append((fit, len(self._t)))
         if not results:
             return None
-        values, weights = np.array(results).T
-        return float(np.average(values, weights=weights))
+        return np.average([r for r, _ in results], axis=0, weights=[n for _, n in results])
 
-    def _window_estimate(self) -> float | None:
+    def _window_estimate(self) -> np.ndarray | None:
+        """[offset s, rate error x, y, z rad/s] of the current window; None when it is too short or still."""
         from scipy.interpolate import CubicSpline  # here, not with the module: 0.2 s of every trial's start-up
 
         n = len(self._t)
@@ -95,10 +109,10 @@ class TimeOffsetEstimator:
         shift = float(lags[int(np.argmax(score))])
         spline = CubicSpline(np.arange(len(table)), table)
         at = np.arange(MAX_LAG, MAX_LAG + m, dtype=float)
-        offsets = np.tile(np.eye(3), (m, 1))  # a constant per axis: the gyro biases
+        offsets = np.tile(np.eye(3), (m, 1))  # a constant per axis: the gyros' rate error
         for _ in range(NEWTON_STEPS):  # Gauss-Newton on the sub-sample shift and the constant offsets
             r, r_dot = spline(at + shift), spline(at + shift, 1)
             design = np.column_stack((r_dot.ravel(), offsets))
             step, *_ = np.linalg.lstsq(design, (g - r).ravel(), rcond=None)
             shift += step[0]
-        return shift / self.rate_hz
+        return np.concatenate(([shift / self.rate_hz], step[1:]))
