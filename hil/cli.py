@@ -1,4 +1,4 @@
-"""The ``hil`` command line: parses the arguments and calls one runner (:mod:`hil.trial`).
+"""The ``hil`` command line: the arguments parsed (:mod:`hil.arguments`), it calls one runner (:mod:`hil.trial`).
 
 Each command imports its runner when it runs, inside its ``cmd_*`` function: the parser alone starts in
 about 40 ms (``hil --help``, a refused argument), where importing every runner would cost about 1.1 s before
@@ -8,30 +8,20 @@ process) before the schemas and the numerics load, so that the children's import
 
 from __future__ import annotations
 
-import argparse
-import json
+import signal
 import sys
-from datetime import datetime, timezone
-from pathlib import Path
 
-DEFAULT_CONFIG = "configs/emulated_swing.yaml"
-CALIBRATION_CONFIG = "configs/calibration.yaml"
-EXIT_CODES = """exit codes:
-  0  done (and PASS against output.limits, or no limits judged)
-  1  a trial that ended early (devices lost, table not following, interlock, every sample rejected,
-     bytes that decode as no frame: output.stream_timeout_s)
-     or was interrupted (Ctrl-C, SIGTERM, SIGHUP): table turned off, outputs kept;
-     a campaign with failed runs or ended by a signal (outputs of the runs done; --resume goes on)
-  2  bad input (config, data file, port, arguments): one line on stderr naming it and the reason
-  3  a trial that completed but FAILs against output.limits (see report.html, junit.xml)"""
+from hil import interrupted_at_start
 
+if __name__ == "__main__":  # python -m hil.cli (the console script's start is hil's, in hil/__init__.py)
+    signal.signal(signal.SIGINT, interrupted_at_start)
 
-def _config_path(text: str) -> Path:
-    """:func:`hil.inputs.resolve_path`, imported when an argument is converted."""
-    from hil.inputs import resolve_path
+import argparse  # noqa: E402 (after the handler: a Ctrl-C during these imports is one line too)
+import json  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from pathlib import Path  # noqa: E402
 
-    return resolve_path(text)
-
+from hil.arguments import build_parser  # noqa: E402
 
 def _viewer(args: argparse.Namespace):
     from hil.trial.viewer_feed import ViewerOptions
@@ -214,180 +204,41 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         raise InputError(str(exc)) from None
 
 
-def _config_argument(p: argparse.ArgumentParser, default: str = DEFAULT_CONFIG) -> None:
-    p.add_argument("config", nargs="?", type=_config_path, default=default,
-                   help=f"trial YAML, a path or a shipped config's name (default {default})")
-
-
-def _live_options(p: argparse.ArgumentParser) -> None:
-    from emulators.command import speed_option
-
-    p.add_argument("--speed", default="1", type=speed_option,
-                   help="emulated trials: X times real time, or 'max' (default 1)")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-
-
-def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or runs/NAME-TIME",
-                   viewer_default: str | None = None) -> None:
-    from hil.viewer.modes import VIEWER_MODES, default_viewer_mode
-
-    p.add_argument("--out", help=f"output directory (default: {out_default})")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    default = viewer_default or default_viewer_mode()
-    p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
-                   help=f"Rerun viewer: native window, web viewer, .rrd file only, or nothing (default {default})")
-    p.add_argument("--bind", default="127.0.0.1", help="address the web viewer listens on (default 127.0.0.1)")
-
-
-def _record_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dut", help="the unit's serial number (record.dut_serial)")
-    p.add_argument("--operator", help="who runs the trial (record.operator)")
-    p.add_argument("--station", help="the test station (record.station)")
-
-
-def _history_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--history", metavar="URL", help="the trial history: a SQLite file or a SQLAlchemy URL "
-                   "(default $HIL_HISTORY, else history.sqlite under the user's data directory; docs/history.md)")
-    p.add_argument("--no-history", action="store_true", help="do not file the trial in the history")
-
-
-class _Parser(argparse.ArgumentParser):
-    """An argument parser whose refusal is one line on stderr naming the argument and the reason, exit 2."""
-
-    def error(self, message: str):
-        self.exit(2, f"hil: error: {message} ({self.prog} --help)\n")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
-    from emulators.command import positive
-
-    parser = _Parser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
-                                     epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    p = sub.add_parser("run", help="run a trial: devices (or their emulators) -> recorder, estimator, viewer")
-    _config_argument(p)
-    _trial_options(p)
-    _record_options(p)
-    _history_options(p)
-    p.add_argument("--duration", type=positive, help="seconds (default: trial.duration_s)")
-    _live_options(p)
-    p.set_defaults(func=cmd_run)
-
-    p = sub.add_parser("calibrate", help="multi-position calibration: the harness turns the table through the "
-                                         "schedule; OUT/calibration.json")
-    _config_argument(p, CALIBRATION_CONFIG)
-    _trial_options(p)
-    _record_options(p)
-    _history_options(p)
-    _live_options(p)
-    p.add_argument("--simulate", action="store_true",
-                   help="the emulated table and IMU in this process, as fast as the CPU allows (no ports, no "
-                        "recording; --speed does not apply)")
-    p.set_defaults(func=cmd_calibrate)
-
-    p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
-    p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")
-    _trial_options(p, out_default="RUN_DIR/replay")
-    _history_options(p)
-    p.set_defaults(func=cmd_replay)
-
-    p = sub.add_parser("simulate", help="emulator straight into the estimator, as fast as possible")
-    _config_argument(p)
-    _trial_options(p, viewer_default="none")
-    _record_options(p)
-    _history_options(p)
-    p.set_defaults(func=cmd_simulate)
-
-    p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
-    p.add_argument("data", help="CSV: t_s, dtheta_[xyz]_rad, dv_[xyz]_mps[, outer_deg, middle_deg, inner_deg]")
-    p.add_argument("--config", required=True, type=_config_path, help="trial YAML (trial and site are enough)")
-    p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    _record_options(p)
-    _history_options(p)
-    p.set_defaults(func=cmd_estimate)
-
-    p = sub.add_parser("noise", help="Allan deviation and IEEE noise terms of a config (its devices read, or "
-                                     "simulated), run or CSV")
-    p.add_argument("source", help="a trial config (devices on ports: a static record acquired into OUT/acquisition; "
-                                  "emulated: simulated), a run directory or recording, or a CSV of increments")
-    p.add_argument("--duration", type=positive, help="seconds to acquire from devices, or to simulate (default: "
-                                                   "trial.duration_s)")
-    p.add_argument("--quiet", action="store_true", help="no progress line while acquiring")
-    p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
-    p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
-    p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")
-    p.add_argument("--no-figures", action="store_true", help="skip allan.png")
-    p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
-    p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
-                                                    "10^k s), all (every multiple of the period: n^2/2 operations), "
-                                                    "or taus in s such as 1,10,100,3600")
-    _record_options(p)
-    _history_options(p)
-    p.set_defaults(func=cmd_noise)
-
-    p = sub.add_parser("history", help="a unit's trials from the trial history: bias repeatability, drift, "
-                                       "calibration and noise terms over time")
-    p.add_argument("--dut", help="the unit's serial number (record.dut_serial); default every unit")
-    p.add_argument("--since", help="only trials started on or after this date (ISO 8601, UTC)")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON (docs/contracts.md)")
-    p.add_argument("--out", help="write history.html with the plots into this directory")
-    p.add_argument("--history", metavar="URL", help="the history database (default $HIL_HISTORY, else the "
-                   "user's data directory)")
-    p.set_defaults(func=cmd_history)
-
-    p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
-                                        "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")
-    p.add_argument("spec", help="campaign YAML: {base: CONFIG, runs: N, seed: S, kind: swing|noise|calibration, "
-                                   "sweep: {dotted.key: [values]}}")
-    p.add_argument("--scheduler", metavar="ADDR", help="an existing cluster's scheduler, tcp://host:8786 (default: a LocalCluster on "
-                                       "127.0.0.1)")
-    p.add_argument("--workers", type=int, metavar="N", help="LocalCluster: worker processes (default: one a core); --scheduler: "
-                                               "wait for this many")
-    p.add_argument("--out", help="output directory (default: runs/campaign-SPEC)")
-    p.add_argument("--resume", action="store_true", help="go on with OUT/runs.parquet: skip the runs done there")
-    p.set_defaults(func=cmd_campaign)
-
-    p = sub.add_parser("worker", help="dask workers for an existing cluster, with the campaign's worker settings "
-                                      "(profiler off, no malloc trim, one thread each); runs until a signal")
-    p.add_argument("scheduler", help="the cluster's scheduler, tcp://host:8786")
-    p.add_argument("--nworkers", type=int, default=1, metavar="N", help="worker processes (default 1)")
-    p.add_argument("--host", help="the address the workers listen on (default: dask's choice)")
-    p.set_defaults(func=cmd_worker)
-
-    p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports; "
-                                       "their statistics on stderr at the end and on a signal")
-    _config_argument(p)
-    add_emulate_options(p)
-    p.set_defaults(func=cmd_emulate)
-
-    p = sub.add_parser("report", help="rebuild a trial's report.html and junit.xml from its outputs (exit as its "
-                                      "verdict), or a noise characterisation's report.html")
-    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml) or hil noise's "
-                               "(noise.json)")
-    p.set_defaults(func=cmd_report)
-
-    p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "
-                                      "last line")
-    p.add_argument("protocol", help="a protocol's name (kvh1750, xsens-mtdata2, stim300, tts1, can-dbc, or an "
-                                    "installed plug-in's), or auto (named from a byte dump's first 64 kB; not for CAN "
-                                    "logs)")
-    p.add_argument("file", help="a raw byte dump, or a python-can .blf/.asc log for can-dbc")
-    p.add_argument("--out", help="CSV to write (default: stdout is not used; counters only)")
-    p.add_argument("--dbc", help="DBC file for can-dbc")
-    p.add_argument("--rate", type=positive, default=200.0, help="the device's output rate, Hz (default 200; a STIM300 "
-                                                            "needs its sample rate)")
-    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="one of the device's output settings, as imu.options takes it (repeatable)")
-    p.set_defaults(func=cmd_decode)
-    return parser
+# the function of each command, by the name the parser gives it
+COMMANDS = {"run": cmd_run, "calibrate": cmd_calibrate, "replay": cmd_replay, "simulate": cmd_simulate,
+            "estimate": cmd_estimate, "noise": cmd_noise, "history": cmd_history, "campaign": cmd_campaign,
+            "worker": cmd_worker, "report": cmd_report, "decode": cmd_decode, "emulate": cmd_emulate}
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command ``argv`` (default: the command line's) names; its exit code. Ctrl-C at any moment but a
+    trial's (which ends the trial as interrupted, :mod:`hil.trial.stop_signals`), from the parsing of the
+    arguments on, is one line and exit 130."""
+    try:
+        if signal.getsignal(signal.SIGINT) is interrupted_at_start:
+            signal.signal(signal.SIGINT, signal.default_int_handler)  # caught below from here on
+        return _command(argv)
+    except BaseException as exc:
+        if not _interrupted(exc):
+            raise
+        print("hil: interrupted", file=sys.stderr)
+        return 130
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether ``exc`` is a Ctrl-C's KeyboardInterrupt or was raised by one (Python wraps one raised in a class
+    body's ``__set_name__`` into a RuntimeError, for instance)."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _command(argv: list[str] | None) -> int:
+    """The arguments parsed and their command run; bad input is one line and exit 2."""
     args = build_parser().parse_args(argv)
-    args.started = datetime.now(timezone.utc)
+    args.func, args.started = COMMANDS[args.command], datetime.now(timezone.utc)
     from hil.inputs import InputError  # no schema yet: a command that starts a child does so first
 
     try:
@@ -395,9 +246,6 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"hil: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("hil: interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

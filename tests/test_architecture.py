@@ -20,7 +20,7 @@ LAYERS = (
     ("hil.outputs", "hil.viewer"),
     ("hil.trial",),
     ("hil.campaign", "hil.history"),
-    ("hil.cli", "hil.pytest_plugin"),
+    ("hil.arguments", "hil.cli", "hil.pytest_plugin"),
 )
 
 

@@ -21,7 +21,7 @@ from test_calibration import (
 
 from hil.estimation.calibration_schedule import default_schedule
 from hil.outputs.calibration import calibration_document
-from hil.outputs.calibration_report import window_residuals, write_calibration_report
+from hil.outputs.calibration_report import window_residuals, write_calibration_report, write_residual_figure
 from hil.units import DEG_PER_H, UG
 
 
@@ -67,7 +67,8 @@ def test_the_report_embeds_the_accelerometer_and_gyro_figure(tmp_path):
     windows, acc, gyr = run(default_schedule(plateau_s=20.0), seed=3)
     doc = calibration_document(acc, gyr, windows)
     result = {"trial": {"name": "six-position"}, "ended": "completed", "record": {"dut_serial": "SN 9"}}
-    write_calibration_report(tmp_path, doc, window_residuals(windows, acc, gyr, EARTH, GEOMETRY), result, "PASS")
+    image = write_residual_figure(tmp_path, window_residuals(windows, acc, gyr, EARTH, GEOMETRY))
+    write_calibration_report(tmp_path, doc, result, "PASS", image)
     page = (tmp_path / "calibration.html").read_text()
     assert page.count("<img") == 1 and "data:image/png;base64," in page
     assert "<h1>six-position</h1>" in page and "SN 9" in page and 'class="verdict PASS"' in page
@@ -75,6 +76,6 @@ def test_the_report_embeds_the_accelerometer_and_gyro_figure(tmp_path):
     assert image.shape[1] == 2 * 9 * 90  # two columns of panels: specific force and angular rate
     without = tmp_path / "accel-only"
     without.mkdir()
-    write_calibration_report(without, doc, window_residuals(windows, acc, None, EARTH, GEOMETRY), result, "PASS")
+    write_residual_figure(without, window_residuals(windows, acc, None, EARTH, GEOMETRY))
     image = matplotlib.image.imread(io.BytesIO((without / "calibration_residuals.png").read_bytes()))
     assert image.shape[1] == 9 * 90

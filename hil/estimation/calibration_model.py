@@ -13,9 +13,7 @@ The parameter vector theta holds, in this order, the terms of :data:`TERMS`. A f
 estimates; the others stay at their given values. Observability is judged term by term in priority
 order on the column-scaled design: a term whose column is, to within ``tolerance`` of its squared norm,
 a combination of the columns already kept cannot be separated by the schedule; the reason names them.
-A sensor term whose 1-sigma effect at the schedule's full scale is beyond ``1 / sqrt(tolerance)`` times
-the resolution of its outputs is too weakly excited to observe (:func:`weakly_excited`). Either is held
-at zero, and the fit repeated without it.
+Nor can a term too weakly excited (:func:`weakly_excited`). Either is held at zero, the fit repeated without it.
 """
 
 from __future__ import annotations
@@ -25,6 +23,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from hil.units import ARCSEC, PPM, UG_PER_G2
 
 AXES = "xyz"
 MISALIGNMENT = ("xy", "xz", "yx", "yz", "zx", "zy")
@@ -40,6 +40,8 @@ TERMS = (
 )
 INDEX = {name: k for k, name in enumerate(TERMS)}
 BIAS, SCALE, MIS, NONLIN, ZERO = (slice(0, 3), slice(3, 6), slice(6, 12), slice(12, 15), slice(15, 18))
+# how a term judged by its excitation is named in its reason: unit label, SI per unit
+REPORT_UNITS = {"scale": ("ppm", PPM), "misalignment": ("arcsec", ARCSEC), "nonlinearity": ("ug/g^2", UG_PER_G2)}
 ZERO_STEP = 1e-6  # rad, central-difference step of the reference in the zero offsets
 NOISE_FLOOR = 1e-9  # a sample's noise below this fraction of its window's mean is rounding, not noise
 
@@ -287,9 +289,8 @@ def least_squares(theta0: np.ndarray, basis: np.ndarray, names: Sequence[str],
 
 @dataclass(frozen=True)
 class _Solution:
-    """A converged Gauss-Newton solution over ``basis``: theta, the residuals and Jacobian there, the
-    variance factors, the final weights (N * G,), the fit's own covariance over the basis coordinates and the
-    inverse normal matrix."""
+    """A Gauss-Newton solution over ``basis``: theta, the residuals and Jacobian there, the variance factors, the
+    final weights (N * G,), the fit's own covariance over the basis coordinates, the inverse normal matrix."""
 
     theta: np.ndarray
     residual: np.ndarray
@@ -371,9 +372,10 @@ def weakly_excited(solution: _Solution, names: Sequence[str], effects: np.ndarra
         touched = np.any(solution.jac[:, :, k] != 0.0, axis=0)
         ratio = sigma[k] * effects[k] * math.sqrt(float(np.sum(weights[:, touched])))
         if ratio > limit:
-            reasons[name] = (f"too weakly excited by this schedule (estimate {solution.theta[k]:.3g} +- "
-                             f"{sigma[k]:.2g}, SI, not applied): its 1-sigma effect at the schedule's full scale is "
-                             f"{ratio:.3g} times the 1-sigma of a constant fitted to the same outputs (limit "
+            label, unit = REPORT_UNITS[name.rsplit("_", 1)[0]]
+            reasons[name] = (f"too weakly excited by this schedule (estimate {solution.theta[k] / unit:.4g} +- "
+                             f"{sigma[k] / unit:.2g} {label}, not applied): its 1-sigma effect at the schedule's full "
+                             f"scale is {ratio:.3g} times the 1-sigma of a constant fitted to the same outputs (limit "
                              f"{limit:.3g} = 1/sqrt(calibration.rank_tolerance))")
     return reasons
 

@@ -25,7 +25,8 @@ from hil.estimation.calibration_model import (
 from hil.pipeline.compensation import ACCEL_KEYS, GYRO_KEYS
 from hil.units import ARCSEC, DEG, UG
 
-NOT_FITTED = "not fitted (left out of calibration.accel_terms / gyro_terms)"
+HELD_BY_GYROS = ("taken from the accelerometers: the gyro fit holds the middle and inner zero offsets at their "
+                 "values")
 
 
 def calibration_document(accel: AccelCalibration, gyro: Fit | None, windows: list[Window],
@@ -41,8 +42,8 @@ def calibration_document(accel: AccelCalibration, gyro: Fit | None, windows: lis
         doc[block], sigma[block] = {}, {}
         for key, part, unit in keys:
             names = TERMS[part]
-            doc[block][key] = _values(fit, fit.theta, names, unit, f"{block}.{key}", unobservable)
-            sigma[block][key] = _values(fit, fit.sigma, names, unit, None, unobservable)
+            doc[block][key] = _values(fit, block, fit.theta, names, unit, f"{block}.{key}", unobservable)
+            sigma[block][key] = _values(fit, block, fit.sigma, names, unit, None, unobservable)
     doc["sigma"] = sigma
     zero = [_zero_offset(k, accel.refined, gyro, unobservable) for k in range(3)]
     doc["turntable"] = {"zero_offset_arcsec": [z[0] for z in zero], "zero_offset_sigma_arcsec": [z[1] for z in zero]}
@@ -66,11 +67,21 @@ def calibration_document(accel: AccelCalibration, gyro: Fit | None, windows: lis
     return doc
 
 
-def _values(fit: Fit, values: np.ndarray, names: tuple[str, ...], unit: float, key: str | None,
+def _not_fitted(block: str) -> str:
+    """The reason of a term its block's ``calibration.accel_terms`` / ``gyro_terms`` leaves out."""
+    return f"not fitted (left out of calibration.{block}_terms)"
+
+
+def _reason(fit: Fit, block: str, name: str) -> str | None:
+    """Why the fit gives no value for ``name``: unobservable (the fit's reason) or not fitted; None when it does."""
+    return fit.unobservable.get(name) or (None if name in fit.fitted else _not_fitted(block))
+
+
+def _values(fit: Fit, block: str, values: np.ndarray, names: tuple[str, ...], unit: float, key: str | None,
             unobservable: dict[str, str]) -> list[float | None]:
     out: list[float | None] = []
     for i, name in enumerate(names):
-        reason = fit.unobservable.get(name) or (None if name in fit.fitted else NOT_FITTED)
+        reason = _reason(fit, block, name)
         if reason is not None and key is not None:
             unobservable[f"{key}.{i}"] = reason
         out.append(None if reason is not None else float(values[INDEX[name]] / unit))
@@ -78,13 +89,14 @@ def _values(fit: Fit, values: np.ndarray, names: tuple[str, ...], unit: float, k
 
 
 def _zero_offset(axis: int, accel: Fit, gyro: Fit | None, unobservable: dict[str, str]) -> tuple:
-    """(value, sigma) in arcsec of one gimbal's zero offset: from the accelerometers, else from the gyros."""
+    """(value, sigma) in arcsec of one gimbal's zero offset: from the accelerometers, else from the gyros (which
+    fit the outer one only)."""
     name = TERMS[ZERO][axis]
     reasons = []
-    for label, fit in (("accelerometers", accel), ("gyros", gyro)):
+    for block, label, fit in (("accel", "accelerometers", accel), ("gyro", "gyros", gyro)):
         if fit is None:
             continue
-        reason = fit.unobservable.get(name) or (None if name in fit.fitted else NOT_FITTED)
+        reason = HELD_BY_GYROS if block == "gyro" and axis > 0 else _reason(fit, block, name)
         if reason is None:
             k = INDEX[name]
             return float(fit.theta[k] / ARCSEC), float(fit.sigma[k] / ARCSEC)

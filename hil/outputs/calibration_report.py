@@ -26,6 +26,7 @@ from hil.estimation.calibration_model import TERMS, Fit, Window, fold_inner_rota
 from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
+from hil.outputs.calibration_section import RESIDUALS_PNG
 from hil.outputs.figures import pyplot
 from hil.outputs.page_header import page_header
 from hil.outputs.trial_report import html_page
@@ -133,28 +134,34 @@ def residual_figure(residuals: Residuals) -> bytes:
     return buf.getvalue()
 
 
-def write_calibration_report(out: Path, doc: dict, residuals: Residuals, result: dict, verdict: str,
-                             figures: bool = True) -> Path:
-    """``out/calibration.html`` (self-contained: the figure inline) and ``calibration_residuals.png``, headed by
-    the trial's name, record, end and ``verdict`` from its ``result`` (result.json's document)."""
+def write_residual_figure(out: Path, residuals: Residuals) -> bytes:
+    """``out/calibration_residuals.png`` (:func:`residual_figure`), drawn before the trial's report, which shows it."""
+    png = residual_figure(residuals)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / RESIDUALS_PNG).write_bytes(png)
+    return png
+
+
+def write_calibration_report(out: Path, doc: dict, result: dict, verdict: str, image: bytes | None = None) -> Path:
+    """``out/calibration.html`` (self-contained: the residual figure ``image``, a PNG, inline), headed by the trial's
+    name, record, end and ``verdict`` from its ``result`` (result.json's document)."""
     rows = "".join(
         f"<tr><td>{html.escape(r['term'])}</td><td class='num'>{_fmt(r['estimate'])}</td>"
         f"<td class='num'>{_fmt(r['sigma'])}</td><td class='num'>{_fmt(r['truth'])}</td>"
         f"<td class='num'>{_fmt(r['error_sigma'])}</td><td>{html.escape(r['reason'] or '')}</td></tr>"
         for r in comparison(doc))
-    image = ""
-    if figures and doc["positions"]:
-        png = residual_figure(residuals)
-        (out / "calibration_residuals.png").write_bytes(png)
-        image = (f'<figure><img alt="residuals per position" '
-                 f'src="data:image/png;base64,{base64.b64encode(png).decode()}"><figcaption>Residual of each '
-                 "window's mean output against its reference (gravity; the earth rate plus the table's rate) "
-                 "before calibration (the error-free model) and after it (the fitted model).</figcaption></figure>")
+    figure = ""
+    if image is not None:
+        figure = (f'<figure><img alt="residuals per position" '
+                  f'src="data:image/png;base64,{base64.b64encode(image).decode()}"><figcaption>Residual of each '
+                  "window's mean output against its reference (gravity; the earth rate plus the table's rate) "
+                  "before calibration (the error-free model) and after it (the fitted model).</figcaption></figure>")
     body = ("<p class='meta'>Multi-position calibration (2018 three-stage paper). Units as in the term names "
             "(µg, ppm, arcsec, µg/g², °/h). Truth: the injected errors as this schedule sees them (emulated "
-            "trials); error / σ with an angle's σ combined with the encoder resolution (1e-6°).</p>"
+            "trials); error / σ with an angle's σ combined with the encoder resolution (1e-6°). A term without an "
+            "estimate is null in calibration.json and never applied by imu.calibration.</p>"
             "<table><thead><tr><th>term</th><th>estimate</th><th>1σ</th><th>truth</th><th>error / σ</th>"
-            f"<th>unobservable</th></tr></thead><tbody>{rows}</tbody></table>{image}")
+            f"<th>why no estimate</th></tr></thead><tbody>{rows}</tbody></table>{figure}")
     name = str(result["trial"]["name"])
     header = page_header("Calibration", name, result.get("record"), result.get("ended"), verdict)
     path = out / "calibration.html"
@@ -165,4 +172,4 @@ def write_calibration_report(out: Path, doc: dict, residuals: Residuals, result:
 def _fmt(value) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "—"
-    return f"{value:.4g}"
+    return f"{value + 0.0:.4g}"  # + 0.0: a negative zero prints as 0"

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.config import InputError, ReportLimits, load_config
+from hil.outputs.calibration_section import RESIDUALS_PNG, calibration_lead
 from hil.outputs.figures import FIGURES, Draw, write_figures
 from hil.outputs.junit import write_junit
 from hil.outputs.measurements import (
@@ -42,6 +43,7 @@ _CAPTIONS = {
     "alignment.png": "Alignment error against the turntable, methods 1 and 2 and the theoretical error "
     "(cf. Liu 2019 Fig. 4)",
     "allan.png": "Overlapping Allan deviation with its intervals, the fitted terms' slopes and read-off points",
+    RESIDUALS_PNG: "Residual of each window's mean output against its reference, before and after calibration",
 }
 
 
@@ -202,6 +204,43 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
     judged = [m for m in results if m.outcome != NOT_JUDGED]
     failed = [m for m in judged if m.outcome == FAIL]
     e = html.escape
+    calibrated = result.get("calibration") is not None
+    lead, shown, folded, estimate = "", results, [], ""
+    if calibrated:  # a calibration leads with what it found; its unjudged measurements fold away
+        lead = calibration_lead(result["calibration"]) + _figure_html([f for f in figures if f[0] == RESIDUALS_PNG])
+        figures = [f for f in figures if f[0] != RESIDUALS_PNG]
+        shown = [m for m in results if m.outcome != NOT_JUDGED]
+        folded = [m for m in results if m.outcome == NOT_JUDGED]
+        estimate = "<p class='meta'>The online bias estimate (Liu et al. 2019) over the calibration's motion.</p>"
+    summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
+               + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
+    what = ("Multi-position calibration (2018 three-stage paper): the terms in calibration.html"
+            if calibrated else "Accelerometer bias from swinging motion (Liu et al. 2019)")
+    fold = (f"<details><summary>{len(folded)} measurements not judged (no limit in output.limits)</summary>"
+            f"{_measurement_table(folded)}</details>" if folded else "")
+    body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
+{e(what)}.</p>
+<p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
+{_record_table(result.get("record"))}
+<p>{e(summary)}.</p>
+{"".join(f'<p class="note">{e(n)}</p>' for n in notes)}
+{lead}
+<h2>Measurements</h2>
+{_measurement_table(shown)}{fold}
+{_history(series)}
+{noise}
+<h2>Figures</h2>{estimate}
+{_figure_html(figures) or "<p>No figures in this directory.</p>"}
+<p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
+(recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
+    kind = "Calibration report" if calibrated else "Trial report"
+    header = page_header(kind, str(trial.get("name", "trial")), result.get("record"), ended, verdict)
+    return html_page(header, f"{trial.get('name', 'trial')}: {verdict}", body)
+
+
+def _measurement_table(results: list[Measurement]) -> str:
+    """The measurements as a table: name and description, value, unit, limit, outcome."""
+    e = html.escape
     rows = []
     for m in results:
         outcome_class = m.outcome if m.outcome in (PASS, FAIL) else "none"
@@ -210,27 +249,8 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
             f"<td class='num'>{e(m.shown)}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
             f"<td class='outcome {outcome_class}'>{e(m.outcome)}</td></tr>"
         )
-    summary = (f"{len(judged)} of {len(results)} measurements judged, {len(failed)} failed"
-               + (": " + ", ".join(m.name for m in failed) if failed else ""))  # fmt: skip
-    what = ("Multi-position calibration (2018 three-stage paper): the terms in calibration.html"
-            if "calibration" in result else "Accelerometer bias from swinging motion (Liu et al. 2019)")
-    body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
-{e(what)}.</p>
-<p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
-{_record_table(result.get("record"))}
-<p>{e(summary)}.</p>
-{"".join(f'<p class="note">{e(n)}</p>' for n in notes)}
-<h2>Measurements</h2>
-<table><thead><tr><th>measurement</th><th>value</th><th>unit</th><th>limit</th><th>outcome</th></tr></thead>
-<tbody>{"".join(rows)}</tbody></table>
-{_history(series)}
-{noise}
-<h2>Figures</h2>
-{_figure_html(figures) or "<p>No figures in this directory.</p>"}
-<p class="meta">Built from result.json, series.csv and the figures beside this file. The Rerun recording
-(recording.rrd, when saved) opens with <code>rerun recording.rrd</code>.</p>"""
-    header = page_header("Trial report", str(trial.get("name", "trial")), result.get("record"), ended, verdict)
-    return html_page(header, f"{trial.get('name', 'trial')}: {verdict}", body)
+    return ("<table><thead><tr><th>measurement</th><th>value</th><th>unit</th><th>limit</th><th>outcome</th></tr>"
+            f"</thead><tbody>{''.join(rows)}</tbody></table>")
 
 
 def _record_table(record: dict | None) -> str:

@@ -23,6 +23,7 @@ from hil.outputs.calibration_report import (
     observed_truth,
     window_residuals,
     write_calibration_report,
+    write_residual_figure,
 )
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import COMPLETED, TrialEnd
@@ -95,15 +96,17 @@ class CalibrationOutcome(TrialOutcome):
         return cls(**fields, calibration=document, residuals=residuals)
 
     def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
-        """The trial's outputs, then (when calibrated) calibration.json with the trial's record and
-        calibration.html headed by its verdict; returns the verdict."""
+        """The residual figure (when calibrated), the trial's outputs, then calibration.json with the trial's
+        record and calibration.html headed by its verdict; returns the verdict."""
+        image = None
+        if self.calibration is not None and self.calibration["positions"] and figures and self.cfg.output.figures:
+            image = write_residual_figure(self.out, self.residuals)  # before the report, which leads with it
         verdict = super().write(figures, draw)
         if self.calibration is not None:
             if "record" in self.result:
                 self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
-            write_calibration_report(self.out, self.calibration, self.residuals, self.result, verdict,
-                                     figures and self.cfg.output.figures)
+            write_calibration_report(self.out, self.calibration, self.result, verdict, image)
         return verdict
 
 

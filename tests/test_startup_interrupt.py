@@ -1,0 +1,62 @@
+"""Ctrl-C at any moment of a command's start-up is one line and exit 130, never a traceback; once the trial runs,
+it ends the trial as interrupted (exit 1). The signal is sent at delays after the console script has imported
+the package hil (the interpreter's own start, before any of hil's code runs, is out of its reach), seen from the
+interpreter's import log on stderr."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+HIL = Path(sys.executable).parent / "hil"
+DELAYS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)  # s after the package hil is imported
+TRIAL_LINES = ("hil: SIGINT: ending the trial (turntable off, outputs kept)", "hil: trial interrupted: SIGINT")
+
+COMMANDS = {
+    "run": ["run", "configs/emulated_swing.yaml", "--duration", "20", "--speed", "max", "--viewer", "none",
+            "--quiet", "--no-figures", "--no-history"],
+    "simulate": ["simulate", "configs/emulated_swing.yaml", "--no-figures", "--no-history"],
+    "noise": ["noise", "configs/noise_static.yaml", "--duration", "3000", "--no-figures", "--no-history"],
+}
+
+
+def _interrupted(args: list[str], delay: float, out: Path) -> tuple[int, list[str]]:
+    """Exit code and stderr (the import log left out) of ``hil ARGS --out OUT`` sent SIGINT ``delay`` s after the
+    console script imported the package hil."""
+    env = {**os.environ, "PYTHONPROFILEIMPORTTIME": "1"}
+    proc = subprocess.Popen([str(HIL), *args, "--out", str(out)], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        for line in proc.stderr:
+            lines.append(line)
+            if line.startswith("import time:") and line.split("|")[-1].strip() == "hil":
+                break
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        rest = proc.stderr.read()
+        proc.wait(timeout=120)
+    finally:
+        proc.kill()
+        proc.stderr.close()
+    err = [line for line in "".join(lines).splitlines() + rest.splitlines() if not line.startswith("import time:")]
+    return proc.returncode, err
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_ctrl_c_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, command):
+    for delay in DELAYS:
+        code, err = _interrupted(COMMANDS[command], delay, tmp_path / f"out-{delay}")
+        assert not any("Traceback" in line for line in err), (delay, err)
+        if code == 130:
+            assert err == ["hil: interrupted"], (delay, err)
+        else:  # the trial was running: it ended as interrupted
+            assert command == "run" and code == 1 and err[0] == TRIAL_LINES[0] and err[-1] == TRIAL_LINES[1], \
+                (delay, code, err)
