@@ -47,7 +47,8 @@ def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int
         calibration = getattr(outcome, "calibration", None)  # a calibration trial's document, once fitted
         kind, figures_of = (CALIBRATION, calibration_figures(calibration or {})) if args.func is cmd_calibrate \
             else (SWING, swing_figures(outcome.result))
-        file_trial(args.history, trial_row(kind, outcome.out, outcome.result, verdict, figures_of))
+        file_trial(args.history, trial_row(kind, outcome.out, outcome.result, verdict, figures_of,
+                                           getattr(outcome, "replay_of", None)))  # a replay's trial
     code = outcome.exit_code(verdict)
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)

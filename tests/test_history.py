@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
 import sqlite3
 import subprocess
 import sys
@@ -20,9 +19,9 @@ from scipy.stats import chi2
 from hil.history.entry import calibration_figures, noise_figures
 from hil.history.store import MIGRATIONS, History, HistoryError
 from hil.outputs.result_schema import read_result
+from tests.pages import CHROMIUM, clipped_columns, layout_width, needs_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
-CHROMIUM = shutil.which("chromium")
 
 
 def hil(*args: str) -> subprocess.CompletedProcess:
@@ -32,7 +31,7 @@ def hil(*args: str) -> subprocess.CompletedProcess:
 
 def short_swing(tmp_path: Path, seed: int) -> Path:
     cfg = yaml.safe_load((ROOT / "configs" / "liu2019_sim.yaml").read_text())
-    cfg["trial"].update(seed=seed, duration_s=200)
+    cfg["trial"].update(seed=seed, duration_s=500)  # converged by about 320 s
     path = tmp_path / f"seed{seed}.yaml"
     path.write_text(yaml.safe_dump(cfg))
     return path
@@ -62,16 +61,27 @@ def test_history_json_reports_the_units_runs_and_a_repeatability_computed_from_i
     biases = np.array([json.loads((run / "result.json").read_text())["estimate"]["accel_bias_ug"] for run in runs])
     s = biases.std(axis=0, ddof=1)
     lo, hi = s * np.sqrt(2 / chi2.ppf(0.975, 2)), s * np.sqrt(2 / chi2.ppf(0.025, 2))
-    assert doc["dut_serial"] == "A" and doc["runs"] == 3 and len(doc["trials"]) == 3
-    np.testing.assert_allclose(doc["accel_bias_repeatability_ug"], s, rtol=1e-12)
-    np.testing.assert_allclose(doc["accel_bias_repeatability_ci_ug"], np.stack([lo, hi], axis=1), rtol=1e-12)
+    (unit,) = doc["units"]
+    assert doc["dut_serial"] == unit["dut_serial"] == "A" and unit["runs"] == 3 and len(doc["trials"]) == 3
+    assert not any(unit["left_out"].values())
+    np.testing.assert_allclose(unit["accel_bias_repeatability_ug"], s, rtol=1e-12)
+    np.testing.assert_allclose(unit["accel_bias_repeatability_ci_ug"], np.stack([lo, hi], axis=1), rtol=1e-12)
     assert {t["out_dir"] for t in doc["trials"]} == {str(run.resolve()) for run in runs}
     assert all(read_result(run / "result.json").record.dut_serial == "A" for run in runs)
-    everyone = json.loads(hil("history", "--json", "--history", history).stdout)
-    assert everyone["runs"] == 4
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="needs chromium (apt-get install chromium; .ci/run installs it)")
+def test_history_without_a_unit_gives_each_unit_its_own_figures_never_one_pooled(unit_a):
+    history, _ = unit_a
+    doc = json.loads(hil("history", "--json", "--history", history).stdout)
+    assert doc["dut_serial"] is None and len(doc["trials"]) == 4
+    assert [(u["dut_serial"], u["runs"]) for u in doc["units"]] == [("A", 3), ("B", 1)]
+    assert doc["units"][1]["accel_bias_repeatability_ug"] is None  # one run of B: no spread to take
+    text = hil("history", "--history", history).stdout.splitlines()
+    assert [line.split(":")[0] for line in text if not line.startswith(("started", "20"))] == ["A", "B"]
+    assert "over 3 runs" in next(line for line in text if line.startswith("A:"))
+
+
+@needs_chromium
 def test_history_html_renders_its_parts_in_headless_chromium(unit_a, tmp_path):
     history, _ = unit_a
     assert hil("history", "--dut", "A", "--out", str(tmp_path), "--history", history).returncode == 0
@@ -88,9 +98,18 @@ def test_history_html_renders_its_parts_in_headless_chromium(unit_a, tmp_path):
     assert pixels.shape[1] == 1400 and pixels[..., :3].std() > 0.05  # drawn, not blank
 
 
+@needs_chromium
+def test_history_html_of_every_unit_fits_1400_px_with_every_column_in_sight(unit_a, tmp_path):
+    history, _ = unit_a
+    assert hil("history", "--out", str(tmp_path), "--history", history).returncode == 0
+    page = tmp_path / "history.html"
+    assert layout_width(page, tmp_path) <= 1400
+    assert clipped_columns(page, tmp_path) == []
+
+
 def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the_trial(tmp_path):
     locked = tmp_path / "locked.sqlite"
-    History(str(locked)).trials()  # created
+    sqlite3.connect(locked).close()  # an empty file: the schema is made on opening
     holder = sqlite3.connect(locked)
     holder.execute("BEGIN EXCLUSIVE")
     blocker = tmp_path / "a-file"
@@ -125,8 +144,8 @@ def test_an_older_schema_is_migrated_keeping_its_rows(tmp_path):
             db.execute(statement)
         db.execute("INSERT INTO trials (kind, dut_serial, started_utc, figures) VALUES ('swing', 'A', '2026', '{}')")
     history = History(str(path))
-    assert history.version() == len(MIGRATIONS) == 2
-    assert [(t["dut_serial"], t["notes"]) for t in history.trials("A")] == [("A", None)]
+    assert history.version() == len(MIGRATIONS) == 3
+    assert [(t["dut_serial"], t["notes"], t["replay_of"]) for t in history.trials("A")] == [("A", None, None)]
     with sqlite3.connect(path) as db:
         db.execute("UPDATE schema_version SET version = 99")
     with pytest.raises(HistoryError, match="newer"):

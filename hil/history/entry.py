@@ -12,12 +12,13 @@ RECORD_KEYS = ("dut_part", "dut_serial", "station", "operator", "notes", "softwa
 
 
 def swing_figures(result: dict) -> dict[str, Any]:
-    """The estimate's bias, its sigma and the drift check of a result.json (ug, ug/h)."""
+    """The estimate's bias, its sigma, whether it was observable and when it converged, and the drift check of a
+    result.json (ug, ug/h, s)."""
     estimate = result.get("estimate") or {}
     drift = estimate.get("drift_check") or {}
     return {"accel_bias_ug": estimate.get("accel_bias_ug"), "accel_bias_sigma_ug": estimate.get("accel_bias_sigma_ug"),
             "drift_ug_per_h": drift.get("drift_ug_per_h"), "drift_sigma_ug_per_h": drift.get("sigma_ug_per_h"),
-            "converged_at_s": estimate.get("converged_at_s")}
+            "observable": estimate.get("observable"), "converged_at_s": estimate.get("converged_at_s")}
 
 
 def calibration_figures(calibration: dict) -> dict[str, Any]:
@@ -36,9 +37,12 @@ def noise_figures(noise: dict) -> dict[str, Any]:
     return {f"{sensor}.{key}": value for sensor in ("gyro", "accel") for key, value in (noise.get(sensor) or {}).items()}
 
 
-def trial_row(kind: str, out: Path, result: dict, verdict: str | None, figures: dict[str, Any]) -> dict[str, Any]:
-    """The row of a trial of ``kind`` written to ``out``: its record, how it ended, its verdict and ``figures``."""
+def trial_row(kind: str, out: Path, result: dict, verdict: str | None, figures: dict[str, Any],
+              replay_of: Path | None = None) -> dict[str, Any]:
+    """The row of a trial of ``kind`` written to ``out``: its record, how it ended, its verdict and ``figures``;
+    a replay's names the run directory of the trial it re-processed (``replay_of``)."""
     record = result.get("record") or {}
     return {"kind": kind, "name": (result.get("trial") or {}).get("name"), "ended": result.get("ended"),
             "verdict": verdict, "out_dir": str(out.resolve()), "git_commit": record.get("commit"),
-            **{key: record.get(key) for key in RECORD_KEYS}, "figures": figures}
+            **{key: record.get(key) for key in RECORD_KEYS}, "figures": figures,
+            "replay_of": None if replay_of is None else str(replay_of.resolve())}

@@ -14,7 +14,8 @@ from typing import Any
 ENV = "HIL_HISTORY"
 LOCK_TIMEOUT_S = 2.0  # how long a write waits for another writer's lock before it gives up
 COLUMNS = ("kind", "name", "ended", "verdict", "out_dir", "dut_part", "dut_serial", "station", "operator", "notes",
-           "software_version", "git_commit", "config_sha256", "started_utc", "ended_utc", "host", "figures")
+           "software_version", "git_commit", "config_sha256", "started_utc", "ended_utc", "host", "figures",
+           "replay_of")
 # version k + 1 is reached by the statements MIGRATIONS[k]; never edit a released step, append one
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     ("CREATE TABLE trials (id INTEGER PRIMARY KEY, kind TEXT NOT NULL, name TEXT, ended TEXT, verdict TEXT, "
@@ -22,6 +23,11 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
      "git_commit TEXT, config_sha256 TEXT, started_utc TEXT, ended_utc TEXT, host TEXT, figures TEXT NOT NULL)",),
     ("ALTER TABLE trials ADD COLUMN notes TEXT",
      "CREATE INDEX trials_by_unit ON trials (dut_serial, started_utc)"),
+    # a replay names the run directory of the trial it re-processed; a trial that did not complete is never
+    # PASS or FAIL (rows filed before either rule are brought to it)
+    ("ALTER TABLE trials ADD COLUMN replay_of TEXT",
+     "UPDATE trials SET verdict = CASE WHEN ended LIKE 'interrupted%' THEN 'INTERRUPTED' ELSE 'ENDED EARLY' END "
+     "WHERE ended <> 'completed' AND verdict IN ('PASS', 'FAIL')"),
 )
 
 
@@ -48,15 +54,17 @@ class History:
         self.location = location
 
     def append(self, row: dict[str, Any]) -> None:
-        """Add one trial (``row``: :data:`COLUMNS`, ``figures`` a JSON-able dict)."""
+        """Add one trial (``row``: :data:`COLUMNS`, ``figures`` a JSON-able dict); a SQLite file is created, in
+        a directory that exists (the default location's directory is made)."""
         values = {key: row.get(key) for key in COLUMNS}
         values["figures"] = json.dumps(row.get("figures") or {})
         names = ", ".join(COLUMNS)
-        with self._connection() as run:
+        with self._connection(create=True) as run:
             run(f"INSERT INTO trials ({names}) VALUES ({', '.join(':' + c for c in COLUMNS)})", values)
 
     def trials(self, dut_serial: str | None = None, since: str | None = None) -> list[dict[str, Any]]:
-        """The trials (of the unit ``dut_serial``, started at or after the ISO date ``since``), oldest first."""
+        """The trials (of the unit ``dut_serial``, started at or after ``since``, an ISO time in UTC as the
+        rows hold it), oldest first; a SQLite file that does not exist is a :class:`HistoryError`."""
         where, params = [], {}
         if dut_serial is not None:
             where.append("dut_serial = :dut")
@@ -75,10 +83,12 @@ class History:
             return run("SELECT version FROM schema_version", {})[0]["version"]
 
     @contextmanager
-    def _connection(self) -> Iterator:
+    def _connection(self, create: bool = False) -> Iterator:
         """A function running one SQL statement with named parameters (rows as dicts), in one transaction,
-        the schema migrated first."""
+        the schema migrated first; a SQLite file that does not exist is made only to ``create`` it."""
         path = self._sqlite_path()
+        if path is not None:
+            self._check_file(path, create)
         try:
             with (_sqlite(path) if path is not None else _sqlalchemy(self.location)) as run:
                 _migrate(run)
@@ -87,6 +97,19 @@ class History:
             raise
         except Exception as exc:  # the drivers' errors have no common base: any of them names the cause
             raise HistoryError(f"{self.location}: {' '.join(str(exc).split()) or type(exc).__name__}") from None
+
+    def _check_file(self, path: Path, create: bool) -> None:
+        """Refuses a SQLite file that is not there to read, or whose directory is not there to create it in
+        (a mistyped path files nowhere new); makes the default location's directory."""
+        if path.exists():
+            return
+        if not create:
+            raise HistoryError(f"{self.location}: no trial history there (no such file; trials are filed there "
+                               "as they run, or --history names another)")
+        if path == default_location():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        elif not path.parent.is_dir():
+            raise HistoryError(f"{self.location}: no such directory {path.parent}")
 
     def _sqlite_path(self) -> Path | None:
         if "://" not in self.location:
@@ -113,7 +136,6 @@ def _migrate(run) -> None:
 
 @contextmanager
 def _sqlite(path: Path) -> Iterator:
-    path.parent.mkdir(parents=True, exist_ok=True)
     connection = sqlite3.connect(path, timeout=LOCK_TIMEOUT_S)
     connection.row_factory = sqlite3.Row
     try:

@@ -5,11 +5,13 @@ the same processor as a live trial and returns one :class:`~hil.trial.outcome.Tr
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from emulators.simulation import Simulation
 from hil.config import Config
+from hil.outputs.record import recorded_block
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
@@ -23,11 +25,21 @@ if TYPE_CHECKING:
     from emulators.simulation_process import SimulationProcess
 
 
+@dataclass
+class ReplayOutcome(TrialOutcome):
+    """A replay's outcome: its trial's record is the recorded trial's (unit, part, operator, station, notes), and
+    it is filed in the history as a replay of that trial (``replay_of``: its run directory), not a trial."""
+
+    replay_of: Path | None = None
+
+
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
-               ) -> tuple[TrialOutcome, Viewer | None]:
+               ) -> tuple[ReplayOutcome, Viewer | None]:
     """A recording's chunks through the processing of the live run, in the same order, read as they are fed."""
-    out = Path(out) if out else recording_path(source).parent / "replay"
+    path = recording_path(source)
+    out = Path(out) if out else path.parent / "replay"
     recording, cfg = open_recording(source)
+    cfg = cfg.model_copy(update={"record": recorded_block(path, cfg.record)})  # the recorded unit
     with recording:
         viewer = open_viewer(options, cfg, out, blocking=True)
         finished = replay_recording(recording, cfg, viewer)
@@ -36,7 +48,7 @@ def run_replay(source: str | Path, out: str | Path | None, options: ViewerOption
         print(f"hil: {source}: the recording ends inside a record (cut short); replayed up to it", file=sys.stderr)
     ended = how_it_ended(recording)
     outcome = TrialOutcome.of(finished, cfg, recording.metadata["config"], out, ended, emulated_truth(cfg))
-    return outcome, viewer
+    return ReplayOutcome(**vars(outcome), replay_of=path.parent), viewer
 
 
 def how_it_ended(recording: RecordingReader | Recording) -> str:
