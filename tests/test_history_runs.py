@@ -87,6 +87,8 @@ def test_history_of_every_unit_gives_one_line_per_unit_and_pools_none(unit_with_
     lines = history("--history", unit_with_misleading_runs)[1].splitlines()
     assert [line.split(":")[0] for line in lines[-3:]] == ["A", "B", "(no serial)"]
     assert len(lines) == 1 + 9 + 3  # the header, the rows, one line per unit
+    interrupted = next(line for line in lines if line.startswith("2026-12-04T11:00"))
+    assert interrupted.split()[1:5] == ["swing", "A", "interrupted", "INTERRUPTED"]
 
 
 @pytest.mark.parametrize("since", ["garbage", "2026-13-45", "2026-12-04T25:00"])

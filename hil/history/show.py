@@ -53,7 +53,7 @@ def since_utc(text: str | None) -> str | None:
 def _text(summary: dict[str, Any]) -> str:
     lines = [f"{'started (UTC)':25} {'kind':11} {'unit':12} {'ended':11} {'verdict':11} name"]
     for t in summary["trials"]:
-        ended = t["ended"] if t["ended"] == "completed" else "early"
+        ended = (t["ended"] or "-").split(":")[0]  # completed, early or interrupted: the reason is in the row
         kind = "replay" if t.get("replay_of") else t["kind"]
         lines.append(f"{t['started_utc'] or '':25} {kind:11} {t['dut_serial'] or '-':12} {ended:11} "
                      f"{t['verdict'] or '-':11} {t['name'] or ''}")
