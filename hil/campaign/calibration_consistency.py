@@ -10,7 +10,16 @@ from typing import Any
 
 import numpy as np
 
-from hil.campaign.campaign_report import banded, normal_histograms, point_labels
+from hil.campaign.campaign_report import (
+    band_text,
+    banded,
+    breakable,
+    cell,
+    normal_histograms,
+    point_cell,
+    point_labels,
+    table_html,
+)
 from hil.outputs.trial_report import figures_html
 from hil.campaign.runs import ERROR, TERM
 from hil.campaign.task import point_label
@@ -47,20 +56,25 @@ def _num(v: Any, form: str = ".3g") -> str:
     return "–" if v is None else format(v, form)
 
 
+def _point_rows(p: dict) -> list[tuple[bool, str]]:
+    """A sweep point's rows, one a term; the point spans them."""
+    terms = p.get("terms", {})
+    rows = []
+    for term, s in terms.items():
+        cells = point_cell(p["values"], len(terms)) if not rows else ""
+        cells += cell(breakable(term), num=False) + cell(s["runs"]) + cell(s["unobservable"])
+        cells += "".join(cell(_num(s.get(k))) for k in ("error_mean", "error_std", "sigma_mean"))
+        cells += (cell(_num(s.get("ratio"), ".3f"), bold=not s.get("ratio_inside", True))
+                  + cell(band_text(s.get("ratio_band"))) + cell(_num(s.get("within_3sigma"), ".2f"))
+                  + cell(_num(s.get("z_rms"), ".2f")))
+        rows.append((not s.get("ratio_inside", True), cells))
+    return rows
+
+
 def _table(summary: dict) -> str:
-    head = ("<tr><th>sweep point</th><th>term</th><th>runs</th><th>unobservable</th><th>error mean</th>"
-            "<th>error std</th><th>mean σ</th><th>std/σ</th><th>band</th><th>within 3σ</th><th>rms error/σ</th></tr>")
-    body = []
-    for p in summary["points"]:
-        for term, s in p.get("terms", {}).items():
-            flag = "" if s.get("ratio_inside", True) else " class='row-FAIL'"
-            band = f"{s['ratio_band'][0]:.3f}–{s['ratio_band'][1]:.3f}" if "ratio_band" in s else "–"
-            cells = [s["runs"], s["unobservable"]] + [_num(s.get(k)) for k in ("error_mean", "error_std", "sigma_mean")]
-            cells += [_num(s.get("ratio"), ".3f"), band, _num(s.get("within_3sigma"), ".2f"),
-                      _num(s.get("z_rms"), ".2f")]
-            body.append(f"<tr{flag}><td>{html.escape(point_label(p['values']))}</td><td>{html.escape(term)}</td>"
-                        + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
-    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
+    head = ["sweep point", "term", "runs", "un&shy;observable", "error mean", "error std", "mean σ", "std/σ", "band",
+            "within 3σ", "rms error/σ"]
+    return table_html(head, [row for p in summary["points"] for row in _point_rows(p)])
 
 
 def _families(summary: dict) -> str:
@@ -98,4 +112,4 @@ def calibration_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
     return (f"<h2>Calibration consistency per sweep point</h2>{_headlines(summary)}{_families(summary)}"
             f"<h2>Every term</h2>{_table(summary)}"
             "<p class='meta'>Units as in calibration.json; a row is highlighted when its ratio falls outside its "
-            f"band.</p><h2>Figures</h2>{figures_html(figures)}")
+            f"band, that ratio in bold.</p><h2>Figures</h2>{figures_html(figures)}")

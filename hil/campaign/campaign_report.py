@@ -2,12 +2,13 @@
 in the style of the trial report, with the section of the campaign's kind. A swing campaign's: the consistency
 table per sweep point and four figures: the normalised errors against N(0, 1), the ratio std(error)/mean(sigma)
 with its band, the mean NEES with its chi-square band, the convergence time against the swept value. The
-figure helpers here serve every kind's section. matplotlib is imported when the page is drawn."""
+figure and table helpers here serve every kind's section. matplotlib is imported when the page is drawn."""
 
 from __future__ import annotations
 
 import html
 import io
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -149,47 +150,63 @@ def _num(v: Any) -> str:
     return "–" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
 
 
-def _band(p: dict, key: str) -> str:
-    """A band's ends, one a line (its cell spans a point's three rows)."""
-    return f"{p[key][0]:.3f} to<br>{p[key][1]:.3f}" if key in p else "–"
+def cell(content: Any, *, num: bool = True, span: int = 1, bold: bool = False) -> str:
+    """A ``<td>`` of a campaign table: a number right-aligned, ``span`` rows high, in bold (a statistic outside
+    its band)."""
+    text = f"<strong>{content}</strong>" if bold else str(content)
+    return f"<td{' class=num' if num else ''}{f' rowspan={span}' if span > 1 else ''}>{text}</td>"
 
 
-def _stat(p: dict, key: str, k: int | None, inside: bool, span: str = "") -> str:
-    """The cell of statistic ``key`` of point ``p`` (of axis ``k``), in bold when it falls outside its band."""
-    value = _num(p[key] if k is None else p[key][k]) if key in p else "–"
-    return f"<td class='num'{span}>{value if inside else f'<strong>{value}</strong>'}</td>"
+def breakable(key: str) -> str:
+    """A dotted key (escaped) free to break after each dot that ends a name and after each underscore."""
+    return re.sub(r"\.(?=[A-Za-z_])|_", lambda m: m.group() + "<wbr>", html.escape(key))
 
 
-def _point_rows(p: dict) -> str:
-    """A sweep point's three rows, one an axis; what holds for the whole point spans them."""
-    e = html.escape
+def point_cell(values: dict[str, Any], span: int = 1) -> str:
+    """The sweep point's cell."""
+    return cell(breakable(point_label(values)), num=False, span=span)
+
+
+def band_text(band: list[float] | None, form: str = ".3f") -> str:
+    """A band's ends, one a line."""
+    return "–" if band is None else f"{band[0]:{form}} to<br>{band[1]:{form}}"
+
+
+def table_html(head: list[str], rows: list[tuple[bool, str]]) -> str:
+    """A campaign table: its header, and its rows (highlighted, their cells); rows of an axis each and bands on
+    two lines keep every column in sight in a 1400 px window."""
+    body = "".join(f"<tr{' class=row-FAIL' if flagged else ''}>{cells}</tr>" for flagged, cells in rows)
+    header = "".join(f"<th>{h}</th>" for h in head)
+    return f"<div class='wide'><table><thead><tr>{header}</tr></thead><tbody>{body}</tbody></table></div>"
+
+
+def _point_rows(p: dict) -> list[tuple[bool, str]]:
+    """A sweep point's rows, one an axis; what holds for the whole point spans them."""
     ratio_inside = p.get("ratio_inside", [True] * 3)
     nees_inside = p.get("nees_inside", True)
-    flag = "" if nees_inside and all(ratio_inside) else " class='row-FAIL'"
-    label = e(point_label(p["values"])).replace(".", ".<wbr>")
-    conv = "<br>".join(_num(p["converged_at_s"][n]) for n in ("q05", "q50", "q95"))  # one a line, beside x y z
+    flagged = not (nees_inside and all(ratio_inside))
     rows = []
     for k, axis in enumerate(AXES):
-        cells = "".join(_stat(p, key, k, True) for key in ("error_mean_ug", "error_std_ug", "sigma_mean_ug"))
-        cells += _stat(p, "ratio", k, ratio_inside[k])
-        point = spans = ""
+        cells = ""
         if k == 0:
-            point = (f"<td rowspan='3'>{label}</td><td class='num' rowspan='3'>{p['runs']}</td>"
-                     f"<td class='num' rowspan='3'>{p['failed']}</td>")  # fmt: skip
-            spans = (f"<td class='num' rowspan='3'>{_band(p, 'ratio_band')}</td>"
-                     + _stat(p, "nees_mean", None, nees_inside, " rowspan='3'")
-                     + f"<td class='num' rowspan='3'>{_band(p, 'nees_band')}</td>"
-                     f"<td class='num' rowspan='3'>{conv}</td>")  # fmt: skip
-        rows.append(f"<tr{flag}>{point}<td>{axis}</td>{cells}{spans}</tr>")
-    return "".join(rows)
+            cells += point_cell(p["values"], 3) + cell(p["runs"], span=3) + cell(p["failed"], span=3)
+        cells += cell(axis, num=False)
+        cells += "".join(cell(_num(p[key][k]) if key in p else "–") for key in ("error_mean_ug", "error_std_ug",
+                                                                                   "sigma_mean_ug"))
+        cells += cell(_num(p["ratio"][k]) if "ratio" in p else "–", bold=not ratio_inside[k])
+        if k == 0:
+            conv = "<br>".join(_num(p["converged_at_s"][n]) for n in ("q05", "q50", "q95"))  # beside x, y, z
+            cells += (cell(band_text(p.get("ratio_band")), span=3)
+                      + cell(_num(p.get("nees_mean")), span=3, bold=not nees_inside)
+                      + cell(band_text(p.get("nees_band")), span=3) + cell(conv, span=3))
+        rows.append((flagged, cells))
+    return rows
 
 
 def _table(summary: dict) -> str:
-    head = ("<tr><th>sweep point</th><th>runs</th><th>failed</th><th>axis</th><th>error mean (µg)</th>"
-            "<th>error std (µg)</th><th>mean σ (µg)</th><th>std/σ</th><th>std/σ band</th><th>mean NEES</th>"
-            "<th>NEES band</th><th>converged (s) 5/50/95 %</th></tr>")
-    body = "".join(_point_rows(p) for p in summary["points"])
-    return f"<div class='wide'><table><thead>{head}</thead><tbody>{body}</tbody></table></div>"
+    head = ["sweep point", "runs", "failed", "axis", "error mean (µg)", "error std (µg)", "mean σ (µg)", "std/σ",
+            "std/σ band", "mean NEES", "NEES band", "converged (s) 5/50/95 %"]
+    return table_html(head, [row for p in summary["points"] for row in _point_rows(p)])
 
 
 def swing_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:

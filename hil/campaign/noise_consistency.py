@@ -4,16 +4,23 @@ fitted/truth histograms per term, and per term the coverage of the reported inte
 
 from __future__ import annotations
 
-import html
 from typing import Any
 
 import numpy as np
 
 from hil.campaign.noise_summary import AXES, TERM_KEYS
-from hil.campaign.campaign_report import banded, png, point_labels
+from hil.campaign.campaign_report import (
+    band_text,
+    banded,
+    breakable,
+    cell,
+    png,
+    point_cell,
+    point_labels,
+    table_html,
+)
 from hil.outputs.trial_report import figures_html
 from hil.campaign.runs import ERROR, TRUTH
-from hil.campaign.task import point_label
 
 AXIS_NAMES = "xyz"
 
@@ -65,31 +72,36 @@ def _coverage(summary: dict, term: str, plt) -> bytes:
                   [(0.0, [a["coverage"] for _, a in entries], "coverage")])
 
 
-def _cells(per_axis: list[dict], key: str, form: str) -> str:
-    return " ".join("–" if a.get(key) is None else format(a[key], form) for a in per_axis)
+def _value(a: dict, key: str, form: str) -> str:
+    return "–" if a.get(key) is None else format(a[key], form)
+
+
+def _point_rows(p: dict, terms: list[str]) -> list[tuple[bool, str]]:
+    """A sweep point's rows, one a term and axis; the point spans its rows, a term its axes'."""
+    groups = [(term, p["terms"][term]) for term in terms if term in p.get("terms", {})]
+    span = sum(len(per_axis) for _, per_axis in groups)
+    rows = []
+    for term, per_axis in groups:
+        flagged = not all(a.get("coverage_inside", True) for a in per_axis)
+        for k, a in enumerate(per_axis):
+            cells = ""
+            if not rows:
+                cells += point_cell(p["values"], span) + cell(p["runs"], span=span) + cell(p["failed"], span=span)
+            if k == 0:
+                cells += cell(breakable(term), num=False, span=len(per_axis))
+            cells += cell(AXIS_NAMES[k], num=False) + "".join(
+                cell(_value(a, key, form)) for key, form in (("truth", ".3g"), ("mean", ".3g"), ("std", ".2g"),
+                                                             ("relative_error_mean", "+.1%"), ("unresolved", "d")))
+            cells += (cell(_value(a, "coverage", ".2f"), bold=not a.get("coverage_inside", True))
+                      + cell(band_text(a.get("coverage_band"), ".2f")))
+            rows.append((flagged, cells))
+    return rows
 
 
 def _table(summary: dict, terms: list[str]) -> str:
-    head = ("<tr><th>sweep point</th><th>runs</th><th>failed</th><th>term</th><th>truth x y z</th><th>mean</th>"
-            "<th>std</th><th>mean rel. error</th><th>unresolved</th><th>coverage</th><th>band</th></tr>")
-    body = []
-    for p in summary["points"]:
-        for term in terms:
-            per_axis = p.get("terms", {}).get(term)
-            if per_axis is None:
-                continue
-            flag = "" if all(a.get("coverage_inside", True) for a in per_axis) else " class='row-FAIL'"
-            bands = " ".join(f"{a['coverage_band'][0]:.2f}–{a['coverage_band'][1]:.2f}" if "coverage_band" in a else "–"
-                             for a in per_axis)
-            body.append(f"<tr{flag}><td>{html.escape(point_label(p['values']))}</td><td class='num'>{p['runs']}</td>"
-                        f"<td class='num'>{p['failed']}</td><td>{html.escape(term)}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'truth', '.4g')}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'mean', '.4g')}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'std', '.3g')}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'relative_error_mean', '+.1%')}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'unresolved', 'd')}</td>"
-                        f"<td class='num'>{_cells(per_axis, 'coverage', '.2f')}</td><td class='num'>{bands}</td></tr>")
-    return f"<div class='wide'><table><thead>{head}</thead><tbody>{''.join(body)}</tbody></table></div>"
+    head = ["sweep point", "runs", "failed", "term", "axis", "truth", "mean", "std", "mean rel. error",
+            "un&shy;resolved", "cover&shy;age", "band"]
+    return table_html(head, [row for p in summary["points"] for row in _point_rows(p, terms)])
 
 
 def noise_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
@@ -101,5 +113,6 @@ def noise_section(summary: dict, rows: list[dict[str, Any]], plt) -> str:
     figures += [(f"{term}: coverage of the reported interval with its 95 % binomial band", _coverage(summary, term, plt))
                 for term in terms]
     return (f"<h2>Noise terms per sweep point</h2>{_table(summary, terms)}"
-            f"<p class='meta'>Units as in noise.json; a row is highlighted when a coverage falls outside its band.</p>"
+            f"<p class='meta'>Units as in noise.json; a term is highlighted when a coverage falls outside its band, "
+            "that coverage in bold.</p>"
             f"<h2>Figures</h2>{figures_html(figures)}")
