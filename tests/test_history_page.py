@@ -12,10 +12,11 @@ import pytest
 from hil.history.page import series_figure, trial_series
 
 
-def swing(started: datetime, bias: list[float], dut: str = "A", replay_of: str | None = None) -> dict:
+def swing(started: datetime, bias: list[float], dut: str | None = "A", replay_of: str | None = None,
+          converged_at_s: float | None = 120.0) -> dict:
     return {"kind": "swing", "ended": "completed", "dut_serial": dut, "replay_of": replay_of,
             "started_utc": started.isoformat(timespec="seconds"),
-            "figures": {"accel_bias_ug": bias, "drift_ug_per_h": [0.1, 0.2, 0.3], "converged_at_s": 120.0}}
+            "figures": {"accel_bias_ug": bias, "drift_ug_per_h": [0.1, 0.2, 0.3], "converged_at_s": converged_at_s}}
 
 
 def swing_figure(trials: list[dict]):
@@ -47,7 +48,11 @@ def test_every_plot_over_time_has_a_legend_naming_its_axes_and_its_units():
     assert 40 < span_days(fig) < 45  # the 40 days and a margin
 
 
-def test_a_replay_is_not_plotted_again_beside_its_trial():
+def test_only_the_runs_of_the_repeatability_are_plotted_never_a_replay_or_an_unconverged_trial():
     replay = swing(START + timedelta(days=1), [1.5, 2.5, 3.5], replay_of="/runs/a1")
-    fig = swing_figure([swing(START, [1.0, 2.0, 3.0]), replay])
-    assert [len(line.get_xdata()) for line in fig.axes[0].get_lines()] == [1, 1, 1]
+    short = swing(START + timedelta(days=2), [900.0, -400.0, 80.0], converged_at_s=None)
+    unnamed = swing(START + timedelta(days=3), [1.2, 2.2, 3.2], dut=None)
+    fig = swing_figure([swing(START, [1.0, 2.0, 3.0]), replay, short, unnamed])
+    lines = fig.axes[0].get_lines()
+    assert [(line.get_label(), list(line.get_ydata())) for line in lines[::3]] == [("A x", [1.0]),
+                                                                                  ("(no serial) x", [1.2])]

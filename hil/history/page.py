@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hil.history.entry import CALIBRATION, NOISE, SWING
+from hil.history.repeatability import left_out_because
 from hil.outputs.figures import pyplot
 from hil.outputs.measurements import format_value
 from hil.outputs.page_header import page_header
@@ -85,13 +86,20 @@ def _cell(trial: dict[str, Any], column: str) -> str:
     return "" if trial.get(column) is None else str(trial[column])
 
 
+def plotted(trial: dict[str, Any]) -> bool:
+    """Whether ``trial``'s figures are drawn over time: a completed trial, not a replay (it repeats its trial's
+    figures); a swing trial only as a run of the repeatability (observable, converged), with or without a serial."""
+    if trial["kind"] == SWING:
+        return left_out_because(trial) in (None, "no_serial")
+    return trial["kind"] in TITLES and trial["ended"] == "completed" and not trial.get("replay_of")
+
+
 def trial_series(trials: list[dict[str, Any]]) -> list[tuple[str, Series]]:
-    """(figure title, {figure key: {unit: (start times, values)}}) for each kind's figures of the completed
-    trials (a replay repeats its trial's figures: left out)."""
+    """(figure title, {figure key: {unit: (start times, values)}}) for each kind's figures of the trials
+    :func:`plotted`."""
     groups: dict[str, Series] = {title: {} for title in TITLES.values()}
     for trial in trials:
-        plotted = trial["ended"] == "completed" and trial["kind"] in TITLES and not trial.get("replay_of")
-        if not plotted or not trial["started_utc"]:
+        if not plotted(trial) or not trial["started_utc"]:
             continue
         when = datetime.fromisoformat(trial["started_utc"])
         for key, value in trial["figures"].items():

@@ -13,18 +13,18 @@ from scipy.special import chdtri  # chi2.ppf(q, k) = chdtri(k, 1 - q), without s
 from hil.history.entry import SWING
 
 LEVEL = 0.95  # the confidence interval's level
-# why a swing row is not one of its unit's runs, in the order they are asked (a row counts under its first)
-LEFT_OUT = ("no_serial", "replay", "not_completed", "not_observable", "not_converged")
+# why a swing row is not one of its unit's runs, in the order they are asked (a row counts under its first);
+# a row without a serial is a sound run of no known unit when no other reason applies
+LEFT_OUT = ("replay", "not_completed", "not_observable", "not_converged", "no_serial")
 
 
 def left_out_because(trial: dict[str, Any]) -> str | None:
     """Why the swing row ``trial`` is not a run of the repeatability (:data:`LEFT_OUT`); None when it is one."""
     figures = trial["figures"]
     bias = figures.get("accel_bias_ug")
-    reasons = {"no_serial": trial["dut_serial"] is None, "replay": trial.get("replay_of") is not None,
-               "not_completed": trial["ended"] != "completed",
+    reasons = {"replay": trial.get("replay_of") is not None, "not_completed": trial["ended"] != "completed",
                "not_observable": figures.get("observable") is False or bias is None or None in bias,
-               "not_converged": figures.get("converged_at_s") is None}
+               "not_converged": figures.get("converged_at_s") is None, "no_serial": trial["dut_serial"] is None}
     return next((reason for reason in LEFT_OUT if reasons[reason]), None)
 
 

@@ -14,9 +14,9 @@ from hil.history.repeatability import history_summary
 from hil.history.store import History, HistoryError, resolve
 from hil.inputs import InputError
 
-LEFT_OUT_WORDS = {"no_serial": "without a unit serial", "replay": "replays of a trial",
-                  "not_completed": "not completed", "not_observable": "bias not observable",
-                  "not_converged": "not converged"}
+LEFT_OUT_WORDS = {"replay": "replays of a trial", "not_completed": "not completed",
+                  "not_observable": "bias not observable", "not_converged": "not converged",
+                  "no_serial": "without a unit serial"}
 
 
 def show_history(option: str | None, dut: str | None, since: str | None, as_json: bool, out: Path | None) -> int:
