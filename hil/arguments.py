@@ -44,12 +44,17 @@ def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or
                    viewer_default: str | None = None) -> None:
     from hil.viewer.modes import VIEWER_MODES, default_viewer_mode
 
-    p.add_argument("--out", help=f"output directory (default: {out_default})")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    _out_options(p, out_default)
     default = viewer_default or default_viewer_mode()
     p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
                    help=f"Rerun viewer: native window, web viewer, .rrd file only, or nothing (default {default})")
     p.add_argument("--bind", default="127.0.0.1", help="address the web viewer listens on (default 127.0.0.1)")
+
+
+def _out_options(p: argparse.ArgumentParser, out_default: str, figures: str = "the PNG figures") -> None:
+    p.add_argument("--out", help=f"output directory (default: {out_default}); one that holds outputs is refused")
+    p.add_argument("--overwrite", action="store_true", help="replace the outputs --out holds (another trial's)")
+    p.add_argument("--no-figures", action="store_true", help=f"skip {figures}")
 
 
 def _record_options(p: argparse.ArgumentParser) -> None:
@@ -112,8 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("estimate", help="the estimator on a CSV of increments exported from other software")
     p.add_argument("data", help="CSV: t_s, dtheta_[xyz]_rad, dv_[xyz]_mps[, outer_deg, middle_deg, inner_deg]")
     p.add_argument("--config", required=True, type=_config_path, help="trial YAML (trial and site are enough)")
-    p.add_argument("--out", help="output directory (default: output.dir or runs/NAME-TIME)")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    _out_options(p, "output.dir or runs/NAME-TIME")
     _record_options(p)
     _history_options(p)
 
@@ -124,10 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=positive, help="seconds to acquire from devices, or to simulate (default: "
                                                    "trial.duration_s)")
     p.add_argument("--quiet", action="store_true", help="no progress line while acquiring")
-    p.add_argument("--out", help="output directory (default: runs/noise-NAME)")
+    _out_options(p, "runs/noise-NAME", "allan.png")
     p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
     p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")
-    p.add_argument("--no-figures", action="store_true", help="skip allan.png")
     p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
     p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
                                                     "10^k s), all (every multiple of the period: n^2/2 operations), "

@@ -18,6 +18,8 @@ if __name__ == "__main__":  # python -m hil.cli (the console script's start is h
 
 import argparse  # noqa: E402 (after the handler: a Ctrl-C during these imports is one line too)
 import json  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -70,31 +72,51 @@ def _trial_config(args: argparse.Namespace):
     return cfg, output_dir(args.out, cfg)
 
 
+@contextmanager
+def _claimed(args: argparse.Namespace, out: Path, noise: bool = False) -> Iterator[None]:
+    """The command's output directory, claimed for the ``with`` block (:func:`hil.outputs.output_dir.claimed`);
+    a history's rows that pointed at outputs ``--overwrite`` replaced point nowhere."""
+    from hil.outputs.output_dir import NOISE_OUTPUTS, TRIAL_OUTPUTS, claimed
+
+    with claimed(out, NOISE_OUTPUTS if noise else TRIAL_OUTPUTS, args.overwrite) as replaced:
+        if replaced:
+            from hil.history.filing import forget_outputs
+
+            forget_outputs(args.history, out)
+        yield
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from hil.trial.live_runner import run_live
 
     cfg, out = _trial_config(args)
-    return _finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, _viewer(args), args.quiet))
+    with _claimed(args, out):
+        return _finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, _viewer(args),
+                                       args.quiet))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     cfg, out = _trial_config(args)
-    if args.simulate:
-        from hil.trial.calibration_simulation import run_calibration_simulation
+    with _claimed(args, out):
+        if args.simulate:
+            from hil.trial.calibration_simulation import run_calibration_simulation
 
-        return _finish(args, *run_calibration_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)))
-    from hil.trial.calibration_runner import run_calibration
+            return _finish(args, *run_calibration_simulation(cfg, Path(args.config).read_text(), out, _viewer(args)))
+        from hil.trial.calibration_runner import run_calibration
 
-    return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet))
+        return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.outputs.figure_process import FigureProcess  # started first: matplotlib loads while the trial runs
 
     with FigureProcess() as figures:
+        from hil.recording.replay import recording_path
         from hil.trial.offline import run_replay
 
-        return _finish(args, *run_replay(args.source, args.out, _viewer(args)), figures)
+        out = Path(args.out) if args.out else recording_path(args.source).parent / "replay"
+        with _claimed(args, out):
+            return _finish(args, *run_replay(args.source, out, _viewer(args)), figures)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -106,8 +128,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
         cfg, out = _trial_config(args)
         cfg.emulated_only(args.config, "hil simulate")
-        outcome = run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args), simulation)
-        return _finish(args, *outcome, figures)
+        with _claimed(args, out):
+            outcome = run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args), simulation)
+            return _finish(args, *outcome, figures)
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
@@ -117,16 +140,23 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         from hil.trial.offline import run_csv
 
         cfg, out = _trial_config(args)
-        return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out), None, figures)
+        with _claimed(args, out):
+            return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out), None, figures)
 
 
 def cmd_noise(args: argparse.Namespace) -> int:
+    out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
+    with _claimed(args, out, noise=True):
+        return _noise(args, out)
+
+
+def _noise(args: argparse.Namespace, out: Path) -> int:
+    """``hil noise`` into its claimed directory ``out``."""
     from hil.outputs.noise import noise_summary
     from hil.outputs.record import noise_record
     from hil.trial.noise_acquisition import AcquisitionFailed
     from hil.trial.noise_runner import run_noise
 
-    out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
     given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,

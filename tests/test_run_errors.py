@@ -90,18 +90,27 @@ def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_k
 
 
 def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(tmp_path, capsys, monkeypatch):
+    import hil.trial.live_runner
     import hil.viewer.trial_viewer
 
     def broken(*args, **kwargs):
         raise OSError("rerun: address already in use")
 
+    spawned = []
+
+    def spawn(*args, **kwargs):
+        spawned.append(spawn_emulator(*args, **kwargs))
+        return spawned[-1]
+
     monkeypatch.setattr(hil.viewer.trial_viewer, "TrialViewer", broken)
+    monkeypatch.setattr(hil.trial.live_runner, "spawn_emulator", spawn)
     out = tmp_path / "out"
     code = main(["run", str(ROOT / "configs" / "emulated_swing.yaml"), "--duration", "5", "--speed", "max",
                  "--quiet", "--viewer", "save", "--no-figures", "--out", str(out)])
     assert code == 2
     assert "--viewer save: the viewer did not start: rerun: address already in use" in _one_line(capsys.readouterr().err)
-    assert (out / "emulator.log").exists() and not (out / "ports.json").exists()  # spawned, then stopped
+    assert len(spawned) == 1 and spawned[0][0].poll() is not None  # spawned, then stopped
+    assert not out.exists()  # refused at its start: no outputs
 
 
 def test_swapped_ports_end_the_trial_with_one_line_naming_the_port(tmp_path, capsys):
@@ -141,3 +150,16 @@ def test_a_lag_between_the_streams_beyond_one_imu_period_is_a_console_warning(of
     assert (warning is not None) == warned
     if warned:
         assert f"by {offset * 1e3:.2f} ms, more than one IMU period ({1e3 / rate:.2f} ms)" in warning
+
+
+def test_a_trial_refused_at_its_start_leaves_no_outputs(tmp_path, capsys):
+    config = _config(tmp_path, "lab", imu={"source": "serial", "port": "/dev/ttyNOSUCH0"},
+                     turntable={"source": "serial", "data_port": "/dev/ttyNOSUCH1"})
+    given, made = tmp_path / "given", tmp_path / "made"
+    given.mkdir()
+    for out in (given, made):
+        assert main(["run", str(config), "--duration", "5", *FAST, "--out", str(out)]) == 2
+    assert list(given.iterdir()) == [] and not made.exists()
+    capsys.readouterr()
+    assert main(["replay", str(given), "--out", str(tmp_path / "replay"), *FAST[3:]]) == 2  # nothing to take
+    assert "recording.mcap: cannot read" in _one_line(capsys.readouterr().err)

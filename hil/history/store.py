@@ -62,6 +62,17 @@ class History:
         with self._connection(create=True) as run:
             run(f"INSERT INTO trials ({names}) VALUES ({', '.join(':' + c for c in COLUMNS)})", values)
 
+    def forget_outputs(self, out_dir: str) -> int:
+        """The trials whose outputs were in ``out_dir``, which another trial's have replaced, point nowhere
+        (``out_dir`` null); how many. A SQLite history not made yet stays so."""
+        path = self._sqlite_path()
+        if path is not None and not path.exists():
+            return 0
+        with self._connection() as run:
+            rows = run("SELECT id FROM trials WHERE out_dir = :out", {"out": out_dir})
+            run("UPDATE trials SET out_dir = NULL WHERE out_dir = :out", {"out": out_dir})
+        return len(rows)
+
     def trials(self, dut_serial: str | None = None, since: str | None = None) -> list[dict[str, Any]]:
         """The trials (of the unit ``dut_serial``, started at or after ``since``, an ISO time in UTC as the
         rows hold it), oldest first; a SQLite file that does not exist is a :class:`HistoryError`."""

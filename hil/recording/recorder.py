@@ -132,6 +132,11 @@ class Recorder:
         self._writer.finish()
         self._file.close()
 
+    def discard(self) -> None:
+        """Close and remove the file: a trial that never started leaves no recording to be taken for one."""
+        self.close()
+        self.path.unlink(missing_ok=True)
+
     def _run(self) -> None:
         """Write what is queued, then flush; at least one flush every ``flush_s``; None ends it."""
         while True:

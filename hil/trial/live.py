@@ -189,10 +189,6 @@ class LiveTrial:
         self.duration = duration
         self.viewer = viewer
         self.interrupted: str | None = None
-        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
-                                 record=start_record(cfg, config_text, ports))
-        self.queue: queue.Queue = queue.Queue(hooks.queue_items)
-        self.fanout = Fanout(self.recorder, self.queue)
         self.latency = LatencyStats()
         self.ended_by_source = False
         self.acquiring = True  # until acquisition ends: the motion check then no longer listens (the table is off)
@@ -209,6 +205,10 @@ class LiveTrial:
             check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
+        self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
+                                 record=start_record(cfg, config_text, ports))  # once the trial can start
+        self.queue: queue.Queue = queue.Queue(hooks.queue_items)
+        self.fanout = Fanout(self.recorder, self.queue)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
 
     def run(self) -> str:
@@ -216,12 +216,14 @@ class LiveTrial:
         pipeline's end in :attr:`finished`.
 
         Raises :class:`~drivers.transport.TransportError` (after closing everything) when a port cannot
-        be opened at the start.
+        be opened at the start; the trial then leaves no recording.
         """
         ended = TrialEnd.early("the trial did not start")  # str(ended) is result.json's "ended"
+        started = False
         try:
             for reader in self.readers:
                 reader.start()
+            started = True
             try:
                 self._loop()
             except TrialAborted as exc:
@@ -236,7 +238,10 @@ class LiveTrial:
                 reader.stop()
             while not self.queue.empty():  # what the readers handed over last: the replay sees it too
                 self.processor.feed(self.queue.get_nowait())
-            self.recorder.close(str(ended))
+            if started:
+                self.recorder.close(str(ended))
+            else:
+                self.recorder.discard()
             self.finished = self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
