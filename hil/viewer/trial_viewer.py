@@ -24,6 +24,7 @@ import subprocess
 import threading
 import uuid
 from collections.abc import Callable, Mapping
+from datetime import timedelta
 from pathlib import Path
 from typing import Self
 
@@ -54,7 +55,7 @@ APPLICATION_ID = "turntable-hil"
 RRD_NAME = "recording.rrd"
 TABLE_RATE_HZ = 10.0  # gimbal poses in the 3D view: a step of 1 deg at 10 deg/s, a few pixels on screen
 CONE_PERIOD_S = 10.0  # the reconstructed cone is redrawn at most this often (trial time)
-FILE_FLUSH_S = 30.0  # the .rrd gets each time series as one chunk this often (trial time)
+FILE_FLUSH_S = 120.0  # the .rrd gets each time series as one chunk this often (trial time), the rest (wall time)
 QUEUE_ITEMS = 1024
 
 
@@ -109,7 +110,7 @@ class TrialViewer:
         blueprint = default_blueprint(calibration_views() if layout == "calibration" else None)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
-        self._file = _recording_stream(recording_id)
+        self._file = _recording_stream(recording_id, FILE_FLUSH_S)
         self._file.save(self.rrd_path, default_blueprint=blueprint)
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
         if mode != "save":
@@ -335,9 +336,11 @@ class TrialViewer:
             self._scalars(path, np.array([t]), row[None, :])
 
 
-def _recording_stream(recording_id: uuid.UUID) -> rr.RecordingStream:
-    """A stream of the trial's recording, on trial time alone."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+def _recording_stream(recording_id: uuid.UUID, flush_s: float | None = None) -> rr.RecordingStream:
+    """A stream of the trial's recording, on trial time alone; what it is logged (not sent as columns) is merged
+    into chunks every ``flush_s`` s (None: rerun's default, 0.2 s)."""
+    config = None if flush_s is None else rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=flush_s))
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, batcher_config=config)
     rr.set_log_time_enabled(False, recording=rec)
     rr.set_log_tick_enabled(False, recording=rec)
     return rec
