@@ -19,8 +19,8 @@ the deviation is 0.664 B), K the rate (acceleration) random walk. In the power-l
 frequency metrology the rate is the "frequency": white rate is white FM (alpha = 0), bias instability
 flicker FM (alpha = -1), random walk RW FM (alpha = -2).
 
-Intervals at each tau: the noise type identified there (``allan_edf``: lag-1 autocorrelation, else the
-fitted model's largest term), Greenhall's EDF nu for it, and chi-square (SP 1065 Eq. 68):
+Intervals at each tau: the noise type identified there as Stable32 does (``allan_noise_id``: lag-1
+autocorrelation, B1 ratio and R(n)), Greenhall's EDF nu for it (``allan_edf``), and chi-square (SP 1065 Eq. 68):
 nu avar / chi2_{nu}((1 + p) / 2) <= AVAR <= nu avar / chi2_{nu}((1 - p) / 2).
 
 The terms come from one non-negative fit of the model to the Allan variances at octave tau, weighted by
@@ -36,15 +36,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.estimation.allan_cov import avar_covariance, noise_products
-from hil.estimation.allan_edf import ALPHAS, greenhall_edf, lag1_alpha, model_alpha
+from hil.estimation.allan_edf import greenhall_edf
+from hil.estimation.allan_noise_id import identify
 from hil.estimation.allan_taus import octave_factors, tau_factors
 from hil.units import DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_SQRT_H, PER_SQRT_H, UG
 
 FLICKER_FLOOR = 2.0 * math.log(2.0) / math.pi  # avar floor / B^2 (IEEE 952 Eq. C.15); sqrt: 0.664
 DEFAULT_LEVEL = 0.683  # two-sided, the "1-sigma" intervals of Stable32
-# The lag-1 identification of one tau is kept to the noise types that make at least this part of the fitted
-# model there: from a few hundred points it calls flicker white or random walk at a third to half the taus.
-PLAUSIBLE_PART = 0.1
 MAX_MISSING = 0.1  # a record with more of its samples in gaps is refused
 _MIN_OCTAVES = 4  # fewer tau than this cannot separate three terms
 _MAX_ITERATIONS = 100
@@ -77,7 +75,7 @@ class AllanAnalysis:
     lower: np.ndarray  # (M, K), interval at ``level``
     upper: np.ndarray  # (M, K)
     edf: np.ndarray  # (M, K), Greenhall's for the noise type identified at each tau
-    alpha: np.ndarray  # (M, K), that noise type's exponent: 0 white, -1 flicker, -2 random walk
+    alpha: np.ndarray  # (M, K), that noise type's exponent: 2 white PM, 1 flicker PM, 0 white, -1 flicker, -2 walk
     model_adev: np.ndarray  # (M, K), the fitted model
     white: tuple[Term, ...]
     bias_instability: tuple[Term, ...]
@@ -206,17 +204,6 @@ def _term(coefficient: float, sd: float, level: float) -> Term:
     return Term(math.sqrt(coefficient) if coefficient > sd else None, lower, upper)
 
 
-def _tau_alpha(identified: int | None, parts: np.ndarray) -> int:
-    """The noise type at a tau: of the types that make at least PLAUSIBLE_PART of the fitted model there, the
-    one nearest the lag-1 identification ``identified`` (the largest when the record is too short for it)."""
-    plausible = [alpha for alpha, part in zip(ALPHAS, parts) if part >= PLAUSIBLE_PART * parts.sum() and part > 0.0]
-    if not plausible:
-        return ALPHAS[0] if identified is None else model_alpha(int(identified))
-    if identified is None:
-        return ALPHAS[int(np.argmax(parts))]
-    return min(plausible, key=lambda alpha: (abs(alpha - identified), -parts[ALPHAS.index(alpha)]))
-
-
 def _edfs(alpha: np.ndarray, factors: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Greenhall's EDF at each tau and axis (M, K), from M = counts differences; the axes mostly share a
     noise type, so each sum is taken once."""
@@ -262,11 +249,8 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     avar, counts = (avar_fit, fit_counts) if taus == "octave" else overlapping_avar(dx, period, factors)
     factors, avar, counts = factors[counts > 0], avar[counts > 0], counts[counts > 0]
     tau = factors * period
-    phase = np.vstack([np.zeros((1, dx.shape[1])), np.cumsum(np.nan_to_num(dx), axis=0)])
     parts = [design_matrix(tau) * f.coefficients for f in fits]
-    identified = [lag1_alpha(phase, int(m)) for m in factors]
-    alpha = np.array([[_tau_alpha(None if ids is None else ids[k], parts[k][j]) for k in range(dx.shape[1])]
-                      for j, ids in enumerate(identified)])
+    alpha = identify(dx, factors)
     nu = _edfs(alpha, factors, counts)
     lower, upper = chi2_interval(avar, nu, level)
     sd = [np.sqrt(np.diag(f.covariance)) for f in fits]

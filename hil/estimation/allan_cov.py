@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hil.estimation.allan_edf import ALPHAS, sw
+from hil.estimation.allan_edf import sw
+
+MODEL_ALPHAS = (0, -1, -2)  # the fitted model's noises: white rate, bias instability, rate random walk
 
 _C = np.array([1.0, -2.0, 1.0])
 _DIRECT = 32  # pieces of up to this many lags are summed term by term
@@ -36,7 +38,7 @@ def _raw(lags: np.ndarray, mi: int, mj: int) -> np.ndarray:
     shifts = (np.arange(3)[None, :] * mj - np.arange(3)[:, None] * mi).ravel()  # (9,): b m_j - a m_i
     weights = np.outer(_C, _C).ravel()
     t = lags[None, :] + shifts[:, None]
-    return np.stack([weights @ sw(t, alpha + 2) for alpha in ALPHAS])
+    return np.stack([weights @ sw(t, alpha + 2) for alpha in MODEL_ALPHAS])
 
 
 def _points(mi: int, mj: int, ci: int, cj: int) -> tuple[np.ndarray, np.ndarray]:
@@ -61,13 +63,13 @@ def _points(mi: int, mj: int, ci: int, cj: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def noise_products(factors: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """E (K, K, 3, 3): cov(a_i, a_j) = sum_qr sqrt(A_qi A_qj A_ri A_rj) E_ijqr for the noises ``ALPHAS``.
+    """E (K, K, 3, 3): cov(a_i, a_j) = sum_qr sqrt(A_qi A_qj A_ri A_rj) E_ijqr for the noises ``MODEL_ALPHAS``.
 
     ``counts`` the second differences M_i at each factor (fewer than N - 2m where gaps left some out).
     """
     factors = [int(m) for m in factors]
     zero = [_raw(np.zeros(1), m, m)[:, 0] for m in factors]  # (3,) variance scale of each noise at m
-    out = np.zeros((len(factors), len(factors), len(ALPHAS), len(ALPHAS)))
+    out = np.zeros((len(factors), len(factors), len(MODEL_ALPHAS), len(MODEL_ALPHAS)))
     for i, mi in enumerate(factors):
         for j in range(i, len(factors)):
             mj = factors[j]
