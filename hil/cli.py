@@ -73,12 +73,14 @@ def _trial_config(args: argparse.Namespace):
 
 
 @contextmanager
-def _claimed(args: argparse.Namespace, out: Path, noise: bool = False) -> Iterator[None]:
-    """The command's output directory, claimed for the ``with`` block (:func:`hil.outputs.output_dir.claimed`);
-    a history's rows that pointed at outputs ``--overwrite`` replaced point nowhere."""
+def _claimed(args: argparse.Namespace, out: Path, *inputs: str | Path | None, noise: bool = False) -> Iterator[None]:
+    """The command's output directory, claimed for the ``with`` block (:func:`hil.outputs.output_dir.claimed`;
+    its ``inputs`` are never removed); a history's rows that pointed at outputs ``--overwrite`` replaced point
+    nowhere."""
     from hil.outputs.output_dir import NOISE_OUTPUTS, TRIAL_OUTPUTS, claimed
 
-    with claimed(out, NOISE_OUTPUTS if noise else TRIAL_OUTPUTS, args.overwrite) as replaced:
+    given = tuple(Path(path) for path in inputs if path is not None)
+    with claimed(out, NOISE_OUTPUTS if noise else TRIAL_OUTPUTS, args.overwrite, given) as replaced:
         if replaced:
             from hil.history.filing import forget_outputs
 
@@ -90,14 +92,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     from hil.trial.live_runner import run_live
 
     cfg, out = _trial_config(args)
-    with _claimed(args, out):
+    with _claimed(args, out, args.config):
         return _finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, _viewer(args),
                                        args.quiet))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     cfg, out = _trial_config(args)
-    with _claimed(args, out):
+    with _claimed(args, out, args.config):
         if args.simulate:
             from hil.trial.calibration_simulation import run_calibration_simulation
 
@@ -111,10 +113,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from hil.outputs.figure_process import FigureProcess  # started first: matplotlib loads while the trial runs
 
     with FigureProcess() as figures:
+        from hil.inputs import InputError
         from hil.recording.replay import recording_path
         from hil.trial.offline import run_replay
 
-        out = Path(args.out) if args.out else recording_path(args.source).parent / "replay"
+        recorded = recording_path(args.source).parent
+        out = Path(args.out) if args.out else recorded / "replay"
+        if out.resolve() == recorded.resolve():
+            raise InputError(f"--out {out}: the recording's own directory; a replay writes beside it (default "
+                             f"{recorded / 'replay'})")
         with _claimed(args, out):
             return _finish(args, *run_replay(args.source, out, _viewer(args)), figures)
 
@@ -128,7 +135,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
         cfg, out = _trial_config(args)
         cfg.emulated_only(args.config, "hil simulate")
-        with _claimed(args, out):
+        with _claimed(args, out, args.config):
             outcome = run_simulation(cfg, Path(args.config).read_text(), out, _viewer(args), simulation)
             return _finish(args, *outcome, figures)
 
@@ -140,13 +147,13 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         from hil.trial.offline import run_csv
 
         cfg, out = _trial_config(args)
-        with _claimed(args, out):
+        with _claimed(args, out, args.config, args.data):
             return _finish(args, run_csv(cfg, Path(args.config).read_text(), args.data, out), None, figures)
 
 
 def cmd_noise(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
-    with _claimed(args, out, noise=True):
+    with _claimed(args, out, args.source, args.config, noise=True):
         return _noise(args, out)
 
 

@@ -103,3 +103,15 @@ def test_a_second_replay_into_its_default_directory_is_refused(tmp_path, short, 
     assert main(["replay", str(run), *fast]) == 2
     assert f"--out {run / 'replay'}: holds the outputs of a trial" in capsys.readouterr().err
     assert main(["replay", str(run), *fast, "--overwrite"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(run), *fast, "--out", str(run), "--overwrite"]) == 2  # it would take the recording
+    assert "the recording's own directory" in capsys.readouterr().err and (run / "recording.mcap").exists()
+
+
+def test_a_trial_run_again_from_its_own_config_copy_replaces_all_but_that(tmp_path, short):
+    out = tmp_path / "out"
+    assert main(["simulate", str(short), "--no-figures", "--no-history", "--out", str(out)]) == 0
+    again = ["simulate", str(out / "config.yaml"), "--no-figures", "--no-history", "--out", str(out)]
+    assert main(again) == 2
+    assert main([*again, "--overwrite"]) == 0
+    assert (out / "config.yaml").read_text() == short.read_text()

@@ -30,14 +30,15 @@ class OutputDirError(InputError):
 
 
 @contextmanager
-def claimed(out: Path, outputs: tuple[str, ...], overwrite: bool = False) -> Iterator[bool]:
+def claimed(out: Path, outputs: tuple[str, ...], overwrite: bool = False,
+            inputs: tuple[Path, ...] = ()) -> Iterator[bool]:
     """``out`` (created if need be) for the ``with`` block, locked against every other command; refused when it
-    holds any of ``outputs`` (the names the command writes) unless ``overwrite``, which removes them first. Yields
-    whether it removed any (the outputs of another trial, which no longer are)."""
+    holds any of ``outputs`` (the names the command writes) unless ``overwrite``, which removes them first but the
+    command's ``inputs`` (a config given from there). Yields whether it removed any (another trial's outputs)."""
     fd, created = _lock(out)
     try:
         before = set(os.listdir(out))
-        replaced = _clear(out, outputs, overwrite)
+        replaced = _clear(out, outputs, overwrite, {path.resolve() for path in inputs})
         try:
             yield replaced
         except InputError:
@@ -96,9 +97,10 @@ def _unlock(out: Path, fd: int, created: bool) -> None:
             pass
 
 
-def _clear(out: Path, outputs: tuple[str, ...], overwrite: bool) -> bool:
-    """Refuse a directory holding any of ``outputs``, or with ``overwrite`` remove them; whether there were any."""
-    found = [name for name in outputs if (out / name).exists()]
+def _clear(out: Path, outputs: tuple[str, ...], overwrite: bool, inputs: set[Path]) -> bool:
+    """Refuse a directory holding any of ``outputs``, or with ``overwrite`` remove them (but ``inputs``); whether
+    there were any."""
+    found = [name for name in outputs if (out / name).exists() and (out / name).resolve() not in inputs]
     if found and not overwrite:
         raise OutputDirError(f"--out {out}: holds the outputs of a trial ({', '.join(found[:3])}"
                              f"{', ...' if len(found) > 3 else ''}); choose another directory, or --overwrite to "
