@@ -101,10 +101,15 @@ def test_report_exits_as_the_trials_verdict(tmp_path, capsys):
     assert _badge((outcome.out / "report.html").read_text()) == INTERRUPTED
 
 
-def test_report_rebuilds_a_noise_directory(tmp_path):
+def test_report_rebuilds_a_noise_directory(tmp_path, capsys):
     out = tmp_path / "noise"
     assert main(["noise", str(ROOT / "configs" / "noise_static.yaml"), "--duration", "200", "--out", str(out),
                  "--no-figures", "--no-history"]) == 0
     (out / "report.html").unlink()
     assert main(["report", str(out)]) == 0
     assert "noise" in (out / "report.html").read_text()
+    (out / "noise.json").write_text("{\"gyro\": ")  # cut short
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "noise.json: not a noise.json this version can read (JSONDecodeError" in err

@@ -69,7 +69,11 @@ def rebuild_report(out_dir: Path) -> tuple[Path, str | None]:
     and the trial's verdict (None for a noise characterisation, which has none)."""
     out_dir = Path(out_dir)
     if (out_dir / NOISE_JSON).exists() and not (out_dir / "result.json").exists():
-        return write_noise_report(out_dir), None
+        try:
+            return write_noise_report(out_dir), None
+        except (KeyError, TypeError, ValueError) as exc:  # ValueError: JSON that does not parse
+            raise ReportError(f"{out_dir / NOISE_JSON}: not a noise.json this version can read ({type(exc).__name__}: "
+                              f"{exc}); run hil noise again") from None
     return _write_report(out_dir)
 
 
