@@ -15,7 +15,7 @@ import can
 import cantools
 import numpy as np
 
-from drivers.codec import Codec, FrameBatch, Framer, RawChunk
+from drivers.codec import Codec, FrameBatch, Framer, HealthFlag, RawChunk
 from drivers.framing import SequenceUnwrapper, host_rate
 from hil.config import CanSignals
 from hil.inputs import resolve_path
@@ -65,6 +65,10 @@ class CanDbcCodec(Codec[CanImuFrame]):
     name: ClassVar[str] = "can-dbc"
     kind: ClassVar[str] = "imu"
     link: ClassVar[str] = "can"
+    # the status signal's bits as the shipped lab DBC defines them (configs/imu_lab_highres.dbc)
+    health_flags: ClassVar[tuple[HealthFlag, ...]] = (HealthFlag("sensor_fault", 0x1), HealthFlag("saturation", 0x2),
+                                                      HealthFlag("built_in_test_failed", 0x4))
+    start_up_flags: ClassVar[tuple[str, ...]] = ("built_in_test_failed",)
     unit_keys: ClassVar[tuple[str, str, str]] = ("imu.can.dbc (the accel signals' unit)",
                                                  "imu.can.dbc (the gyro signals' unit)", "imu.can.signals")
 
@@ -167,7 +171,7 @@ class CanDbcCodec(Codec[CanImuFrame]):
         s = self.scales
         counter = sample.sync_index % self.sync_modulus if self.sync_modulus else None
         return CanImuFrame(tuple(x / k for x, k in zip(sample.dtheta, s[:3])),
-                           tuple(x / k for x, k in zip(sample.dv, s[3:])), counter, sample.status)
+                           tuple(x / k for x, k in zip(sample.dv, s[3:])), counter, self.sent_status(sample))
 
     def csv_header(self) -> list[str]:
         units = [u.replace("/", "_").replace("^", "") for u in self.units]

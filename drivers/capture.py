@@ -14,11 +14,12 @@ from typing import Any
 
 import can
 import cantools
+import numpy as np
 from can.io.blf import BLFParseError
 from pydantic import ValidationError
 
 from drivers.can_dbc import CanDbcCodec
-from drivers.codec import RawChunk
+from drivers.codec import RawChunk, raised_flags
 from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES, byte_codecs, detect
 from drivers.tap import message_to_chunk
@@ -40,10 +41,11 @@ class CaptureError(InputError, ValueError):
 def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None = None,
                    dbc: str | Path | None = None, rate_hz: float = 200.0,
                    **codec_options: Any) -> dict[str, int]:
-    """Counters {"frames", "corrupt", "skipped_bytes", "gaps"} of a capture; its valid frames go to ``out_csv``.
+    """Counters {"frames", "corrupt", "skipped_bytes", "gaps"} of a capture, and for an IMU "invalid" (the frames
+    its device's health flags mark invalid); its valid frames go to ``out_csv``.
 
     One CSV row per valid frame: ``sync_index`` then the frame's fields in device units (unit in each
-    column name). ``rate_hz`` only matters for unwrapping counters; ``codec_options`` are the codec's
+    column name), and for an IMU ``valid`` (1, or 0 where a health flag is raised). ``rate_hz`` only matters for unwrapping counters; ``codec_options`` are the codec's
     own settings (e.g. ``gyro_unit="deg"`` for a KVH 1750 configured so). Raises :class:`CaptureError`
     when the capture, the protocol, the DBC or the CSV cannot be used, or no valid frame is found.
     """
@@ -60,16 +62,20 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
         codec = _byte_codec(cls, rate_hz, codec_options)
         chunks = _byte_chunks(path)
     decoder = StreamDecoder(codec)
+    imu = codec.kind == "imu"
+    invalid = 0
     try:
         with open(out_csv, "w", newline="", encoding="utf-8") if out_csv else contextlib.nullcontext() as out:
             writer = csv.writer(out) if out is not None else None
             if writer:
-                writer.writerow(["sync_index", *codec.csv_header()])
+                writer.writerow(["sync_index", *codec.csv_header(), *(["valid"] if imu else [])])
             for chunk in chunks:
                 frames = decoder.frames(chunk)
+                valid = ~raised_flags(codec.health_flags, codec.status_words(frames.rows)).any(axis=1)
+                invalid += int(np.count_nonzero(~valid))
                 if writer:
-                    writer.writerows([int(k), *codec.csv_row(codec.record(row))]
-                                     for k, row in zip(frames.sync_index, frames.rows))
+                    writer.writerows([int(k), *codec.csv_row(codec.record(row)), *([int(v)] if imu else [])]
+                                     for k, row, v in zip(frames.sync_index, frames.rows, valid.tolist()))
     except OSError as exc:
         raise CaptureError(f"{exc.filename or path}: {exc.strerror or exc}") from None
     counters = decoder.counters
@@ -78,7 +84,7 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
             Path(out_csv).unlink()  # a header and no row: no output rather than an empty one
         raise CaptureError(f"{path}: no valid {protocol} frame found ({counters.corrupt} corrupt, "
                            f"{counters.skipped_bytes} bytes skipped); is it a {protocol} capture?")
-    return counters.as_dict()
+    return counters.as_dict() | ({"invalid": invalid} if imu else {})
 
 
 def detect_capture(path: str | Path) -> str:

@@ -95,6 +95,29 @@ class Counters:
         return out | ({"skipped_items": dict(sorted(self.skipped_items.items()))} if self.skipped_items else {})
 
 
+@dataclass(frozen=True, slots=True)
+class HealthFlag:
+    """One of a device's status bits that marks its sample invalid: ``name`` (result.json's
+    ``streams.imu_invalid_by_flag`` counts by it), the ``mask`` of the status word, and whether the bit says the
+    sample is good (``valid_when_set``, as the KVH 1750's valid bits) or reports a fault (set: invalid)."""
+
+    name: str
+    mask: int
+    valid_when_set: bool = False
+
+    def raised(self, status: np.ndarray) -> np.ndarray:
+        """Per status word (N,), True where this flag marks the sample invalid."""
+        hit = (np.asarray(status, dtype=np.int64) & self.mask) != 0
+        return ~hit if self.valid_when_set else hit
+
+
+def raised_flags(flags: tuple[HealthFlag, ...], status: np.ndarray) -> np.ndarray:
+    """Per status word (N,), which of ``flags`` mark the sample invalid: (N, len(flags)) bool."""
+    status = np.asarray(status, dtype=np.int64)
+    return np.stack([flag.raised(status) for flag in flags], axis=1) if flags \
+        else np.zeros((len(status), 0), dtype=bool)
+
+
 class NoOptions(Model):
     """The options of a codec that has none (``imu.options`` must then be empty)."""
 
@@ -112,6 +135,9 @@ class Codec(ABC, Generic[R]):
     Options: ClassVar[type[Model]] = NoOptions
     link: ClassVar[str] = "serial"  # "serial": frames are bytes on a line (baud checked); "can": CAN messages
     healthy_status: ClassVar[int] = 0  # the status word of a device with nothing to report (the emulator sends it)
+    # The status bits that mark a sample invalid (docs/devices.md, "Health flags"); none: every sample is valid.
+    health_flags: ClassVar[tuple[HealthFlag, ...]] = ()
+    start_up_flags: ClassVar[tuple[str, ...]] = ()  # those it raises while it starts (the emulator's flagged samples)
     device_time: ClassVar[bool] = False  # the frames carry the device's own clock (the emulator fills it in)
     # The config keys that set the accelerometer unit, the gyro unit and the gyro output (rate or increment),
     # which the plausibility check names when the readings are off by a unit; None: the protocol fixes them.
@@ -153,11 +179,30 @@ class Codec(ABC, Generic[R]):
         """What the frames' sync counter counts modulo (None: the frames carry none)."""
         return None
 
+    def sent_status(self, sample: ImuSample) -> int:
+        """The status word a frame carrying ``sample`` sends: its own, else a healthy device's."""
+        return self.healthy_status if sample.status is None else sample.status
+
+    def flagged_status(self, names: tuple[str, ...]) -> int:
+        """The healthy status word with the health flags ``names`` raised (a valid bit cleared, a fault bit set)."""
+        status = self.healthy_status
+        for flag in self.health_flags:
+            if flag.name in names:
+                status = status & ~flag.mask if flag.valid_when_set else status | flag.mask
+        return status
+
+    def status_words(self, rows: np.ndarray) -> np.ndarray:
+        """The status word (int64) of each row of a :class:`FrameBatch`: its ``status`` field (0 without one);
+        a codec whose frames hold their status otherwise says how."""
+        names = rows.dtype.names or ()
+        return rows["status"].astype(np.int64) if "status" in names else np.zeros(len(rows), dtype=np.int64)
+
     def frame_bytes(self) -> int:
         """Bytes one frame takes on a serial line, for the baud check (0 for frames that are CAN messages)."""
         if self.link != "serial":
             return 0
-        probe = (ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0) if self.kind == "imu"
+        probe = (ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0, status=self.healthy_status)
+                 if self.kind == "imu"
                  else TableSample(1, (0.0, 0.0, 0.0)))
         return len(self.encode(self.from_sample(probe)))
 

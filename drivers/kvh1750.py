@@ -9,7 +9,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import FrameBatch
+from drivers.codec import FrameBatch, HealthFlag
 from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
@@ -19,6 +19,9 @@ from hil.units import G0
 HEADER = b"\xfe\x81\xff\x55"
 FRAME_SIZE = 36
 STATUS_ALL_VALID = 0x77  # gyro x/y/z 0x01/0x02/0x04, accel x/y/z 0x10/0x20/0x40
+# Each sensor's valid bit (clear: that sensor's output is not valid, as at power-up before the gyros settle)
+HEALTH_FLAGS = tuple(HealthFlag(f"{sensor}_{axis}_invalid", bit << shift, valid_when_set=True)
+                     for sensor, shift in (("gyro", 0), ("accel", 4)) for bit, axis in ((1, "x"), (2, "y"), (4, "z")))
 _BODY = struct.Struct(">4s6fBBh")
 _CRC = struct.Struct(">I")
 FIELDS = np.dtype([("header", "S4"), ("gyro", ">f4", 3), ("accel", ">f4", 3), ("status", "u1"), ("sequence", "u1"),
@@ -57,6 +60,8 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
 
     Options: ClassVar[type[Model]] = Kvh1750Options
     healthy_status: ClassVar[int] = STATUS_ALL_VALID
+    health_flags: ClassVar[tuple[HealthFlag, ...]] = HEALTH_FLAGS
+    start_up_flags: ClassVar[tuple[str, ...]] = ("gyro_x_invalid", "gyro_y_invalid", "gyro_z_invalid")  # status 0x70
     unit_keys: ClassVar[tuple[str, str, str]] = ("imu.options.accel_unit", "imu.options.gyro_unit",
                                                  "imu.options.gyro_output")
 
@@ -101,10 +106,10 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
                           frames.rows["status"].astype(np.int64))
 
     def from_sample(self, sample: ImuSample) -> KvhFrame:
-        """The frame for an SI sample at 25 deg C; its status byte is ``sample.status`` (STATUS_ALL_VALID: healthy)."""
+        """The frame for an SI sample at 25 deg C; its status byte is ``sample.status`` (None: STATUS_ALL_VALID)."""
         g, a = self._gyro_scale, self._accel_scale
         return KvhFrame(tuple(x / g for x in sample.dtheta), tuple(x / a for x in sample.dv),
-                        sample.status, sample.sync_index % 128, 25)
+                        self.sent_status(sample), sample.sync_index % 128, 25)
 
     def csv_header(self) -> list[str]:
         gyro = self.gyro_unit + ("_s" if self.gyro_output == "rate" else "")

@@ -17,7 +17,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import FrameBatch
+from drivers.codec import FrameBatch, HealthFlag
 from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
@@ -34,6 +34,14 @@ ACCEL_FRACTION = {5: (20, 23), 10: (19, 22), 30: (18, 21), 80: (16, 19)}
 FIELDS = np.dtype([("gyro", "i4", 3), ("accel", "i4", 3), ("gyro_status", "u1"), ("accel_status", "u1"),
                    ("incl_status", "u1"), ("gyro_temp", "i2", 3), ("accel_temp", "i2", 3), ("counter", "u1"),
                    ("latency_us", "u2")])
+
+# A cluster's status byte (Table 5-23): bit 7 system integrity error, 6 start-up, 5 outside operating conditions,
+# 4 overload, 3 channel error (bits 0-2 name the axis of the last two); the gyros' in the status word's low byte,
+# the accelerometers' in the next (the inclinometers', unused, above)
+STATUS_BITS = (("system_integrity_error", 0x80), ("start_up", 0x40), ("outside_operating_conditions", 0x20),
+               ("overload", 0x10), ("channel_error", 0x08))
+HEALTH_FLAGS = tuple(HealthFlag(f"{cluster}_{name}", bit << shift) for cluster, shift in (("gyro", 0), ("accel", 8))
+                     for name, bit in STATUS_BITS)
 
 Vec3 = tuple[float, float, float]
 
@@ -94,6 +102,8 @@ class Stim300Codec(ByteCodec[StimDatagram]):
     kind: ClassVar[str] = "imu"
     header_size: ClassVar[int] = 1
     Options: ClassVar[type[Model]] = Stim300Options
+    health_flags: ClassVar[tuple[HealthFlag, ...]] = HEALTH_FLAGS
+    start_up_flags: ClassVar[tuple[str, ...]] = ("gyro_start_up", "accel_start_up")  # about 0.5 s after power-on
     unit_keys: ClassVar[tuple[str, str, str]] = ("imu.options.accel_output and imu.options.accel_range_g",
                                                  "imu.options.gyro_output", "imu.options.gyro_output")
 
@@ -160,16 +170,20 @@ class Stim300Codec(ByteCodec[StimDatagram]):
         """The datagram count the 2000/s counter implies (the counter over its step, modulo 256 / step)."""
         return rows["counter"].astype(np.int64) // self.step
 
+    def status_words(self, rows: np.ndarray) -> np.ndarray:
+        """The gyros', accelerometers' and inclinometers' status bytes, from the low byte up."""
+        return (rows["gyro_status"].astype(np.int64) | (rows["accel_status"].astype(np.int64) << 8)
+                | (rows["incl_status"].astype(np.int64) << 16))
+
     def samples(self, frames: FrameBatch) -> ImuSamples:
         rows = frames.rows
-        status = (rows["gyro_status"].astype(np.int64) | (rows["accel_status"].astype(np.int64) << 8)
-                  | (rows["incl_status"].astype(np.int64) << 16))
         return ImuSamples(frames.sync_index, rows["gyro"] * self.gyro_scale, rows["accel"] * self.accel_scale,
-                          np.full(len(frames), frames.host_time), status)
+                          np.full(len(frames), frames.host_time), self.status_words(rows))
 
     def from_sample(self, sample: ImuSample) -> StimDatagram:
-        """The datagram of an SI sample (outputs rounded to the nearest count; status OK, 0 us latency)."""
+        """The datagram of an SI sample (outputs rounded to the nearest count; its status, 0 us latency)."""
         limit = 1 << 23
+        status = self.sent_status(sample)
 
         def counts(values: Vec3, scale: float) -> tuple[int, int, int]:
             raw = tuple(round(v / scale) for v in values)
@@ -178,7 +192,7 @@ class Stim300Codec(ByteCodec[StimDatagram]):
             return raw
 
         return StimDatagram(counts(sample.dtheta, self.gyro_scale), counts(sample.dv, self.accel_scale),
-                            sample.status & 0xFF, (sample.status >> 8) & 0xFF, (sample.status >> 16) & 0xFF,
+                            status & 0xFF, (status >> 8) & 0xFF, (status >> 16) & 0xFF,
                             counter=(sample.sync_index * self.step) & 0xFF)
 
     def csv_header(self) -> list[str]:

@@ -9,7 +9,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from drivers.codec import Counters, FrameBatch
+from drivers.codec import Counters, FrameBatch, HealthFlag
 from drivers.framing import ByteCodec
 from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
@@ -18,6 +18,12 @@ PREAMBLE = b"\xfa\xff\x36"  # preamble, bus id (master), message id MTData2
 MAX_PAYLOAD = 2048  # longer announced lengths are taken as a false sync
 SAMPLE_TIME_HZ = 10_000.0  # SampleTimeFine ticks per second
 MAX_OTHER = 32  # other items a message may carry that are counted by kind
+
+SELF_TEST_PASSED = 0x1  # StatusWord bit 0: the MT passed its self-test
+# StatusWord bit 0 (self-test passed) and the clipping flags of bits 8-13 (accelerometer x, y, z, gyro x, y, z)
+HEALTH_FLAGS = (HealthFlag("self_test_failed", SELF_TEST_PASSED, valid_when_set=True),
+                *(HealthFlag(f"clipping_{sensor}_{axis}", 1 << bit) for bit, (sensor, axis) in enumerate(
+                    ((s, a) for s in ("accel", "gyro") for a in "xyz"), start=8)))
 
 Vec3 = tuple[float, float, float]
 
@@ -175,6 +181,9 @@ class XsensCodec(ByteCodec[MtData2Frame]):
 
     Options: ClassVar[type[Model]] = XsensOptions
     device_time: ClassVar[bool] = True
+    healthy_status: ClassVar[int] = SELF_TEST_PASSED
+    health_flags: ClassVar[tuple[HealthFlag, ...]] = HEALTH_FLAGS
+    start_up_flags: ClassVar[tuple[str, ...]] = ("self_test_failed",)
 
     def __init__(self, rate_hz: float, **options: Any) -> None:
         super().__init__(rate_hz, **options)
@@ -245,13 +254,18 @@ class XsensCodec(ByteCodec[MtData2Frame]):
         dv = np.where(np.isnan(rows["delta_v"][:, :1]), rows["acceleration"] * dt, rows["delta_v"])
         return dtheta, dv, ~(np.isnan(dtheta[:, 0]) | np.isnan(dv[:, 0]))
 
+    def status_words(self, rows: np.ndarray) -> np.ndarray:
+        """The StatusWord, else the StatusByte (its low byte), else a healthy word (a message without a status
+        says nothing is wrong)."""
+        word, byte = rows["status_word"], rows["status_byte"]
+        return np.where(word >= 0, word, np.where(byte >= 0, byte, self.healthy_status)).astype(np.int64)
+
     def samples(self, frames: FrameBatch) -> ImuSamples:
-        """Messages with neither increments nor rates are left out (counted by the caller); the status is the
-        StatusWord, else the StatusByte (its low byte), else 0."""
+        """Messages with neither increments nor rates are left out (counted by the caller); the status is
+        :meth:`status_words`'."""
         dtheta, dv, usable = self.increments(frames.rows)
-        word, byte = frames.rows["status_word"], frames.rows["status_byte"]
-        status = np.where(word >= 0, word, np.maximum(byte, 0))
-        return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time), status).take(usable)
+        return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
+                          self.status_words(frames.rows)).take(usable)
 
     def from_sample(self, sample: ImuSample) -> MtData2Frame:
         """The message for an SI sample, with the items ``outputs`` names."""
@@ -259,7 +273,7 @@ class XsensCodec(ByteCodec[MtData2Frame]):
             packet_counter=sample.sync_index & 0xFFFF,
             sample_time_fine=None if sample.device_time is None
             else round(sample.device_time * SAMPLE_TIME_HZ) & 0xFFFFFFFF,
-            status_word=sample.status)
+            status_word=self.sent_status(sample))
         if self.outputs == "increments":
             return replace(frame, delta_q=rotation_vector_to_quaternion(sample.dtheta), delta_v=sample.dv)
         return replace(frame, rate_of_turn=tuple(x * self.rate_hz for x in sample.dtheta),

@@ -92,7 +92,7 @@ def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, Devic
     imu_cfg = cfg.imu
     imu_clock, table_clock = device_clocks(cfg)
     seed = cfg.trial.seed
-    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors)
+    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors, imu_cfg.faults)
     table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
     streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
                                   max(1, round(CHUNK_S / source.clock.period)))

@@ -81,6 +81,14 @@ class DeviceClock:
         _, end = self._off()
         return np.where(k >= end, self.pulses(k - end), counts)
 
+    def since_power_on(self, k: np.ndarray) -> np.ndarray:
+        """Seconds the device has been powered at ticks k: from the trial's start, or from a power cycle's end."""
+        k = np.asarray(k)
+        if self.power_cycle is None:
+            return self.tick_times(k)
+        _, end = self._off()
+        return self.tick_times(np.where(k >= end, k - end, k))
+
     def tick_times(self, k: np.ndarray) -> np.ndarray:
         return np.asarray(k, dtype=float) * self.period
 

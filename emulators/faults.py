@@ -19,9 +19,23 @@ import can
 import numpy as np
 
 from hil.config import FaultConfig
+from hil.config_emulated import ImuFaultConfig
 
 KINDS = ("dropped", "corrupted", "truncated", "duplicated", "reordered", "delayed", "unplugged", "unplugs",
-         "power_cycled")
+         "power_cycled", "invalid")  # invalid: frames written whose sample the device flagged (flagged_samples)
+
+
+def flagged_samples(faults: ImuFaultConfig, t: np.ndarray, since_on: np.ndarray,
+                    rng: np.random.Generator) -> np.ndarray:
+    """Per sample latched at trial time ``t`` (N,), ``since_on`` s after the IMU was powered on, whether the IMU
+    flags it invalid: while it starts (``start_up_s``), inside the ``invalid_at_s`` window, or at random with
+    ``invalid_rate`` (drawn from ``rng`` only then)."""
+    flagged = since_on < faults.start_up_s
+    if faults.invalid_at_s is not None:
+        flagged |= (t >= faults.invalid_at_s) & (t < faults.invalid_at_s + faults.invalid_s)
+    if faults.invalid_rate:
+        flagged |= rng.random(len(t)) < faults.invalid_rate
+    return flagged
 
 
 class Damage(Protocol):

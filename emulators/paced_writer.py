@@ -65,8 +65,10 @@ class DeviceWriter:
                 continue
             if not self._plugged(emission.t):
                 continue
+            written = self.frames
             if not self._send(self.faults.frames(emission.payload), due):
                 return
+            self.faults.counts["invalid"] += emission.invalid and self.frames > written
 
     def _plugged(self, t: float) -> bool:
         """False while the device is unplugged at trial time t (the frame is lost)."""

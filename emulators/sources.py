@@ -21,22 +21,25 @@ import numpy as np
 
 from drivers.tts1 import FULL_TURN_UDEG, UDEG_PER_RAD, Status, Tts1Codec
 from emulators.clocks import DeviceClock
+from emulators.faults import flagged_samples
 from emulators.sensor_errors import SensorErrorModel
 from emulators.servo import Servo
 from emulators.truth import Truth
+from hil.config_emulated import ImuFaultConfig
 from hil.samples import ImuSample, TableSample
 
 
 @dataclass(frozen=True)
 class Emission:
     """One device frame: the pulse it ticks on, the trial time it is written, the latest instant it depends
-    on, and whether the device is powered to send it."""
+    on, whether the device is powered to send it, and whether it flags its sample invalid."""
 
     tick: int
     t: float
     latest: float
     payload: Any
     powered: bool = True
+    invalid: bool = False
 
 
 class FrameSource:
@@ -52,12 +55,16 @@ class FrameSource:
 
 
 class ImuSource(FrameSource):
-    """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``."""
+    """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``; the status
+    word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised)."""
 
-    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel) -> None:
+    def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
+                 faults: ImuFaultConfig | None = None) -> None:
         super().__init__(clock, seed, 0)
         self.codec = codec
+        self.faults = faults or ImuFaultConfig()
         self.state["errors"] = errors
+        self.state["flags_rng"] = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, 0, 2])))
 
     def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
         s, codec = self.state, self.codec
@@ -67,10 +74,13 @@ class ImuSource(FrameSource):
         s["last"] = float(latch[-1])
         clock = self.clock
         dev = clock.device_time(latch).tolist() if codec.device_time else [None] * len(k)
+        flagged = flagged_samples(self.faults, latch, clock.since_power_on(k), s["flags_rng"])
+        statuses = (codec.healthy_status, codec.flagged_status(codec.start_up_flags))
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=codec.healthy_status))), bool(on))
-                for i, c, t, end, a, b, d, on in zip(clock.pulses(k), clock.counters(k), clock.tick_times(k), latch,
-                                                      dtheta.tolist(), dv.tolist(), dev, clock.powered(k))]
+                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=statuses[bad]))), bool(on), bad)
+                for i, c, t, end, a, b, d, on, bad in zip(
+                    clock.pulses(k), clock.counters(k), clock.tick_times(k), latch, dtheta.tolist(), dv.tolist(), dev,
+                    clock.powered(k), flagged.tolist())]
 
 
 class TableSource(FrameSource):

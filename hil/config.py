@@ -16,7 +16,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors
+from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.inputs import InputError
 from hil.plugins import imu_codec_class, imu_options
@@ -167,7 +167,7 @@ class ImuConfig(Model):
     latch_delay_us: float = Field(0.0, ge=0)  # from the pulse edge to the end of the increment interval
     timing: DeviceTiming = DeviceTiming()
     errors: ImuErrors = ImuErrors()
-    faults: FaultConfig = FaultConfig()
+    faults: ImuFaultConfig = ImuFaultConfig()
     calibration: str | None = None  # a calibration.json: its inverse model applied to the raw increments
 
     @model_validator(mode="before")
@@ -231,6 +231,7 @@ class ReportLimits(Model):
     calibration_error_sigma_max: float | None = Field(None, gt=0)  # |estimate - truth| / sigma, every term (emulated)
     missing_max: float | None = Field(0.001, ge=0, le=1)  # fractions of the IMU samples filled or bridged, ...
     gated_max: float | None = Field(0.001, ge=0, le=1)  # ... removed by the gyro/table gate, ...
+    invalid_max: float | None = Field(0.001, ge=0, le=1)  # ... flagged invalid by the IMU itself, ...
     without_angles_max: float | None = Field(0.001, ge=0, le=1)  # ... aligned without table angles
     sync_offset_ms_max: float | None = Field(None, gt=0)  # |streams.sync_offset_ms|; default half an IMU period
 

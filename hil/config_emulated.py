@@ -34,6 +34,16 @@ class FaultConfig(Model):
     power_cycle_s: float = Field(0.0, ge=0)  # how long it is silent; then its counter restarts from 0
 
 
+class ImuFaultConfig(FaultConfig):
+    """An emulated IMU's faults: the frame faults of every device, and the samples it flags invalid in its own
+    status word (the flags its codec raises at start-up, :attr:`drivers.codec.Codec.start_up_flags`)."""
+
+    invalid_rate: float = Field(0.0, ge=0, le=1)  # probability that a sample is flagged invalid
+    invalid_at_s: float | None = Field(None, ge=0)  # trial time from which every sample is flagged ...
+    invalid_s: float = Field(0.0, ge=0)  # ... for this long
+    start_up_s: float = Field(0.0, ge=0)  # after power-on (the trial's start, a power cycle's end) flagged this long
+
+
 class ImuErrors(Model):
     """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
 

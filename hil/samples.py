@@ -27,7 +27,8 @@ class ImuSample:
     dv: tuple[float, float, float]  # m/s
     host_time: float = float("nan")  # s, host clock at reception
     device_time: float | None = None  # s, the device's own clock when it reports one
-    status: int = 0
+    status: int | None = None  # the device's status word; None: a healthy device's (its codec's ``healthy_status``)
+    temperature_c: float = math.nan  # deg C, the device's own temperature when its frames carry one
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,13 +46,24 @@ class TableSample:
 @dataclass(frozen=True)
 class ImuSamples:
     """Struct-of-arrays form of decoded IMU samples (the frames of one read): sync indices (N,) int64,
-    increments (N, 3), host receive times (N,), status words (N,)."""
+    increments (N, 3), host receive times (N,), status words (N,), the device's temperature (N,) deg C (NaN where
+    its frames carry none) and whether the device marks each sample valid (N,) bool (its health flags, judged
+    by the pipeline; all valid until then)."""
 
     sync_index: np.ndarray
     dtheta: np.ndarray
     dv: np.ndarray
     host_time: np.ndarray
     status: np.ndarray
+    temperature_c: np.ndarray | None = None  # None: NaN for every sample
+    valid: np.ndarray | None = None  # None: every sample valid
+
+    def __post_init__(self) -> None:
+        n = len(self.sync_index)
+        if self.temperature_c is None:
+            object.__setattr__(self, "temperature_c", np.full(n, np.nan))
+        if self.valid is None:
+            object.__setattr__(self, "valid", np.ones(n, dtype=bool))
 
     def __len__(self) -> int:
         return len(self.sync_index)
@@ -59,21 +71,22 @@ class ImuSamples:
     def take(self, mask: np.ndarray) -> ImuSamples:
         """The samples where ``mask`` (or an index array) selects."""
         return ImuSamples(self.sync_index[mask], self.dtheta[mask], self.dv[mask], self.host_time[mask],
-                          self.status[mask])
+                          self.status[mask], self.temperature_c[mask], self.valid[mask])
 
     def records(self) -> list[ImuSample]:
         """One record a sample."""
-        return [ImuSample(k, tuple(a), tuple(b), t, None, status) for k, a, b, t, status in zip(
-            self.sync_index.tolist(), self.dtheta.tolist(), self.dv.tolist(), self.host_time.tolist(),
-            self.status.tolist(), strict=True)]
+        return [ImuSample(k, tuple(a), tuple(b), t, None, status, temperature) for k, a, b, t, status, temperature
+                in zip(self.sync_index.tolist(), self.dtheta.tolist(), self.dv.tolist(), self.host_time.tolist(),
+                       self.status.tolist(), self.temperature_c.tolist(), strict=True)]
 
     @classmethod
     def stack(cls, samples: list[ImuSample]) -> ImuSamples:
         return cls(np.array([s.sync_index for s in samples], dtype=np.int64),
                    np.array([s.dtheta for s in samples], dtype=float).reshape(-1, 3),
                    np.array([s.dv for s in samples], dtype=float).reshape(-1, 3),
-                   np.array([s.host_time for s in samples], dtype=float), np.array([s.status for s in samples],
-                                                                                   dtype=np.int64))
+                   np.array([s.host_time for s in samples], dtype=float),
+                   np.array([s.status or 0 for s in samples], dtype=np.int64),
+                   np.array([s.temperature_c for s in samples], dtype=float))
 
 
 @dataclass(frozen=True)
@@ -141,7 +154,8 @@ class AlignedBatch:
     ``t`` (N,) ends each increment interval; ``dtheta`` and ``dv`` are (N, 3); ``angles`` is (N, 3)
     (outer, middle, inner) at ``t``, NaN rows for the samples without angles, or None from a source that has
     no turntable reference at all (a simulation or a CSV without angles: the pipeline takes it as NaN rows,
-    :meth:`angle_rows`).
+    :meth:`angle_rows`). ``valid`` (N,) bool marks the samples the device flagged invalid (False), which the
+    estimator never takes; None: every sample valid.
     """
 
     t: np.ndarray
@@ -149,6 +163,7 @@ class AlignedBatch:
     dv: np.ndarray
     angles: np.ndarray | None = None
     t0: float = field(default=0.0)  # start of the first interval
+    valid: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.t)

@@ -60,6 +60,6 @@ def test_the_codec_interface_is_declared_on_the_base_with_its_defaults():
     assert (kvh.counter_modulus, xsens.counter_modulus, can_dbc.counter_modulus) == (128, 65536, 1 << 24)
     assert kvh.unit_advice()[0] == "imu.options.accel_unit"
     assert xsens.unit_advice() == ("imu.protocol (xsens-mtdata2)",) * 3
-    assert (kvh.healthy_status, xsens.healthy_status, xsens.device_time, kvh.device_time) == (0x77, 0, True, False)
+    assert (kvh.healthy_status, xsens.healthy_status, xsens.device_time, kvh.device_time) == (0x77, 1, True, False)
     abstract = {name for name, value in vars(Codec).items() if getattr(value, "__isabstractmethod__", False)}
     assert abstract == {"encode", "framer", "record", "samples", "from_sample", "csv_header", "csv_row"}

@@ -116,7 +116,7 @@ def test_session_on_a_virtual_bus_decodes_samples_and_logs_what_python_can_reads
 
     out = tmp_path / "imu.csv"
     counters = decode_capture("can-dbc", log, out)
-    assert counters == {"frames": 20, "corrupt": 0, "skipped_bytes": 1, "gaps": 0}
+    assert counters == {"frames": 20, "corrupt": 0, "skipped_bytes": 1, "gaps": 0, "invalid": 0}
     rows = list(csv.reader(out.open()))
     assert rows[0][:2] == ["sync_index", "gyro_x_rad"] and len(rows) == 21
     assert float(rows[6][1]) == pytest.approx(5e-6)
@@ -134,7 +134,7 @@ def test_decode_reads_an_asc_written_by_python_can_logger(tmp_path):
     logger.stop()
     out = tmp_path / "j1939.csv"
     assert decode_capture("can-dbc", path, out, dbc=J1939) == {"frames": 10, "corrupt": 0, "skipped_bytes": 0,
-                                                               "gaps": 0}
+                                                               "gaps": 0, "invalid": 0}
     rows = list(csv.DictReader(out.open()))
     assert [int(r["sync_index"]) for r in rows] == list(range(10))
     assert float(rows[4]["gyro_x_deg_s"]) == pytest.approx(4.0, abs=1 / 128)
@@ -151,7 +151,7 @@ def test_decode_command_prints_counters_as_json_on_the_last_line(tmp_path, capsy
     dump.write_bytes(b"\x00\x01" + b"".join(frames[:50]) + bytes(damaged) + b"".join(frames[51:]))
     assert main(["decode", "kvh1750", str(dump), "--out", str(tmp_path / "kvh.csv")]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert json.loads(lines[-1]) == {"frames": 129, "corrupt": 1, "skipped_bytes": 38, "gaps": 1}
+    assert json.loads(lines[-1]) == {"frames": 129, "corrupt": 1, "skipped_bytes": 38, "gaps": 1, "invalid": 0}
     rows = list(csv.reader((tmp_path / "kvh.csv").open()))
     assert rows[0][:2] == ["sync_index", "gyro_x_rad"] and "accel_x_g" in rows[0]
     assert [int(r[0]) for r in rows[1:]][48:52] == [48, 49, 51, 52]

@@ -94,7 +94,7 @@ def check_log(log, cfg, complete: bool = True) -> None:
     """
     counters = decode_capture("can-dbc", log, dbc=HIGHRES)
     if complete:
-        assert counters == {"frames": 200, "corrupt": 0, "skipped_bytes": 0, "gaps": 0}
+        assert counters == {"frames": 200, "corrupt": 0, "skipped_bytes": 0, "gaps": 0, "invalid": 0}
     db = cantools.database.load_file(HIGHRES)
     batch = next(Simulation.from_config(parse_config(cfg)).batches())
     dthetax = [db.decode_message(m.arbitration_id, m.data) for m in can.LogReader(str(log))

@@ -100,7 +100,7 @@ def test_hil_decode_reads_a_capture_with_the_devices_settings(tmp_path, capsys):
     args = ["decode", "stim300", str(tmp_path / "cap.bin"), "--rate", "2000", "--option", "datagram=0x93"]
     assert main([*args, "--option", "gyro_output=increment", "--out", str(tmp_path / "out.csv")]) == 0
     assert capsys.readouterr().out.strip().splitlines()[-1] == (
-        '{"frames": 1, "corrupt": 1, "skipped_bytes": 2, "gaps": 0}')
+        '{"frames": 1, "corrupt": 1, "skipped_bytes": 2, "gaps": 0, "invalid": 0}')
     rows = (tmp_path / "out.csv").read_text().splitlines()
     assert rows[1].split(",")[1:3] == ["0.5", f"{-2.0 ** -21}"]
     assert main(["decode", "stim300", str(tmp_path / "cap.bin"), "--option", "datagram=0x93"]) == 2

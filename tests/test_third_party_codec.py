@@ -65,8 +65,9 @@ def test_a_third_party_codec_is_configured_decoded_and_emulated(venv):
     (tmp / "cap.bin").write_bytes(b"\xff" + b"".join(frame(k, (1000, -1, 0), (0, 0, 490332)) for k in (7, 8, 10)))
     decode = run(python, "-m", "hil.cli", "decode", "demo-imu", "cap.bin", "--out", "cap.csv", cwd=tmp)
     assert decode.returncode == 0, decode.stderr
-    assert json.loads(decode.stdout.splitlines()[-1]) == {"frames": 3, "corrupt": 0, "skipped_bytes": 1, "gaps": 1}
-    assert (tmp / "cap.csv").read_text().splitlines()[1] == "7,7,1000,-1,0,0,0,490332,0"
+    assert json.loads(decode.stdout.splitlines()[-1]) == {"frames": 3, "corrupt": 0, "skipped_bytes": 1, "gaps": 1,
+                                                          "invalid": 0}
+    assert (tmp / "cap.csv").read_text().splitlines()[1] == "7,7,1000,-1,0,0,0,490332,0,1"
 
     cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
     cfg["imu"]["protocol"] = "demo-imu"

@@ -18,7 +18,7 @@ SIGMA_DIGITS = 2  # significant digits of a value's sigma that set the decimals 
 SIGNIFICANT = 3  # significant digits of a value shown without a sigma
 # the measurements of the streams themselves, whatever the estimators made of them
 STREAM_MEASUREMENTS = frozenset({"frames_dropped", "frames_corrupt", "imu_missing_fraction", "imu_gated_fraction",
-                                 "imu_without_angles_fraction", "sync_offset"})
+                                 "imu_invalid_fraction", "imu_without_angles_fraction", "sync_offset"})
 
 
 @dataclass(frozen=True)
@@ -166,6 +166,8 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         if key == "sync" and value:
             out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
                     for k, v in value.items()]
+        elif key == "imu_invalid_by_flag":
+            out += [_info(f"imu_invalid_{flag}", n, "", "samples the IMU flagged so") for flag, n in value.items()]
         elif key == "gyro_rate_error_dph":
             out += [_info(f"gyro_rate_error_{axis}", v, "°/h", f"gyro rate minus the table's, {axis} axis: the gyro "
                           "bias, plus scale factor and misalignment times the rate of a turning axis")
@@ -177,7 +179,8 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
 
 def _judged_data(streams: dict, limits: ReportLimits) -> list[Measurement]:
     """The aligned streams' own judgement (a simulation's are not aligned): the fractions of the IMU samples
-    filled or bridged, gated and without angles, and the sync offset between the streams."""
+    filled or bridged, gated, flagged invalid by the IMU and without angles, and the sync offset between the
+    streams."""
     if "aligner_aligned" not in streams:
         return []
     aligned, bridged = streams["aligner_aligned"], streams["aligner_imu_bridged"]
@@ -186,6 +189,8 @@ def _judged_data(streams: dict, limits: ReportLimits) -> list[Measurement]:
                     "IMU samples filled or bridged (their frames lost), of all"),
            _at_most("imu_gated_fraction", streams["imu_gated"] / slots, "", limits.gated_max,
                     "IMU samples the gyro/table gate removed, of all"),
+           _at_most("imu_invalid_fraction", streams.get("imu_invalid", 0) / slots, "", limits.invalid_max,
+                    "IMU samples the IMU's own status flagged invalid (never estimated), of all"),
            _at_most("imu_without_angles_fraction", streams["aligner_without_angles"] / slots, "",
                     limits.without_angles_max, "IMU samples aligned without table angles, of all")]
     offset = streams.get("sync_offset_ms")

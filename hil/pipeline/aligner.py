@@ -14,7 +14,8 @@ instant lies within the last knot interval, where the error is ~1e-13 rad for a 
 
 - duplicates (dropped, counted) and out-of-order frames (reordered within ``REORDER_WINDOW``);
 - IMU gaps: up to ``MAX_FILL`` missing samples are filled from the cubic through the cumulative
-  increments around the gap (counted); longer gaps become an :class:`~hil.samples.ImuGap` that the
+  increments around the gap (counted) when the samples around it are valid (not flagged by the device);
+  longer gaps, or those beside a flagged sample, become an :class:`~hil.samples.ImuGap` that the
   estimator bridges with the table attitude;
 - table gaps: interpolated across up to ``MAX_ANGLE_GAP_S``; beyond that the IMU samples go out
   without angles (counted).
@@ -193,9 +194,10 @@ class Aligner:
         self._count = np.zeros(0, dtype=np.int64)
         self._dtheta = np.zeros((0, 3))
         self._dv = np.zeros((0, 3))
+        self._valid = np.zeros(0, dtype=bool)  # the device marked the sample valid
         self._next: int | None = None  # count of the next IMU sample to release
         self._first = 0  # count of the first IMU sample
-        self._history: list[tuple[int, np.ndarray, np.ndarray]] = []  # last released (count, dtheta, dv)
+        self._history: list[tuple[int, np.ndarray, np.ndarray, bool]] = []  # last released (count, dtheta, dv, valid)
         self._table = _TableKnots()
         self._out: list[Released] = []
         self._last_angles: Vec3 = NO_ANGLES
@@ -232,6 +234,7 @@ class Aligner:
             self._count = np.concatenate((self._count, k))
             self._dtheta = np.concatenate((self._dtheta, samples.dtheta))
             self._dv = np.concatenate((self._dv, samples.dv))
+            self._valid = np.concatenate((self._valid, samples.valid))
             return self._release()
         late = k < self._next
         self.counters.imu_late += int(np.count_nonzero(late))
@@ -245,6 +248,7 @@ class Aligner:
         self._count = count[order]
         self._dtheta = np.concatenate((self._dtheta, samples.dtheta[new]))[order]
         self._dv = np.concatenate((self._dv, samples.dv[new]))[order]
+        self._valid = np.concatenate((self._valid, samples.valid[new]))[order]
         return self._release()
 
     def add_tables(self, samples: TableSamples) -> list[Released]:
@@ -274,6 +278,7 @@ class Aligner:
             keep = int(np.searchsorted(self.imu_time(self._count), self._table.last_time(), side="right"))
             self.counters.after_table_end += len(self._count) - keep
             self._count, self._dtheta, self._dv = self._count[:keep], self._dtheta[:keep], self._dv[:keep]
+            self._valid = self._valid[:keep]
         self._release(final=True)
         return self._take()
 
@@ -305,8 +310,9 @@ class Aligner:
                     break
             angles = self._angles_at(t)
             self.counters.without_angles += int(np.count_nonzero(np.isnan(angles[:, 0]))) if self.with_table else 0
-            self._emit(self._count[:run], t, self._dtheta[:run], self._dv[:run], angles)
+            self._emit(self._count[:run], t, self._dtheta[:run], self._dv[:run], angles, self._valid[:run])
             self._count, self._dtheta, self._dv = self._count[run:], self._dtheta[run:], self._dv[run:]
+            self._valid = self._valid[run:]
         if self.with_table and self._next is not None:
             self._table.forget_before(self.imu_time(self._next))
         return self._take() if not final else []
@@ -317,9 +323,10 @@ class Aligner:
         ahead = self.imu_time(int(self._count[-1])) - np.maximum(self._table.last_time(), t)
         return self._table.ready(t) | (ahead >= self.table_wait)
 
-    def _emit(self, k: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray) -> None:
-        self._out.append(AlignedBatch(t, dtheta, dv, angles))
-        last = [(int(k[j]), dtheta[j], dv[j]) for j in range(max(0, len(k) - 2), len(k))]
+    def _emit(self, k: np.ndarray, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, angles: np.ndarray,
+              valid: np.ndarray) -> None:
+        self._out.append(AlignedBatch(t, dtheta, dv, angles, valid=None if valid.all() else valid))
+        last = [(int(k[j]), dtheta[j], dv[j], bool(valid[j])) for j in range(max(0, len(k) - 2), len(k))]
         self._history = [*self._history, *last][-2:]
         self._last_angles = tuple(angles[-1].tolist())
         self.counters.aligned += len(k)
@@ -331,12 +338,13 @@ class Aligner:
         missing = resume - start
         self.counters.imu_gaps += 1
         following = len(self._count) > 1 and self._count[1] == resume + 1
-        if missing <= MAX_FILL and len(self._history) == 2 and following:
+        valid_around = following and all(h[3] for h in self._history) and self._valid[:2].all()
+        if missing <= MAX_FILL and len(self._history) == 2 and valid_around:
             self.counters.imu_filled += missing
             k = np.arange(start, resume)
             dtheta, dv = self._fill(start, resume)
             t = self.imu_time(k)
-            self._emit(k, t, dtheta, dv, self._angles_at(t))
+            self._emit(k, t, dtheta, dv, self._angles_at(t), np.ones(len(k), dtype=bool))
             return
         self.counters.imu_bridged += missing
         t_start, t_end = self.imu_time(start) - self.imu_period, self.imu_time(resume) - self.imu_period
@@ -351,7 +359,7 @@ class Aligner:
 
     def _fill(self, start: int, resume: int) -> tuple[np.ndarray, np.ndarray]:
         """Increments (n, 3) of the missing samples from the cubic through the cumulative sums around the gap."""
-        (k1, th1, v1), (k2, th2, v2) = self._history
+        (k1, th1, v1, _), (k2, th2, v2, _) = self._history
         known = (float(k1 - 1), float(k1), float(k2))
         th = cumulative_cubic(known, (np.zeros(3), th1, th1 + th2), float(resume), (self._dtheta[0], self._dtheta[1]))
         v = cumulative_cubic(known, (np.zeros(3), v1, v1 + v2), float(resume), (self._dv[0], self._dv[1]))

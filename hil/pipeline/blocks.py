@@ -81,11 +81,15 @@ def until(ready: list[Released], end: float) -> list[Released]:
 
 def part(run: AlignedBatch, start: int, stop: int) -> AlignedBatch:
     """Samples ``start:stop`` of a run."""
-    return AlignedBatch(run.t[start:stop], run.dtheta[start:stop], run.dv[start:stop], run.angles[start:stop])
+    return AlignedBatch(run.t[start:stop], run.dtheta[start:stop], run.dv[start:stop], run.angles[start:stop],
+                        valid=None if run.valid is None else run.valid[start:stop])
 
 
 def joined(runs: list[AlignedBatch]) -> AlignedBatch:
     """One run of consecutive runs (at least one)."""
     if len(runs) == 1:
         return runs[0]
-    return AlignedBatch(*(np.concatenate([getattr(r, name) for r in runs]) for name in ("t", "dtheta", "dv", "angles")))
+    valid = None if all(r.valid is None for r in runs) else np.concatenate(
+        [np.ones(len(r), dtype=bool) if r.valid is None else r.valid for r in runs])
+    return AlignedBatch(*(np.concatenate([getattr(r, name) for r in runs]) for name in ("t", "dtheta", "dv", "angles")),
+                        valid=valid)
