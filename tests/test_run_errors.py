@@ -108,7 +108,8 @@ def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(
     code = main(["run", str(ROOT / "configs" / "emulated_swing.yaml"), "--duration", "5", "--speed", "max",
                  "--quiet", "--viewer", "save", "--no-figures", "--out", str(out)])
     assert code == 2
-    assert "--viewer save: the viewer did not start: rerun: address already in use" in _one_line(capsys.readouterr().err)
+    line = _one_line(capsys.readouterr().err)
+    assert "--viewer save: the viewer did not start: rerun: address already in use" in line
     assert len(spawned) == 1 and spawned[0][0].poll() is not None  # spawned, then stopped
     assert not out.exists()  # refused at its start: no outputs
 

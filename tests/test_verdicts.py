@@ -33,9 +33,10 @@ def _badge(page: str) -> str:
 
 def test_interrupted_calibration_is_never_reported_pass(tmp_path):
     out, history = tmp_path / "out", tmp_path / "history.sqlite"
-    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "calibrate", str(ROOT / "configs" / "calibration_short.yaml"),
-                             "--speed", "4", "--quiet", "--viewer", "none", "--no-figures", "--out", str(out),
-                             "--history", str(history)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    config = ROOT / "configs" / "calibration_short.yaml"
+    proc = subprocess.Popen([sys.executable, "-m", "hil.cli", "calibrate", str(config), "--speed", "4", "--quiet",
+                             "--viewer", "none", "--no-figures", "--out", str(out), "--history", str(history)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
         recording = out / "recording.mcap"

@@ -86,6 +86,7 @@ class TrialOutcome:
         verdict = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
                                       self.config_text, figures=figures and self.cfg.output.figures, draw=draw)
         print(summary_text(self.result, self.out))
-        judged = "against output.limits" if self.ended == COMPLETED else "(did not complete: not judged against output.limits)"
+        judged = "against output.limits" if self.ended == COMPLETED else \
+            "(did not complete: not judged against output.limits)"
         print(f"  report: {verdict} {judged} ({self.out / 'report.html'})")
         return verdict
