@@ -17,8 +17,9 @@ import yaml
 from scipy.stats import chi2
 
 from hil.history.entry import calibration_figures, noise_figures
-from hil.history.store import MIGRATIONS, History, HistoryError
+from hil.history.store import History, HistoryError
 from hil.outputs.result_schema import read_result
+from tests.history_legacy import legacy_history
 from tests.pages import CHROMIUM, clipped_columns, layout_width, needs_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -135,21 +136,37 @@ def test_no_history_files_nothing(tmp_path, history_in_tmp):
     assert not history_in_tmp.exists()
 
 
-def test_an_older_schema_is_migrated_keeping_its_rows(tmp_path):
-    path = tmp_path / "v1.sqlite"
-    with sqlite3.connect(path) as db:
-        db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
-        db.execute("INSERT INTO schema_version VALUES (1)")
-        for statement in MIGRATIONS[0]:
-            db.execute(statement)
-        db.execute("INSERT INTO trials (kind, dut_serial, started_utc, figures) VALUES ('swing', 'A', '2026', '{}')")
+@pytest.mark.parametrize("version", [1, 2, 3])
+def test_a_file_of_each_hand_written_version_is_migrated_keeping_its_rows(tmp_path, version):
+    path = tmp_path / f"v{version}.sqlite"
+    with legacy_history(path, version) as db:
+        for serial in ("A", "B"):
+            db.execute("INSERT INTO trials (kind, dut_serial, started_utc, figures) VALUES ('swing', ?, '2026', "
+                       "'{\"x\": 1}')", (serial,))
     history = History(str(path))
-    assert history.version() == len(MIGRATIONS) == 3
-    assert [(t["dut_serial"], t["notes"], t["replay_of"]) for t in history.trials("A")] == [("A", None, None)]
+    assert history.version() == 4
+    assert [(t["id"], t["dut_serial"], t["notes"], t["replay_of"], t["figures"]) for t in history.trials()] == [
+        (1, "A", None, None, {"x": 1}), (2, "B", None, None, {"x": 1})]
+    history.append({"kind": "swing", "dut_serial": "C", "started_utc": "2027", "figures": {}})
+    assert [t["id"] for t in history.trials()] == [1, 2, 3]
     with sqlite3.connect(path) as db:
-        db.execute("UPDATE schema_version SET version = 99")
-    with pytest.raises(HistoryError, match="newer"):
-        history.trials()
+        tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    assert tables == {"trials", "alembic_version"}  # the version is Alembic's alone
+
+
+@pytest.mark.parametrize("newer", ["schema_version", "alembic_version"])
+def test_a_history_of_a_newer_schema_is_refused_naming_it(tmp_path, newer):
+    path = tmp_path / "newer.sqlite"
+    History(str(path)).append({"kind": "swing", "figures": {}})
+    with sqlite3.connect(path) as db:
+        if newer == "schema_version":
+            db.execute("DROP TABLE alembic_version")
+            db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+            db.execute("INSERT INTO schema_version VALUES (99)")
+        else:
+            db.execute("UPDATE alembic_version SET version_num = '0099'")
+    with pytest.raises(HistoryError, match=r"newer.sqlite: migrate: schema (version 99|revision 0099) is newer"):
+        History(str(path)).trials()
 
 
 def test_sqlalchemy_urls_reach_the_same_store(tmp_path):

@@ -5,7 +5,6 @@ converged swing trials of one unit, never a replay of one; what it leaves out, a
 from __future__ import annotations
 
 import json
-import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +14,8 @@ import pytest
 import yaml
 
 from hil.cli import main
-from hil.history.store import MIGRATIONS, History
+from hil.history.store import History
+from tests.history_legacy import legacy_history
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = ([10.0, 20.0, 30.0], [12.0, 19.0, 33.0], [11.0, 23.0, 29.0])  # the bias of three sound runs (ug)
@@ -130,11 +130,7 @@ def test_filing_in_a_directory_that_does_not_exist_warns_and_makes_no_directory(
 
 def test_rows_of_trials_that_did_not_complete_filed_as_pass_or_fail_are_migrated_to_how_they_ended(tmp_path):
     path = tmp_path / "v2.sqlite"
-    with sqlite3.connect(path) as db:
-        db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
-        db.execute("INSERT INTO schema_version VALUES (2)")
-        for statement in MIGRATIONS[0] + MIGRATIONS[1]:
-            db.execute(statement)
+    with legacy_history(path, 2) as db:
         for ended, verdict in (("interrupted: SIGINT", "PASS"), ("early: devices lost", "FAIL"),
                                ("completed", "FAIL"), ("completed", None)):
             db.execute("INSERT INTO trials (kind, ended, verdict, figures) VALUES ('swing', ?, ?, '{}')",
