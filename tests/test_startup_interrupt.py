@@ -20,10 +20,10 @@ DELAYS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)  # s after the package hil is i
 TRIAL_LINES = ("hil: SIGINT: ending the trial (turntable off, outputs kept)", "hil: trial interrupted: SIGINT")
 
 COMMANDS = {
-    "run": ["run", "configs/emulated_swing.yaml", "--duration", "20", "--speed", "max", "--viewer", "none",
+    "run": ["run", "configs/emulated_swing.yaml", "--duration", "600", "--speed", "max", "--viewer", "none",
             "--quiet", "--no-figures", "--no-history"],
     "simulate": ["simulate", "configs/emulated_swing.yaml", "--no-figures", "--no-history"],
-    "noise": ["noise", "configs/noise_static.yaml", "--duration", "3000", "--no-figures", "--no-history"],
+    "noise": ["noise", "configs/noise_static.yaml", "--no-figures", "--no-history"],  # 8 h: never done by then
 }
 
 
@@ -54,7 +54,7 @@ def _interrupted(args: list[str], delay: float, out: Path) -> tuple[int, list[st
 def test_ctrl_c_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, command):
     for delay in DELAYS:
         code, err = _interrupted(COMMANDS[command], delay, tmp_path / f"out-{delay}")
-        assert not any("Traceback" in line for line in err), (delay, err)
+        assert not any("Traceback" in line for line in err), (delay, "\n".join(err))
         if code == 130:
             assert err == ["hil: interrupted"], (delay, err)
         else:  # the trial was running: it ended as interrupted
