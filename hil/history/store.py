@@ -136,12 +136,14 @@ class History:
             self._check_file(path, create)
         with self._step("open"):
             engine = _engine(self.url)
+            connection = engine.connect()
         try:
             with self._step("migrate"):
-                _migrate(engine)
-            with self._step(operation), engine.execution_options(hil_write=write).begin() as connection:
+                _migrate(connection)
+            with self._step(operation), connection.execution_options(hil_write=write).begin():
                 yield connection
         finally:
+            connection.close()
             engine.dispose()
 
     @contextmanager
@@ -220,7 +222,7 @@ def _revision(connection: Connection) -> str | None:
     return None
 
 
-def _migrate(engine: Engine) -> None:
+def _migrate(connection: Connection) -> None:
     """Brings the database to the last revision in one transaction, under a lock that keeps other stations
     waiting (SQLite's writer lock, PostgreSQL's advisory lock); a database of a newer revision is refused."""
     from alembic import command  # only for a database to migrate
@@ -230,17 +232,17 @@ def _migrate(engine: Engine) -> None:
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
     script = ScriptDirectory.from_config(config)
-    with engine.connect() as connection:
-        current = _revision(connection)
+    current = _revision(connection)
+    connection.rollback()
     if current == script.get_current_head():
         return
-    with engine.execution_options(hil_write=True).begin() as connection:
+    with connection.execution_options(hil_write=True).begin():
         if connection.dialect.name == "postgresql":
             connection.execute(sa.select(sa.func.pg_advisory_xact_lock(MIGRATION_LOCK)))
         current = _revision(connection)  # another station may have migrated it meanwhile
         if current is not None and current not in {rev.revision for rev in script.walk_revisions()}:
             raise NewerSchema(f"schema revision {current} is newer than this software's "
-                               f"{script.get_current_head()}")
+                              f"{script.get_current_head()}")
         config.attributes["connection"] = connection
         if current is not None and "alembic_version" not in sa.inspect(connection).get_table_names():
             command.stamp(config, current)
