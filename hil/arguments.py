@@ -146,6 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="write history.html with the plots into this directory")
     p.add_argument("--history", metavar="URL", help="the history database (default $HIL_HISTORY, else the "
                    "user's data directory)")
+    p.add_argument("--sync", action="store_true", help="first file the trials kept in the spool for this history "
+                   "(those it could not take when they ran)")
 
     p = sub.add_parser("campaign", help="Monte Carlo: every sweep point x N seeds of simulated trials on dask.distributed; "
                                         "OUT/runs.parquet, summary.json, campaign.html (exit 1: some runs failed)")

@@ -186,7 +186,8 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
 def cmd_history(args: argparse.Namespace) -> int:
     from hil.history.show import show_history
 
-    return show_history(args.history, args.dut, args.since, args.json, Path(args.out) if args.out else None)
+    return show_history(args.history, args.dut, args.since, args.json, Path(args.out) if args.out else None,
+                        args.sync)
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:

@@ -6,9 +6,10 @@ import pytest
 @pytest.fixture(autouse=True)
 def history_in_tmp(tmp_path_factory, monkeypatch):
     """Every test files its trials in a history of its own (HIL_HISTORY, inherited by the hil processes it
-    starts), never the user's."""
+    starts) and spools them in a data directory of its own (XDG_DATA_HOME), never the user's."""
     path = tmp_path_factory.mktemp("history") / "history.sqlite"
     monkeypatch.setenv("HIL_HISTORY", str(path))
+    monkeypatch.setenv("XDG_DATA_HOME", str(path.parent / "data"))
     return path
 
 

@@ -17,6 +17,7 @@ import yaml
 from scipy.stats import chi2
 
 from hil.history.entry import calibration_figures, noise_figures
+from hil.history.spool import file_spooled
 from hil.history.store import History, HistoryError
 from hil.outputs.result_schema import read_result
 from tests.history_legacy import legacy_history
@@ -108,7 +109,8 @@ def test_history_html_of_every_unit_fits_1400_px_with_every_column_in_sight(unit
     assert clipped_columns(page, tmp_path) == []
 
 
-def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the_trial(tmp_path):
+def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the_trial_the_locked_one_spools(
+        tmp_path):
     locked = tmp_path / "locked.sqlite"
     sqlite3.connect(locked).close()  # an empty file: the schema is made on opening
     holder = sqlite3.connect(locked)
@@ -123,10 +125,12 @@ def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the
             assert (out / "result.json").exists() and (out / "report.html").exists()
             warnings = [line for line in done.stderr.splitlines() if "warning" in line]
             assert len(warnings) == 1 and "not filed in the history" in warnings[0] and url.split("/")[-1] in warnings[0]
+            assert ("kept in the spool" in warnings[0]) == (url == str(locked))  # a history that cannot be: no
     finally:
         holder.rollback()
         holder.close()
     assert History(str(locked)).trials() == []
+    assert file_spooled(History(str(locked))) == 1 and len(History(str(locked)).trials()) == 1
 
 
 def test_no_history_files_nothing(tmp_path, history_in_tmp):

@@ -1,5 +1,6 @@
 """Filing a finished trial in the history, after its own files are written: a history that cannot be written
-costs one warning line, never the trial's outputs or its exit code."""
+costs one warning line, never the trial's outputs or its exit code, and the row waits in the spool
+(:mod:`hil.history.spool`) for the next trial or ``hil history --sync``."""
 
 from __future__ import annotations
 
@@ -7,16 +8,43 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hil.history.spool import file_spooled, keep
 from hil.history.store import History, HistoryError, resolve
 
 
 def file_trial(option: str | None, row: dict[str, Any]) -> None:
-    """Append ``row`` to the history ``option`` names (:func:`~hil.history.store.resolve`); a failure is one
-    warning line on stderr."""
+    """Append ``row`` to the history ``option`` names (:func:`~hil.history.store.resolve`), then the rows
+    spooled for it; a failure is one warning line on stderr, the row kept in the spool."""
+    history = History(resolve(option))
     try:
-        History(resolve(option)).append(row)
+        history.append(row)
     except HistoryError as exc:
-        print(f"hil: warning: trial not filed in the history: {exc}", file=sys.stderr)
+        print(f"hil: warning: trial not filed in the history: {exc}{_kept(history, row, exc)}", file=sys.stderr)
+        return
+    try:
+        sync_spool(history)
+    except HistoryError as exc:
+        print(f"hil: warning: trials in the spool not filed in the history: {exc}", file=sys.stderr)
+
+
+def sync_spool(history: History) -> int:
+    """Files the rows spooled for ``history``, saying how many in one line on stderr when there were some; how
+    many (a :class:`HistoryError` when it cannot, the rest left in the spool)."""
+    filed = file_spooled(history)
+    if filed:
+        print(f"hil: {filed} trial(s) from the spool filed in the history {history.shown}", file=sys.stderr)
+    return filed
+
+
+def _kept(history: History, row: dict[str, Any], exc: HistoryError) -> str:
+    """Keeps ``row`` in the spool unless the history cannot be there (``exc.lasting``): what the warning adds."""
+    if exc.lasting:
+        return ""
+    try:
+        path = keep(history, row)
+    except OSError as error:
+        return f"; not kept in the spool either: {error.filename}: {error.strerror}"
+    return f"; kept in the spool {path.parent}, filed by the next trial or hil history --sync"
 
 
 def forget_outputs(option: str | None, out: Path) -> None:

@@ -9,6 +9,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from hil.history.filing import sync_spool
 from hil.history.page import write_history_page
 from hil.history.repeatability import history_summary
 from hil.history.store import History, HistoryError, resolve
@@ -19,12 +20,17 @@ LEFT_OUT_WORDS = {"replay": "replays of a trial", "not_completed": "not complete
                   "no_serial": "without a unit serial"}
 
 
-def show_history(option: str | None, dut: str | None, since: str | None, as_json: bool, out: Path | None) -> int:
-    """``hil history``: the trials and each unit's figures as a table (or JSON), history.html in ``out``; exit
-    code. A ``since`` that is not a date, or a history that does not exist, is an :class:`InputError`."""
+def show_history(option: str | None, dut: str | None, since: str | None, as_json: bool, out: Path | None,
+                 sync: bool = False) -> int:
+    """``hil history``: the trials and each unit's figures as a table (or JSON), history.html in ``out``, the
+    spooled trials filed first with ``sync``; exit code. A ``since`` that is not a date, or a history that does
+    not exist or cannot be read or take the spooled trials, is an :class:`InputError`."""
     start = since_utc(since)
+    history = History(resolve(option))
     try:
-        trials = History(resolve(option)).trials(dut, start)
+        if sync:
+            sync_spool(history)
+        trials = history.trials(dut, start)
     except HistoryError as exc:
         raise InputError(str(exc)) from None
     summary = history_summary(dut, start, trials)

@@ -76,6 +76,12 @@ def _url(location: str) -> URL | None:
         return None
 
 
+def _key(url: URL) -> str:
+    """``url`` without its password, as the spool names a history."""
+    return URL.create(url.drivername, url.username, None, url.host, url.port, url.database,
+                      url.query).render_as_string(hide_password=False)
+
+
 class History:
     """One history database: ``append`` trials' rows, read ``trials``. ``key``: the database named without its
     password (None for a location that is no URL), as the spool names it."""
@@ -85,9 +91,8 @@ class History:
         self.shown = shown(location)
         self.url = _url(location)
         path = self._sqlite_path()
-        self.key = None if self.url is None else \
-            str(URL.create("sqlite", database=str(path.resolve()))) if path is not None else \
-            self.url.set(password=None).render_as_string(hide_password=False)
+        self.key = None if self.url is None else _key(self.url if path is None else URL.create(
+            "sqlite", database=str(path.resolve())))
 
     def append(self, row: dict[str, Any]) -> None:
         """Add one trial (``row``: :data:`~hil.history.tables.COLUMNS`, ``figures`` a JSON-able dict) in one
