@@ -21,14 +21,8 @@ import numpy as np
 from emulators.sensor_errors import SensorErrorModel
 from hil.campaign.noise_summary import coverage_band
 from hil.config import ImuErrors
-from hil.estimation.allan import (
-    ACCEL_UNITS,
-    FLICKER_FLOOR,
-    GYRO_UNITS,
-    AllanAnalysis,
-    TermUnits,
-    analyse,
-)
+from hil.estimation.allan import ACCEL_UNITS, GYRO_UNITS, AllanAnalysis, TermUnits, analyse
+from hil.estimation.allan_fit import FLICKER_FLOOR
 from hil.units import DEG_PER_H, UG
 
 RATE_HZ = 100.0

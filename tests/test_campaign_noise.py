@@ -20,7 +20,8 @@ from hil.campaign.noise_summary import coverage_band, point_lines, point_summary
 from hil.campaign.runner import resumed_rows, run_campaign
 from hil.campaign.spec import CampaignSpec, SpecError, load_campaign
 from hil.config import ImuErrors
-from hil.estimation.allan import ACCEL_UNITS, FLICKER_FLOOR, GYRO_UNITS
+from hil.estimation.allan import ACCEL_UNITS, GYRO_UNITS
+from hil.estimation.allan_fit import FLICKER_FLOOR
 from hil.trial.noise_runner import noise_truth
 from hil.units import DEG_PER_H, HOUR, UG
 

@@ -18,6 +18,7 @@ import numpy as np
 from emulators.simulation import Simulation
 from hil.config import Config, ImuErrors, load_config
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
+from hil.estimation.allan_fit import TERM_NAMES
 from hil.estimation.allan_taus import parse_taus
 from hil.frames import Earth, TableGeometry
 from hil.inputs import resolve_path
@@ -30,7 +31,7 @@ from hil.recording.replay import open_recording, recorded_pace
 from hil.samples import AlignedBatch
 from hil.trial.noise_acquisition import acquire
 from hil.trial.outcome import TrialSetupError
-from hil.units import DEG, DEG_PER_H, SQRT_HOUR, UG
+from hil.units import DEG, DEG_PER_H, HOUR, SQRT_HOUR, UG
 
 STATIC_ANGLE_SPAN = 1e-3 * DEG  # table angles spanning less than this: a static trial
 STATIC_RATE_SPAN = 0.5 * DEG  # rad/s: 1-s mean rates spanning more than this without angles: a moving IMU
@@ -101,21 +102,26 @@ def _concatenated(batches: list[AlignedBatch]) -> AlignedBatch:
 
 def noise_truth(errors: ImuErrors, rate_hz: float) -> dict:
     """The noise terms the emulator's error model (:mod:`emulators.sensor_errors`) gives a static trial, in
-    noise.json's keys and units: white rate noise of 1-sigma s per sample of period T = 1 / rate has the
-    Allan variance s^2 T / tau (the mean of m = tau / T independent samples), so N = s sqrt(T); the bias
-    instability B and the rate random walk K are configured as the IEEE 952 coefficients themselves (Eqs.
-    C.15, C.17). Linear drift and output quantisation, which add other slopes, are not terms of the model."""
+    noise.json's keys and units: an output quantised to q with its remainder carried errs in its angle
+    (velocity) by a white sequence of variance q^2 / 12, so Q = q / sqrt(12) (IEEE 952 Eq. C.8; white while the
+    angle moves by q or more a sample); white rate noise of 1-sigma s per sample of period T = 1 / rate has
+    the Allan variance s^2 T / tau (the mean of m = tau / T independent samples), so N = s sqrt(T); the bias
+    instability B, the rate random walk K and the linear drift, the rate ramp R, are configured as the IEEE 952
+    coefficients themselves (Eqs. C.15, C.17, C.20)."""
     period = 1.0 / rate_hz
     e = errors
-    rates = {"gyro": (np.array(e.gyro_noise_dph) * DEG_PER_H, np.array(e.gyro_bias_instability_dph) * DEG_PER_H,
-                      np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / SQRT_HOUR),
-             "accel": (np.array(e.accel_noise_ug) * UG, np.array(e.accel_bias_instability_ug) * UG,
-                       np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / SQRT_HOUR)}
+    rates = {"gyro": (e.dtheta_quantum_rad, np.array(e.gyro_noise_dph) * DEG_PER_H,
+                      np.array(e.gyro_bias_instability_dph) * DEG_PER_H,
+                      np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / SQRT_HOUR,
+                      np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / HOUR),
+             "accel": (e.dv_quantum_mps, np.array(e.accel_noise_ug) * UG, np.array(e.accel_bias_instability_ug) * UG,
+                       np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / SQRT_HOUR,
+                       np.array(e.accel_drift_ug_per_h) * UG / HOUR)}
     truth = {}
     for sensor, units, keys in SENSORS:
-        white, instability, walk = rates[sensor]
-        si = (white * math.sqrt(period), instability, walk)
-        scale = (units.white, units.bias_instability, units.random_walk)
+        quantum, white, instability, walk, ramp = rates[sensor]
+        si = (np.full(3, quantum / math.sqrt(12.0)), white * math.sqrt(period), instability, walk, np.abs(ramp))
+        scale = [getattr(units, name) for name in TERM_NAMES]
         truth[sensor] = {key: [float(v) for v in value / unit] for key, value, unit in zip(keys, si, scale)}
     return truth
 
