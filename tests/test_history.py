@@ -17,7 +17,7 @@ import yaml
 from scipy.stats import chi2
 
 from hil.history.entry import calibration_figures, noise_figures
-from hil.history.spool import file_spooled
+from hil.history.spool import _HOST, file_spooled, keep
 from hil.history.store import History, HistoryError
 from hil.outputs.result_schema import read_result
 from tests.history_legacy import legacy_history
@@ -131,6 +131,18 @@ def test_a_locked_history_and_an_unreachable_one_cost_one_warning_line_never_the
         holder.close()
     assert History(str(locked)).trials() == []
     assert file_spooled(History(str(locked))) == 1 and len(History(str(locked)).trials()) == 1
+
+
+def test_a_spooled_row_a_killed_process_had_claimed_is_filed_once_by_the_next(tmp_path):
+    history = History(str(tmp_path / "h.sqlite"))
+    kept = keep(history, {"kind": "swing", "dut_serial": "K", "figures": {}})
+    keep(History(str(tmp_path / "other.sqlite")), {"kind": "swing", "dut_serial": "O", "figures": {}})
+    dead = subprocess.Popen(["true"])  # a process that has ended, killed while it filed the row
+    dead.wait()
+    kept.rename(kept.with_suffix(f".{_HOST}-{dead.pid}.claim"))
+    assert file_spooled(history) == 1 and file_spooled(history) == 0
+    assert [t["dut_serial"] for t in history.trials()] == ["K"]
+    assert len(list(kept.parent.iterdir())) == 1  # the other history's row waits for it
 
 
 def test_no_history_files_nothing(tmp_path, history_in_tmp):

@@ -109,6 +109,19 @@ def test_a_wrong_password_is_exit_2_for_hil_history_and_one_warning_for_a_trial_
     assert done.returncode == 0 and (tmp_path / "run" / "result.json").exists()
     assert len([line for line in done.stderr.splitlines() if "warning" in line]) == 1
     assert not any("not-the-Pw.17" in line or PASSWORD in line for line in _lines(shown) + _lines(done))
+    written = [path for path in tmp_path.rglob("*") if path.is_file() and b"not-the-Pw.17" in path.read_bytes()]
+    assert written == []  # the outputs, and the spool, hold no password
+
+
+def test_a_password_the_driver_reads_from_a_pgpass_file_files_trials_under_a_url_without_it(
+        postgres, pg_history, tmp_path, monkeypatch):
+    pgpass = tmp_path / "pgpass"
+    pgpass.write_text(f"127.0.0.1:{postgres.port}:*:hil:{PASSWORD}\n")
+    pgpass.chmod(0o600)
+    monkeypatch.setenv("PGPASSFILE", str(pgpass))
+    history = History(pg_history.replace(f":{PASSWORD}@", "@"))
+    history.append(row("P", "2026"))
+    assert [t["dut_serial"] for t in history.trials()] == ["P"]
 
 
 @pytest.mark.parametrize("host", ["127.0.0.1:{port}", "no-such-host.invalid"])

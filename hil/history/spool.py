@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from hil.history.store import History, data_dir
+
+_HOST = socket.gethostname().replace(".", "_").replace("-", "_")  # a claim's name: STEM.HOST-PID.claim
 
 
 def spool_dir() -> Path:
@@ -60,12 +63,31 @@ def _spooled(key: str | None):
 
 def _claim(key: str | None) -> list[tuple[Path, Path, dict[str, Any]]]:
     """The rows spooled for ``key``, each renamed to a claim of this process: (path, claim, row)."""
+    _orphans_back()
     claimed = []
     for path, row in _spooled(key):
-        claim = path.with_suffix(f".{os.getpid()}.claim")
+        claim = path.with_suffix(f".{_HOST}-{os.getpid()}.claim")
         try:
             path.rename(claim)
         except FileNotFoundError:  # claimed by another process
             continue
         claimed.append((path, claim, row))
     return claimed
+
+
+def _orphans_back() -> None:
+    """The claims of this host's processes that are no longer running (killed while filing) go back to the
+    spool."""
+    for claim in spool_dir().glob(f"*.{_HOST}-*.claim"):
+        if not _running(int(claim.suffixes[-2].rpartition("-")[2])):
+            claim.replace(claim.with_suffix("").with_suffix(".json"))
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's
+        return True
+    return True
