@@ -1,4 +1,4 @@
-"""Cost of Rerun logging per IMU sample at 200 Hz with the default blueprint (save mode).
+"""Cost of Rerun logging per IMU sample at 200 Hz (or ``--rate``) with the default blueprint (save mode).
 
     .venv/bin/python benchmarks/viz_overhead.py [--duration 600] [--rate 200] [--batch-hz 10]
 
@@ -6,7 +6,8 @@ The trial's snapshots (1 Hz) and gimbal angles are computed first; then the live
 replayed as fast as possible, once with non-blocking calls and once waiting for the logging
 thread: every 1/batch_hz s of trial time a ``log_table`` with the samples of that interval
 (decimated to ``TABLE_RATE_HZ`` inside), every second a ``log_snapshot`` and a ``log_health`` with the
-figures a live trial gives (the pipeline's and the live queue's and latencies). Running far
+figures a live trial gives (the pipeline's and the live queue's and latencies) and a ``log_streams`` (the
+verdict so far, judged against the config's ``output.limits``), at the end the trial's verdict (``end``). Running far
 faster than real time, the caller competes with the logging thread for the interpreter, so its
 figure is pessimistic.
 Prints, per IMU sample:
@@ -29,6 +30,7 @@ import numpy as np
 from emulators.simulation import Simulation
 from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
+from hil.samples import StreamCounts
 from hil.units import UG
 from hil.viewer.trial_viewer import TABLE_RATE_HZ, TrialViewer
 
@@ -51,10 +53,10 @@ def trial(duration: float, rate: float):
         est.update_many(batch)
         t.append(batch.t)
         angles.append(batch.angles)
-    return sim, est.snapshots, np.concatenate(t), np.vstack(angles)
+    return cfg, sim, est.snapshots, np.concatenate(t), np.vstack(angles)
 
 
-def live(sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: bool) -> dict:
+def live(cfg, sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: bool) -> dict:
     per_batch = max(1, round(len(t) / (t[-1] * batch_hz)))
     snaps = iter(snapshots)
     next_snap = next(snaps, None)
@@ -62,7 +64,7 @@ def live(sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: bool) 
     cpu0, wall0 = time.process_time(), time.perf_counter()
     c0 = time.perf_counter()
     viewer = TrialViewer("save", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=blocking)  # fmt: skip
+                         blocking=blocking, limits=cfg.limits, verdict_at_end=True)  # fmt: skip
     caller += time.perf_counter() - c0
     for start in range(0, len(t), per_batch):
         stop = min(start + per_batch, len(t))
@@ -71,10 +73,11 @@ def live(sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: bool) 
         while next_snap is not None and next_snap.t <= t[stop - 1]:
             viewer.log_snapshot(next_snap)
             viewer.log_health(next_snap.t, HEALTH)
+            viewer.log_streams(StreamCounts(next_snap.samples, next_snap.samples, next_snap.samples))
             next_snap = next(snaps, None)
         caller += time.perf_counter() - c0
     c0 = time.perf_counter()
-    viewer.close()
+    viewer.end("## Verdict: PASS\n")
     close = time.perf_counter() - c0
     return {"caller": caller, "close": close, "cpu": time.process_time() - cpu0, "wall": time.perf_counter() - wall0,
             "dropped": viewer.dropped, "size": (out / "recording.rrd").stat().st_size}  # fmt: skip
@@ -98,20 +101,20 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=200.0, help="IMU rate, Hz (default 200)")
     parser.add_argument("--batch-hz", type=float, default=10.0, help="log_table calls per second (default 10)")
     args = parser.parse_args()
-    sim, snapshots, t, angles = trial(args.duration, args.rate)
+    cfg, sim, snapshots, t, angles = trial(args.duration, args.rate)
     n = len(t)
     with tempfile.TemporaryDirectory() as tmp:
         # the calls come ~1000x faster than in a real trial: without blocking the queue overflows and
         # calls are dropped (the caller's own cost); with blocking nothing is lost (the full cost)
-        free = live(sim, snapshots, t, angles, args.batch_hz, Path(tmp) / "free", blocking=False)
-        trial_live = live(sim, snapshots, t, angles, args.batch_hz, Path(tmp) / "live", blocking=True)
+        free = live(cfg, sim, snapshots, t, angles, args.batch_hz, Path(tmp) / "free", blocking=False)
+        trial_live = live(cfg, sim, snapshots, t, angles, args.batch_hz, Path(tmp) / "live", blocking=True)
         trial_batch = batched(sim, snapshots, t, angles, Path(tmp) / "batch")
     us = 1e6 / n
     print(f"trial: {args.duration:.0f} s at {args.rate:.0f} Hz = {n} samples, {len(snapshots)} snapshots, "
           f"table decimated to {TABLE_RATE_HZ:.0f} Hz, save mode, default blueprint")  # fmt: skip
     print(f"live calls (log_table at {args.batch_hz:.0f} Hz, log_snapshot + log_health at 1 Hz)")
     print(f"  caller (processing thread)   {free['caller'] * us:7.2f} us/sample (non-blocking calls)")
-    print(f"  close (flush, finish .rrd)   {trial_live['close'] * 1e3:7.1f} ms")
+    print(f"  end (verdict, finish .rrd)   {trial_live['close'] * 1e3:7.1f} ms")
     print(f"  total CPU, all threads       {trial_live['cpu'] * us:7.2f} us/sample "
           f"({100 * trial_live['cpu'] / args.duration:.2f} % of one core in real time)")  # fmt: skip
     print(f"  wall time, 600x+ real time   {trial_live['wall']:7.2f} s (dropped calls: {trial_live['dropped']})")

@@ -33,15 +33,17 @@ def _viewer(args: argparse.Namespace):
 
 def _finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
-    when given), file the trial in the history, close the viewer of a completed trial; the exit code."""
+    when given), show its verdict in the viewer, file the trial in the history, close the viewer of a completed
+    trial; the exit code."""
     from hil.outputs.figures import write_figures
     from hil.outputs.record import trial_record
-    from hil.trial.viewer_feed import finish_viewer
+    from hil.trial.viewer_feed import finish_viewer, show_verdict
 
     draw = write_figures if figures is None else figures.draw
     outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
                                             outcome.out)
     verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    show_verdict(viewer, outcome.result, outcome.cfg.limits)
     if not args.no_history:
         from hil.history.entry import CALIBRATION, SWING, calibration_figures, swing_figures, trial_row
         from hil.history.filing import file_trial
@@ -169,7 +171,7 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
                         rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet,
                         record=lambda cfg: noise_record(given, args.source, cfg, args.started,
-                                                        datetime.now(timezone.utc)))
+                                                        datetime.now(timezone.utc)), detrend=args.detrend)
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -14,9 +14,12 @@ from tests.helpers import PAPER_ERRORS, make_config
 from rerun.chunk import RrdReader
 
 from emulators.simulation import Simulation
+from hil.config import ReportLimits
 from hil.estimation.online import OnlineEstimator
 from hil.units import DEG, UG
 from hil.viewer import blueprint, rerun_process, trial_viewer
+from hil.viewer.bias_view import follow_ranges
+from hil.viewer.verdict import PENDING, VerdictSoFar
 from hil.viewer.modes import default_viewer_mode
 from hil.viewer.trial_viewer import TrialViewer
 
@@ -95,15 +98,19 @@ def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
     series = _series(path)
     final = snapshots[-1]
     bias, sigma = final.full.bias / UG, final.full.bias_sigma / UG
+    table = final.table_bias / UG
     for k, axis in enumerate("xyz"):
-        t, values = series[f"/bias/{axis}"]  # estimate, -3 sigma, +3 sigma, truth
-        assert t[-1] == pytest.approx(final.t)
-        expected = [bias[k], bias[k] - 3 * sigma[k], bias[k] + 3 * sigma[k], PAPER_ERRORS["accel_bias_ug"][k]]
-        assert values[-1] == pytest.approx(expected, rel=1e-12)
+        expected = {"estimate": bias[k], "sigma3_lower": bias[k] - 3 * sigma[k], "sigma3_upper": bias[k] + 3 * sigma[k],
+                    "table_reference": table[k], "truth": PAPER_ERRORS["accel_bias_ug"][k]}
+        for name, value in expected.items():
+            t, values = series[f"/bias/{axis}/{name}"]  # one series an entity
+            assert t[-1] == pytest.approx(final.t)
+            assert values[-1, 0] == pytest.approx(value, rel=1e-12)
+    assert abs(table[0] - PAPER_ERRORS["accel_bias_ug"][0]) < 20.0  # the table's reference, not another estimate
     assert series["/sigma"][1][-1] == pytest.approx(sigma, rel=1e-12)
     # bias rows exist only where the bias was observable, one per such snapshot
     observable = [s for s in snapshots if s.full.bias is not None]
-    assert len(series["/bias/x"][0]) == len(observable) < len(snapshots)
+    assert len(series["/bias/x/estimate"][0]) == len(observable) < len(snapshots)
 
     t, rank = series["/observability/rank"]  # 12-state, 9-state
     assert len(t) == len(snapshots) and rank[0, 0] < 12
@@ -123,6 +130,53 @@ def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
         t, values = series[path]  # one series per stream and metric, in order of appearance
         assert len(t) == 60 and t[-1] == 60.0
         assert values[-1].tolist() == [HEALTH[stream][metric] for stream, metric in names]
+
+
+def test_a_real_devices_bias_has_its_table_reference_no_truth_and_the_limits_drawn(trial, tmp_path):
+    sim, snapshots, _ = trial
+    limits = ReportLimits(bias_sigma_ug_max=5.0, converged_by_s=30.0)
+    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry, blocking=True, limits=limits)
+    viewer.log_snapshots(snapshots)
+    viewer.close()
+    series = _series(tmp_path / "recording.rrd")
+    assert not any(path.endswith("/truth") for path in _entities(tmp_path / "recording.rrd"))
+    for axis in "xyz":
+        assert {f"/bias/{axis}/{name}" for name in ("estimate", "sigma3_upper", "sigma3_lower", "table_reference")} \
+            <= set(series)
+    t, limit = series["/sigma/limit"]
+    assert len(t) == len(snapshots) and set(limit[:, 0]) == {5.0}
+    t, marker = series["/sigma/converged_by"]  # a vertical line at the deadline, the height of the 1σ panel
+    assert list(t) == [30.0, 30.0]
+    assert list(marker[:, 0]) == [0.0, pytest.approx(np.nanmax(series["/sigma"][1][series["/sigma"][0] <= 30.0]))]
+
+
+def test_the_verdict_so_far_waits_for_values_and_fails_a_convergence_past_its_deadline(trial):
+    _, snapshots, _ = trial
+    verdict = VerdictSoFar(ReportLimits(bias_sigma_ug_max=50.0, converged_by_s=30.0, bias_error_ug_max=10.0),
+                           np.array(PAPER_ERRORS["accel_bias_ug"], dtype=float))
+    outcome = lambda: {m.name: m.outcome for m in verdict.measurements() if m.limit}  # noqa: E731
+    assert outcome()["accel_bias_sigma_x"] == PENDING and outcome()["converged_at"] == PENDING
+    verdict.add([s for s in snapshots if s.t <= 20.0])
+    assert outcome()["converged_at"] == PENDING  # not converged, before its deadline
+    assert outcome()["accel_bias_sigma_x"] in ("PASS", "FAIL")
+    verdict.add([s for s in snapshots if s.t > 20.0])
+    assert verdict.result()["estimate"]["converged_at_s"] is None  # 60 s at 100 Hz: 3σ above 10 µg
+    assert outcome()["converged_at"] == "FAIL"
+    assert "| `accel_bias_error_x` |" in verdict.markdown() and "\\|x\\| ≤ 10 µg" in verdict.markdown()
+    assert verdict.markdown().startswith("## Verdict so far: FAIL (trial running, 60 s)")
+
+
+def test_the_followed_bias_view_spans_a_few_sigma_about_the_latest_estimate(trial):
+    _, snapshots, _ = trial
+    final = snapshots[-1]
+    ranges = follow_ranges(final)
+    for k, axis in enumerate("xyz"):
+        estimate, sigma = final.full.bias[k] / UG, final.full.bias_sigma[k] / UG
+        low, high = ranges[axis]
+        assert low <= estimate - 5 * sigma and high >= estimate + 5 * sigma and high - low <= 12 * sigma
+    far = np.array([1e4, 1e4, 1e4]) * UG  # a truth 10 mg away is left out of the followed view
+    assert follow_ranges(final, far) == follow_ranges(final)
+    assert follow_ranges(snapshots[0]) is None  # no bias yet: the view autoscales
 
 
 def test_table_angles_are_decimated_for_the_3d_view(saved, trial):

@@ -61,6 +61,7 @@ class Snapshot:
     error_method2: np.ndarray | None
     error_theoretical: np.ndarray | None  # (pitch, roll) rad, 2019 eq. 8 with the estimated bias at t
     drift_check: DriftCheck | None = None  # from the 15-state sums whatever the model; None: not observable
+    table_bias: np.ndarray | None = None  # the table-referenced bias (3,) of the samples so far; None: not solvable
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,7 @@ class _Instant:
     t: float  # s since t0
     attitude: np.ndarray  # C_b^ib0
     reference: np.ndarray | None  # the table's C_b^n, None without angles
+    table_bias: np.ndarray | None = None  # the table-referenced bias then
 
 
 class OnlineEstimator:
@@ -254,8 +256,9 @@ class OnlineEstimator:
         return (c_end[..., :-1] + 4.0 * c_mid + c_end[..., 1:]) / 6.0, c_end[..., 1:]
 
     def _instant(self) -> _Instant:
-        """What a snapshot now needs: the normal equations, the time, and the attitudes."""
-        return _Instant(self.gravity.sums(), self._t_last - self.t0, self._attitude.copy(), self._reference)
+        """What a snapshot now needs: the normal equations, the time, the attitudes and the table-referenced bias."""
+        return _Instant(self.gravity.sums(), self._t_last - self.t0, self._attitude.copy(), self._reference,
+                        self.table.solve().bias)
 
     def _snapshots(self, instants: list[_Instant], tracked: bool = True) -> list[Snapshot]:
         """The snapshots at these instants, their least squares solved and their alignments formed as stacks;
@@ -274,7 +277,7 @@ class OnlineEstimator:
                     *(_NAN3 if v is None else v for v in (full.bias, full.bias_sigma, drift.drift, drift.drift_sigma)),
                 )))  # fmt: skip
             snapshots.append(Snapshot(instant.t, instant.sums.samples, full, gravity_only, instant.attitude, *errs,
-                                      drift_check=DriftCheck.from_solution(drift)))
+                                      drift_check=DriftCheck.from_solution(drift), table_bias=instant.table_bias))
         return snapshots
 
     def _alignment_errors(self, instants: list[_Instant], solutions: list[list[Solution]]

@@ -12,12 +12,14 @@ from typing import Protocol
 
 import numpy as np
 
-from hil.config import Config
+from hil.config import Config, ReportLimits
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
 from hil.pipeline.progress import Health, Progress
+from hil.samples import StreamCounts
 from hil.trial.outcome import TrialSetupError, emulated_truth
 from hil.units import HOUR, UG
+from hil.viewer.verdict import final_markdown
 
 
 class Viewer(Protocol):
@@ -31,9 +33,11 @@ class Viewer(Protocol):
     def log_snapshots(self, snaps: list[Snapshot]) -> None: ...
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
     def log_health(self, t: float, health: Health) -> None: ...
+    def log_streams(self, counts: StreamCounts) -> None: ...
     def log_calibration_step(self, t: float, index: int, steps: list) -> None: ...
     def log_calibration_window(self, t: float, accel_ug: np.ndarray | None, gyro_dph: np.ndarray) -> None: ...
     def close(self) -> None: ...
+    def end(self, verdict_markdown: str) -> None: ...
     def stop(self) -> None: ...
 
 
@@ -62,12 +66,18 @@ def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) 
                              truth_bias=None if truth is None else np.array(truth["accel_bias_ug"]) * UG,
                              truth_drift=None if truth is None else np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR,
                              bind=options.bind, recording_name=cfg.trial.name, blocking=blocking,
-                             layout=options.layout)
+                             layout=options.layout, limits=cfg.limits, verdict_at_end=True)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:
         print(f"web viewer: {viewer.url}", file=sys.stderr)
     return viewer
+
+
+def show_verdict(viewer: Viewer | None, result: dict, limits: ReportLimits) -> None:
+    """Log the trial's verdict (result.json's, its measurements judged against ``limits``) and finish the .rrd."""
+    if viewer is not None:
+        viewer.end(final_markdown(result, limits))
 
 
 def finish_viewer(viewer: Viewer | None) -> None:
@@ -105,6 +115,7 @@ class ViewerFeed:
         if not self.snapshots or not progress.snapshots:
             return
         health = progress.health if self.live is None else progress.with_live(self.live())
+        self.viewer.log_streams(progress.counts)
         for snap in progress.snapshots:
             self.viewer.log_snapshot(snap)
             self.viewer.log_health(snap.t, health)

@@ -20,6 +20,8 @@ HEALTH_VIEWS = (("frames", "frames decoded, samples aligned"),
                 ("faults", "corrupt, missing, outages; filled, bridged, without angles"),
                 ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"))
 
+FOLLOW_SIGMAS = 5.0  # the followed bias view spans the latest estimate ± this many sigma (hil.viewer.bias_view)
+LIMIT_COLOR = (200, 0, 0)
 AXIS_COLORS = {"x": (228, 26, 28), "y": (77, 175, 74), "z": (55, 126, 184)}
 _BAND = 0.55  # band lines: the axis colour mixed with grey
 TRUTH_COLOR = (255, 170, 0)
@@ -45,42 +47,50 @@ def band_color(axis: str) -> tuple[int, int, int]:
     return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in AXIS_COLORS[axis])
 
 
-def default_blueprint(extra: rrb.Container | None = None) -> rrb.Blueprint:
-    """The trial layout: bias (Fig. 3/6) | observability and alignment (Figs. 2, 4/7) | 3D and stream health
-    [| ``extra``, a further column]."""
-    bias = [
-        rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg)", plot_legend=rrb.PlotLegend(visible=a == "x"))
-        for a in AXES
-    ]
-    bias.append(rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg)"))
-    bias += [rrb.TimeSeriesView(origin=f"/drift/{a}", name=f"bias drift {a} (µg/h)",
-                                plot_legend=rrb.PlotLegend(visible=False)) for a in AXES]
-    observability = [
-        rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank", axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
-        rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
+def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tuple[float, float]] | None = None
+                      ) -> rrb.Blueprint:
+    """The trial layout: the bias first and largest (per axis the whole history beside the view that follows the
+    converged estimate, its range ``follow[axis]`` µg, autoscaled without), its 1σ with the limit under it |
+    the verdict, the 3D table, and the rest in tabs (stream health in one compact grid, observability,
+    alignment, drift) [| ``extra``, a further column: a trial kind's own views]."""
+    follow = follow or {}
+    rows = [rrb.Horizontal(
+        rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg), whole trial",
+                           plot_legend=rrb.PlotLegend(visible=a == "x")),
+        rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg), converged: ±{FOLLOW_SIGMAS:g}σ about the estimate",
+                           axis_y=rrb.ScalarAxis(range=follow[a]) if a in follow else None,
                            plot_legend=rrb.PlotLegend(visible=False)),
-    ]  # fmt: skip
-    alignment = [
-        rrb.TimeSeriesView(origin=f"/alignment/{angle}", name=f"{angle} error (deg)",
-                           plot_legend=rrb.PlotLegend(visible=angle == "pitch"))
-        for angle in ANGLES
-    ]  # fmt: skip
-    health = rrb.Grid(
-        *(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
-        grid_columns=2,
-        name="stream health",
+        column_shares=[1, 1]) for a in AXES]  # fmt: skip
+    sigma = rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg), limit, convergence deadline")
+    tabs = rrb.Tabs(
+        rrb.Grid(*(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
+                 grid_columns=2, name="stream health"),
+        rrb.Vertical(
+            rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank",
+                               axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
+            rrb.TimeSeriesView(origin="/observability/log10_condition", name="log10 condition number",
+                               plot_legend=rrb.PlotLegend(visible=False)),
+            name="observability"),
+        rrb.Vertical(*(rrb.TimeSeriesView(origin=f"/alignment/{angle}", name=f"{angle} error (deg)",
+                                          plot_legend=rrb.PlotLegend(visible=angle == "pitch")) for angle in ANGLES),
+                     name="alignment"),
+        rrb.Vertical(*(rrb.TimeSeriesView(origin=f"/drift/{a}", name=f"bias drift {a} (µg/h)",
+                                          plot_legend=rrb.PlotLegend(visible=False)) for a in AXES),
+                     name="bias drift"),
+    )  # fmt: skip
+    side = rrb.Vertical(
+        rrb.TextDocumentView(origin="/verdict", name="verdict"),
+        rrb.Spatial3DView(origin="/world", name="turntable and apparent gravity in i_b0"),
+        tabs,
+        row_shares=[3, 3, 2],
+        name="verdict, table, health",
     )
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(*bias, name="accelerometer bias"),
-            rrb.Vertical(*observability, *alignment, name="observability and alignment"),
-            rrb.Vertical(
-                rrb.Spatial3DView(origin="/world", name="turntable and apparent gravity in i_b0"),
-                health,
-                row_shares=[3, 2],
-            ),
+            rrb.Vertical(*rows, sigma, row_shares=[3, 3, 3, 2], name="accelerometer bias"),
+            side,
             *([extra] if extra is not None else []),
-            column_shares=[1, 1, 1] + ([1] if extra is not None else []),
+            column_shares=[3, 2] + ([2] if extra is not None else []),
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -89,14 +99,16 @@ def default_blueprint(extra: rrb.Container | None = None) -> rrb.Blueprint:
 
 
 def log_series_styles(rec: rr.RecordingStream, with_truth: bool) -> None:
-    """The names, colours and widths of every time series (static)."""
+    """The names, colours and widths of every time series but the bias's (static; :mod:`hil.viewer.bias_view`)."""
     for a in AXES:
         names, colors, widths = ["estimate", "−3σ", "+3σ"], [AXIS_COLORS[a], band_color(a), band_color(a)], [2, 1, 1]
         if with_truth:
             names, colors, widths = names + ["truth"], colors + [TRUTH_COLOR], widths + [1.5]
-        rec.log(f"bias/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
         rec.log(f"drift/{a}", rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
     rec.log("sigma", rr.SeriesLines(names=list(AXES), colors=[AXIS_COLORS[a] for a in AXES]), static=True)
+    rec.log("sigma/limit", rr.SeriesLines(names="limit", colors=LIMIT_COLOR, widths=1.5), static=True)
+    rec.log("sigma/converged_by", rr.SeriesLines(names="converged by (limit)", colors=LIMIT_COLOR, widths=1.5),
+            static=True)
     rec.log("observability/rank", rr.SeriesLines(names=["12-state (with bias)", "9-state (method 1)"],
                                                  colors=[(55, 126, 184), (230, 85, 13)]), static=True)  # fmt: skip
     rec.log("observability/log10_condition", rr.SeriesLines(names="log10 cond", colors=(55, 126, 184)), static=True)

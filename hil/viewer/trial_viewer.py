@@ -31,20 +31,23 @@ from typing import Self
 import numpy as np
 import rerun as rr
 
+from hil.config import ReportLimits
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
+from hil.samples import StreamCounts
 from hil.units import DEG, HOUR, UG
 from hil.viewer.blueprint import (
     ANGLES,
     AXES,
     STREAM_COLORS,
-    default_blueprint,
     health_entity,
     health_series,
     log_series_styles,
 )
+from hil.viewer.bias_view import bias_rows, log_bias_styles
 from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.chunks import Columns, Streams
+from hil.viewer.judged_view import JudgedView, log_verdict
 from hil.viewer.modes import VIEWER_MODES
 from hil.viewer.rerun_process import start_viewer, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
@@ -76,6 +79,8 @@ class TrialViewer:
         telemetry: bool | None = None,
         table_rate_hz: float = TABLE_RATE_HZ,
         layout: str = "trial",
+        limits: ReportLimits | None = None,
+        verdict_at_end: bool = False,
     ) -> None:
         if mode not in VIEWER_MODES:
             raise ValueError(f"viewer mode {mode!r}: choose one of {', '.join(VIEWER_MODES)}")
@@ -102,16 +107,19 @@ class TrialViewer:
         self._file: rr.RecordingStream | None = None  # the .rrd's stream, its rows held FILE_FLUSH_S
         self._view: rr.RecordingStream | None = None  # the live view's (spawn, serve), its rows sent at once
         self._calibration: CalibrationLog | None = None
+        self.verdict_at_end = verdict_at_end
+        self._judged = JudgedView(limits, self.truth_bias, calibration_views() if layout == "calibration" else None)
+        self._ended = False
         if mode == "none":
             self._rec = None
             return
 
         recording_id = uuid.uuid4()
-        blueprint = default_blueprint(calibration_views() if layout == "calibration" else None)
+        blueprint = self._judged.blueprint(None)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
         self._file = _recording_stream(recording_id, FILE_FLUSH_S)
-        self._file.save(self.rrd_path, default_blueprint=blueprint)
+        self._file.save(self.rrd_path)  # its blueprint at the end, with the converged estimate's ranges
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
         if mode != "save":
             self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry)
@@ -123,6 +131,7 @@ class TrialViewer:
             rec.send_recording_name(recording_name)
         self._health_series: dict[str, list[str]] = {}
         log_series_styles(self._rec, self.truth_bias is not None)
+        log_bias_styles(self._rec, self.truth_bias is not None)
         log_turntable(self._rec, geometry)
         self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
         self._worker = threading.Thread(target=self._work, name="rerun-logging", daemon=True)
@@ -167,6 +176,11 @@ class TrialViewer:
                 if value is not None]  # fmt: skip
         self._submit(lambda: self._write_health(float(t), rows))
 
+    def log_streams(self, counts: StreamCounts) -> None:
+        """result.json's stream counters so far (a :class:`~hil.samples.StreamCounts`), for the verdict so far."""
+        if self._judged.verdict is not None:
+            self._submit(lambda: setattr(self._judged.verdict, "streams", counts.as_dict()))
+
     def log_calibration_step(self, t: float, index: int, steps: list) -> None:
         """Calibration step ``index`` (0-based) of ``steps`` (dwells and plateaus) commanded at trial time t
         (:mod:`hil.viewer.calibration_view`)."""
@@ -181,23 +195,38 @@ class TrialViewer:
         self._submit(lambda: self._calibration is not None and self._calibration.window(float(t), accel, gyro))
 
     def close(self) -> None:
-        """Log what is queued, flush and finish the .rrd. A spawned viewer keeps running; a served one
-        keeps serving until :meth:`stop` or the end of the process."""
+        """Log what is queued, flush and finish the .rrd (with ``verdict_at_end``, it waits for :meth:`end`, or
+        :meth:`stop`, or the end of the process). A spawned viewer keeps running; a served one keeps serving until
+        :meth:`stop` or the end of the process."""
         if self._rec is None or self._closed:
             return
         self._closed = True
         self._queue.put(None)
         self._worker.join()
-        self._file.flush()
-        self._file.disconnect()  # the .rrd is complete
-        if self._view is not None:
-            self._view.flush()
         if self.error is not None:
             log.warning("Rerun logging failed: %s", self.error)
+        if not self.verdict_at_end:
+            self._end_file()
+        else:
+            self._file.flush()
+        if self._view is not None:
+            self._view.flush()
+
+    def end(self, verdict_markdown: str) -> None:
+        """Close, log the trial's verdict (``/verdict``: result.json's) at its last time and finish the .rrd."""
+        if self._rec is None or self._ended:
+            return
+        self.close()
+        self._run(lambda: log_verdict(self._rec, self._t_latest, verdict_markdown))
+        self._end_file()
+        if self._view is not None:
+            self._view.flush()
 
     def stop(self) -> None:
-        """Close, and stop the web viewer server of ``serve`` mode."""
+        """Close, finish the .rrd and stop the web viewer server of ``serve`` mode."""
         self.close()
+        if self._file is not None:
+            self._end_file()
         if self._view is not None:
             self._view.disconnect()
         process, self.viewer_process = self.viewer_process, None
@@ -213,6 +242,13 @@ class TrialViewer:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def _end_file(self) -> None:
+        """Flush and finish the .rrd (once)."""
+        if not self._ended:
+            self._ended = True
+            self._file.flush()
+            self._file.disconnect()  # the .rrd is complete
 
     # -- the logging thread --
 
@@ -240,11 +276,12 @@ class TrialViewer:
                 log.warning("Rerun logging error (further errors not reported): %s", exc)
 
     def _finish(self) -> None:
-        """The last cone, and every row held."""
+        """The last cone, the verdict so far, every row held, and the followed ranges in the .rrd's blueprint."""
         if self._cone_pending is not None:
             self._draw_cone(self._cone_pending)
         for columns in self._columns:
             columns.flush()
+        self._judged.finish(self._rec, self._file, self._view)
 
     def _scalars(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
         """Rows of a multi-series entity: values (N, K), one series per column; all-NaN rows left out."""
@@ -260,13 +297,9 @@ class TrialViewer:
         n = len(snaps)
         t = np.fromiter((s.t for s in snaps), float, n)
         nan3 = np.full(3, np.nan)
-        bias = np.array([s.full.bias if s.full.bias is not None else nan3 for s in snaps]) / UG
+        for path, (t_rows, values) in bias_rows(snaps, self.truth_bias, self.truth_drift).items():
+            self._scalars(path, t_rows, values)
         sigma = np.array([s.full.bias_sigma if s.full.bias_sigma is not None else nan3 for s in snaps]) / UG
-        for k, a in enumerate(AXES):
-            series = [bias[:, k], bias[:, k] - 3.0 * sigma[:, k], bias[:, k] + 3.0 * sigma[:, k]]
-            if self.truth_bias is not None:
-                series.append(np.where(np.isnan(bias[:, k]), np.nan, self.truth_bias[k] / UG))
-            self._scalars(f"bias/{a}", t, np.column_stack(series))
         self._scalars("sigma", t, sigma)
         drift = np.array([s.drift_check.drift if s.drift_check is not None else nan3 for s in snaps]) / UG * HOUR
         drift_sigma = np.array([s.drift_check.sigma if s.drift_check is not None else nan3 for s in snaps]) / UG * HOUR
@@ -289,6 +322,7 @@ class TrialViewer:
                 columns.append(errors["error_theoretical"][:, k])
             self._scalars(f"alignment/{angle}", t, np.column_stack(columns) / DEG)
         self._write_cones(snaps)
+        self._judged.snapshots(snaps, sigma, self._scalars, self._rec, self._view)
 
     def _write_cones(self, snaps: list[Snapshot]) -> None:
         """The cone every ``CONE_PERIOD_S`` of trial time; the newest one not drawn is drawn at the end."""

@@ -1,0 +1,113 @@
+"""The ``/verdict`` text of a trial's view: every judged measurement (a limit in ``output.limits``) with its value,
+its limit and its outcome, as report.html and junit.xml list them (:func:`hil.outputs.measurements.measurements`,
+the values shown by :func:`~hil.outputs.measurements.format_value`).
+
+While the trial runs the measurements are those of a result.json document of the trial so far
+(:class:`VerdictSoFar`): a measurement without a value yet, or a convergence time not reached before its
+deadline, is ``pending``; at the end the text is that of the trial's result.json, its verdict included.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.config import ReportLimits
+from hil.estimation.convergence import BIAS_TOLERANCE, SolveTrack, convergence_time
+from hil.estimation.online import Snapshot
+from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value, measurements, overall
+from hil.units import DEG, UG
+
+PENDING = "pending"
+TAIL = 0.1  # result.json's alignment errors: the mean over the last 10 % of the trial
+
+
+def verdict_markdown(heading: str, results: list[Measurement]) -> str:
+    """The markdown of the judged measurements under ``heading``: a table of name, value, limit, outcome."""
+    lines = [f"## {heading}", "", "| measurement | value | limit | outcome |", "|---|---|---|---|"]
+    for m in results:
+        if m.limit:
+            value = f"{m.shown} {m.unit}".rstrip() if m.value is not None else "—"
+            outcome = f"**{m.outcome}**" if m.outcome == FAIL else m.outcome
+            limit = f"{m.limit} {m.unit}".rstrip().replace("|", "\\|")  # |x| inside a table cell
+            lines.append(f"| `{m.name}` | {value} | {limit} | {outcome} |")
+    if len(lines) == 4:
+        lines.append("| (no limits in output.limits) | | | |")
+    return "\n".join(lines) + "\n"
+
+
+def final_markdown(result: dict, limits: ReportLimits) -> str:
+    """The text at the end: result.json's verdict and its measurements judged against ``limits``."""
+    return verdict_markdown(f"Verdict: {result.get('verdict') or overall(measurements(result, limits))}",
+                            measurements(result, limits))
+
+
+class VerdictSoFar:
+    """The measurements of the trial so far, from the snapshots and stream counters a viewer is given.
+
+    ``truth`` is result.json's (``accel_bias_ug``, µg), None for a real device."""
+
+    def __init__(self, limits: ReportLimits, truth_ug: np.ndarray | None = None) -> None:
+        self.limits = limits
+        self.truth_ug = None if truth_ug is None else [float(b) for b in truth_ug]
+        self._bias = SolveTrack(7)  # t, bias, its sigma (m/s^2)
+        self._method2 = SolveTrack(3)  # t, pitch, roll (rad)
+        self._latest: Snapshot | None = None
+        self.streams: dict = {}
+
+    def add(self, snaps: list[Snapshot]) -> None:
+        """Snapshots in time order."""
+        for s in snaps:
+            bias = s.full.bias if s.full.bias is not None else np.full(3, np.nan)
+            sigma = s.full.bias_sigma if s.full.bias_sigma is not None else np.full(3, np.nan)
+            self._bias.append(np.concatenate(([s.t], bias, sigma)))
+            if s.error_method2 is not None:
+                self._method2.append(np.array([s.t, s.error_method2[0], s.error_method2[1]]))
+            self._latest = s
+
+    def result(self) -> dict:
+        """A result.json document of the trial so far (the figures the measurements read)."""
+        s = self._latest
+        t = 0.0 if s is None else s.t
+        full = None if s is None else s.full
+        rows = self._bias.rows
+        converged = convergence_time(rows[:, 0], rows[:, 1:4], rows[:, 4:7], BIAS_TOLERANCE) if len(rows) else None
+        drift = full is not None and full.drift is not None
+        estimate = {"bias_model": "drift" if drift else "constant",
+                    "accel_bias_ug": _ug(full and full.bias), "accel_bias_sigma_ug": _ug(full and full.bias_sigma),
+                    "observable": bool(full and full.observable), "converged_at_s": converged}  # fmt: skip
+        if drift:
+            estimate |= {"accel_bias_t0_ug": _ug(full.bias_t0), "accel_bias_t0_sigma_ug": _ug(full.bias_t0_sigma)}
+        method2 = self._method2.rows
+        tail = method2[method2[:, 0] >= (1.0 - TAIL) * t]
+        result = {"trial": {"duration_s": t}, "streams": dict(self.streams), "estimate": estimate,
+                  "alignment_deg": {"method2": {"pitch": float(np.mean(tail[:, 1])) / DEG,
+                                                "roll": float(np.mean(tail[:, 2])) / DEG} if len(tail) else None}}
+        if self.truth_ug is not None:
+            result["truth"] = {"accel_bias_ug": self.truth_ug}
+        return result
+
+    def measurements(self) -> list[Measurement]:
+        """The measurements so far, a judged one without a value yet (or not converged before its deadline)
+        ``pending``."""
+        return [_so_far(m) for m in measurements(self.result(), self.limits)]
+
+    def markdown(self) -> str:
+        """The text while the trial runs: the measurements so far and the verdict they would make now."""
+        results = self.measurements()
+        judged = [m.outcome for m in results if m.limit and m.outcome != NOT_JUDGED]
+        now = FAIL if FAIL in judged else PENDING if PENDING in judged else "PASS"
+        t = 0.0 if self._latest is None else self._latest.t
+        return verdict_markdown(f"Verdict so far: {now} (trial running, {format_value(round(t))} s)", results)
+
+
+def _so_far(m: Measurement) -> Measurement:
+    """``m`` while the trial runs: pending when judged but without a value yet, unless it is a convergence time
+    past its deadline (FAIL) or a limit that does not apply (NOT_JUDGED, the bias error without truth)."""
+    waiting = m.outcome == NOT_JUDGED if m.name == "converged_at" else m.outcome == FAIL
+    if m.limit and m.value is None and waiting:
+        return Measurement(m.name, m.value, m.unit, m.limit, PENDING, m.description, m.sigma)
+    return m
+
+
+def _ug(v: np.ndarray | None) -> list[float] | None:
+    return None if v is None else [float(x) for x in np.asarray(v) / UG]
