@@ -11,7 +11,9 @@ import pytest
 from emulators.sensor_errors import BiasInstability, SensorErrorModel
 from hil.config import ImuErrors
 from hil.estimation import allan
+from hil.arguments import build_parser
 from hil.estimation.allan_cov import MODEL_ALPHAS, avar_covariance, noise_products
+from hil.estimation.allan_detrend import DETRENDS, linear_trend
 from hil.estimation.allan_edf import basic_sum, greenhall_edf, sz
 from hil.estimation.allan_fit import FLICKER_FLOOR, Term
 from hil.estimation.allan_noise_id import identify
@@ -300,3 +302,15 @@ def test_noise_json_has_the_design_keys_in_datasheet_units_and_null_where_unreso
     page = noise_section(doc)
     assert "rate / acceleration ramp" in page and "deg/h/h" in page and "µrad" in page
     assert "not resolved (1)" in page and f"(1) {doc['unresolved']['gyro.bias_instability_dph.0']}" in page
+
+
+def test_linear_detrend_removes_a_ramp_exactly_and_keeps_the_gaps():
+    rate = 2e-3 + 3e-5 * (np.arange(1000) + 0.5) * T  # rad/s: a bias and a ramp of 3e-5 rad/s^2
+    increments = np.column_stack([rate * T, -rate * T])
+    increments[100:110] = np.nan
+    residual, slope = linear_trend(increments, T)
+    np.testing.assert_allclose(slope, [3e-5, -3e-5], rtol=1e-9)
+    assert np.isnan(residual[100:110]).all() and not np.isnan(residual[:100]).any()
+    present = ~np.isnan(residual[:, 0])
+    assert np.ptp(residual[present, 0]) < 1e-15  # the bias left, constant
+    assert [build_parser().parse_args(["noise", "r.csv", "--detrend", d]).detrend for d in DETRENDS] == list(DETRENDS)

@@ -112,3 +112,27 @@ def test_a_shipped_config_run_from_elsewhere_has_its_digest_and_its_trial_name(t
     with sqlite3.connect(history_in_tmp) as db:
         assert db.execute("SELECT name, config_sha256 FROM trials").fetchall() == [
             ("emulated-swing", doc["record"]["config_sha256"])]
+
+
+def test_detrend_linear_takes_the_ramp_out_and_says_so(tmp_path):
+    """A gyro ramp of 20 deg/h/h over white noise and random walk: fitted as the ramp term without --detrend;
+    with --detrend linear removed first, its slope in noise.json's detrend and the ramp term null with the
+    reason, the white term within 5 %."""
+    config = _static(tmp_path, duration=2000.0, rate=50.0)
+    data = yaml.safe_load(config.read_text())
+    data["imu"]["errors"]["gyro_drift_dph_per_h"] = [20.0, -20.0, 20.0]
+    config.write_text(yaml.safe_dump(data))
+    docs = {}
+    for detrend in ("none", "linear"):
+        assert main(["noise", str(config), "--out", str(tmp_path / detrend), "--no-figures", "--no-history",
+                     "--detrend", detrend]) == 0
+        docs[detrend] = json.loads((tmp_path / detrend / "noise.json").read_text())
+    kept, taken = docs["none"], docs["linear"]
+    assert kept["detrend"] == {"kind": "none"}
+    assert kept["gyro"]["ramp_dph_per_h"] == pytest.approx([20.0] * 3, rel=0.2)
+    assert taken["detrend"]["kind"] == "linear"
+    assert taken["detrend"]["gyro"]["ramp_dph_per_h"] == pytest.approx([20.0, -20.0, 20.0], rel=0.1)
+    assert taken["detrend"]["accel"]["ramp_ug_per_h"] == pytest.approx([0.0] * 3, abs=1.0)
+    assert taken["gyro"]["ramp_dph_per_h"] == [None] * 3
+    assert taken["unresolved"]["gyro.ramp_dph_per_h.0"].startswith("removed from the record before the analysis")
+    assert taken["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx(kept["gyro"]["arw_deg_per_sqrt_h"], rel=0.05)

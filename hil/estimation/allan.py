@@ -28,7 +28,7 @@ import numpy as np
 
 from hil.estimation.allan_cov import noise_products
 from hil.estimation.allan_edf import greenhall_edf
-from hil.estimation.allan_fit import TERM_NAMES, Term, design_matrix, fit_terms, term
+from hil.estimation.allan_fit import REASON_REMOVED, TERM_NAMES, Term, design_matrix, fit_terms, term
 from hil.estimation.allan_noise_id import identify
 from hil.estimation.allan_taus import octave_factors, tau_factors
 from hil.units import DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_SQRT_H, HOUR, PER_SQRT_H, UG
@@ -131,11 +131,12 @@ def _edfs(alpha: np.ndarray, factors: np.ndarray, counts: np.ndarray) -> np.ndar
 
 
 def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
-            taus: str | tuple[float, ...] = "octave") -> AllanAnalysis:
+            taus: str | tuple[float, ...] = "octave", removed: tuple[str, ...] = ()) -> AllanAnalysis:
     """Allan deviation on the ``taus`` grid (``allan_taus``) with intervals, and the terms fitted over the
     octave tau, of increments (n, K) or (n,); rows with NaN are missing samples (gaps).
 
-    ``period`` the sample interval in s; ``level`` the two-sided level of every interval.
+    ``period`` the sample interval in s; ``level`` the two-sided level of every interval; ``removed`` the
+    terms (of TERM_NAMES) taken out of the increments before (``allan_detrend``): not fitted, null.
     """
     dx = np.asarray(increments, dtype=float)
     dx = dx[:, None] if dx.ndim == 1 else dx
@@ -156,7 +157,7 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     kept = fit_counts > 0
     fit_factors, avar_fit, fit_counts = fit_factors[kept], avar_fit[kept], fit_counts[kept]
     products = noise_products(fit_factors, fit_counts)
-    fits = [fit_terms(fit_factors * period, avar_fit[:, k], products) for k in range(dx.shape[1])]
+    fits = [fit_terms(fit_factors * period, avar_fit[:, k], products, removed) for k in range(dx.shape[1])]
     factors = fit_factors if taus == "octave" else tau_factors(taus, n, period)
     avar, counts = (avar_fit, fit_counts) if taus == "octave" else overlapping_avar(dx, period, factors)
     factors, avar, counts = factors[counts > 0], avar[counts > 0], counts[counts > 0]
@@ -166,7 +167,8 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     nu = _edfs(alpha, factors, counts)
     lower, upper = chi2_interval(avar, nu, level)
     sd = [np.sqrt(np.diag(f.covariance)) for f in fits]
-    terms = {name: tuple(term(f.coefficients[i], s[i], level) for f, s in zip(fits, sd))
+    gone = Term(None, None, None, REASON_REMOVED)
+    terms = {name: tuple(gone if name in removed else term(f.coefficients[i], s[i], level) for f, s in zip(fits, sd))
              for i, name in enumerate(TERM_NAMES)}
     return AllanAnalysis(
         tau=tau,

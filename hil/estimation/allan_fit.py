@@ -36,6 +36,7 @@ _RELATIVE_SD_FLOOR = 1e-9
 REASON_ZERO = "consistent with zero: its estimate is within one standard deviation of 0"
 REASON_OUT = "out of the non-negative fit: the record holds none of it beside the other terms"
 REASON_SILENT = "the record holds no noise"
+REASON_REMOVED = "removed from the record before the analysis (noise.json detrend)"
 
 
 @dataclass(frozen=True)
@@ -75,13 +76,15 @@ def _root_weights(products: tuple[np.ndarray, np.ndarray], parts: np.ndarray) ->
     return full, 1.0 / sd
 
 
-def fit_terms(tau: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.ndarray]) -> TermFit:
+def fit_terms(tau: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.ndarray],
+              removed: tuple[str, ...] = ()) -> TermFit:
     """Weighted non-negative least-squares fit of the five-term model to avar (M,) (module docstring), then
     backward elimination: while a fitted term is within its standard deviation of zero, the least
     significant is taken out and the rest refitted, so that an unresolved term takes no share of the others'
-    tau. A term out of the fit keeps the standard deviation it would have were it in (its upper limit)."""
+    tau. A term out of the fit keeps the standard deviation it would have were it in (its upper limit); the
+    terms ``removed`` (names of TERM_NAMES: taken out of the record before) are never fitted."""
     design = design_matrix(tau)
-    allowed = np.ones(design.shape[1], dtype=bool)
+    allowed = np.array([name not in removed for name in TERM_NAMES])
     while True:
         fit = _fit(design, avar, products, allowed)
         sd = np.sqrt(np.diag(fit.covariance))

@@ -18,6 +18,7 @@ import numpy as np
 from emulators.simulation import Simulation
 from hil.config import Config, ImuErrors, load_config
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
+from hil.estimation.allan_detrend import linear_trend
 from hil.estimation.allan_fit import TERM_NAMES
 from hil.estimation.allan_taus import parse_taus
 from hil.frames import Earth, TableGeometry
@@ -165,9 +166,10 @@ def with_gaps(t: np.ndarray, period: float, *columns: np.ndarray) -> tuple[int, 
 
 
 def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL,
-                   taus: str | tuple[float, ...] = "octave") -> NoiseAnalysis:
+                   taus: str | tuple[float, ...] = "octave", detrend: str = "none") -> NoiseAnalysis:
     """The Allan deviation on the ``taus`` grid and the noise terms of a record (the table's motion taken out
-    first if it moved; samples missing in gaps left out, ``missing`` in the document); ``label`` names the
+    first if it moved; samples missing in gaps left out, ``missing`` in the document; with ``detrend``
+    ``linear`` each rate's linear trend, the ramp, removed, ``detrend`` in the document); ``label`` names the
     source in errors. Nothing is written."""
     batch = record.batch
     period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
@@ -183,21 +185,27 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
     missing, (dtheta, dv) = with_gaps(batch.t, period, dtheta, dv)
+    removed, taken = (), {"kind": detrend}
+    if detrend == "linear":
+        (dtheta, gyro_slope), (dv, accel_slope) = linear_trend(dtheta, period), linear_trend(dv, period)
+        removed = ("ramp",)
+        taken.update({sensor: {keys[TERM_NAMES.index("ramp")]: [float(v) for v in slope / units.ramp]}
+                      for (sensor, units, keys), slope in zip(SENSORS, (gyro_slope, accel_slope))})
     try:
-        gyro, accel = analyse(dtheta, period, level, taus), analyse(dv, period, level, taus)
+        gyro, accel = analyse(dtheta, period, level, taus, removed), analyse(dv, period, level, taus, removed)
     except ValueError as exc:
         raise DataError(f"{label}: {exc}") from None
     extra = {"source": record.source, "samples": len(batch), "period_s": period, "motion_removed": is_moving,
-             "missing": missing}
+             "missing": missing, "detrend": taken}
     return NoiseAnalysis(gyro, accel, {**noise_document(gyro, accel), **extra})
 
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
               figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
               duration: float | None = None, quiet: bool = False,
-              record: Callable[[Config | None], dict] | None = None) -> dict:
+              record: Callable[[Config | None], dict] | None = None, detrend: str = "none") -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
-    separated) and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
+    separated), with ``detrend`` (``none`` or ``linear``, see :func:`analyse_record`), and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
     :mod:`hil.trial.noise_acquisition`). ``record(source_config)`` gives noise.json's ``record`` once the analysis
     is done (``source_config``: :attr:`NoiseRecord.source_config`)."""
@@ -208,7 +216,7 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     samples = read_source(source, out, config, duration, quiet)
     if export is not None:
         write_increments_csv(export, samples.batch)
-    analysis = analyse_record(samples, str(source), level, grid)
+    analysis = analyse_record(samples, str(source), level, grid, detrend)
     analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source).stem}
     if record is not None:
         analysis.doc["record"] = record(samples.source_config)
