@@ -18,7 +18,7 @@ from scipy.stats import chi2
 
 from hil.history.entry import calibration_figures, noise_figures
 from hil.history.spool import _HOST, file_spooled, keep
-from hil.history.store import History, HistoryError
+from hil.history.store import HEAD, MIGRATIONS, History, HistoryError
 from hil.outputs.result_schema import read_result
 from tests.history_legacy import legacy_history
 from tests.pages import CHROMIUM, clipped_columns, layout_width, needs_chromium
@@ -168,6 +168,12 @@ def test_a_file_of_each_hand_written_version_is_migrated_keeping_its_rows(tmp_pa
     with sqlite3.connect(path) as db:
         tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     assert tables == {"trials", "alembic_version"}  # the version is Alembic's alone
+
+
+def test_head_names_the_last_migration_so_a_history_there_opens_without_alembic():
+    from alembic.script import ScriptDirectory
+
+    assert ScriptDirectory(str(MIGRATIONS)).get_current_head() == HEAD
 
 
 @pytest.mark.parametrize("newer", ["schema_version", "alembic_version"])

@@ -23,6 +23,7 @@ ENV = "HIL_HISTORY"
 LOCK_TIMEOUT_S = 2.0  # how long a SQLite write waits for another writer's lock before it gives up
 CONNECT_TIMEOUT_S = 10  # how long a PostgreSQL connection waits for a server that does not answer
 MIGRATIONS = Path(__file__).with_name("migrations")
+HEAD = "0004"  # the last revision in MIGRATIONS/versions: a database there needs no migration (and no Alembic)
 LEGACY_REVISIONS = {1: "0001", 2: "0002", 3: "0003"}  # schema_version of the files versions 1-3 wrote by hand
 MIGRATION_LOCK = 7_305_050  # the PostgreSQL advisory lock that keeps two stations from migrating at once
 _PASSWORD_IN_URL = re.compile(r"(://[^:/@\s]*:)[^@\s]*@")
@@ -230,17 +231,17 @@ def _revision(connection: Connection) -> str | None:
 def _migrate(connection: Connection) -> None:
     """Brings the database to the last revision in one transaction, under a lock that keeps other stations
     waiting (SQLite's writer lock, PostgreSQL's advisory lock); a database of a newer revision is refused."""
-    from alembic import command  # only for a database to migrate
+    current = _revision(connection)
+    connection.rollback()
+    if current == HEAD:
+        return
+    from alembic import command  # only for a database to migrate: a tenth of a second to import and read
     from alembic.config import Config
     from alembic.script import ScriptDirectory
 
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
     script = ScriptDirectory.from_config(config)
-    current = _revision(connection)
-    connection.rollback()
-    if current == script.get_current_head():
-        return
     with connection.execution_options(hil_write=True).begin():
         if connection.dialect.name == "postgresql":
             connection.execute(sa.select(sa.func.pg_advisory_xact_lock(MIGRATION_LOCK)))
