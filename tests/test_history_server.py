@@ -4,6 +4,7 @@ costing one line that never shows the password (docs/history.md, "Servers")."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -122,6 +123,15 @@ def test_a_password_the_driver_reads_from_a_pgpass_file_files_trials_under_a_url
     history = History(pg_history.replace(f":{PASSWORD}@", "@"))
     history.append(row("P", "2026"))
     assert [t["dut_serial"] for t in history.trials()] == ["P"]
+
+
+def test_a_url_whose_driver_is_not_installed_names_it_and_how_to_install_one():
+    if importlib.util.find_spec("pg8000") is not None:
+        pytest.skip("pg8000 is installed")
+    shown = hil("history", "--history", f"postgresql+pg8000://hil:{PASSWORD}@127.0.0.1/lab")
+    (line,) = shown.stderr.splitlines()
+    assert shown.returncode == 2 and PASSWORD not in line
+    assert ": open: No module named 'pg8000'" in line and "pip install 'turntable-hil[history]'" in line
 
 
 @pytest.mark.parametrize("host", ["127.0.0.1:{port}", "no-such-host.invalid"])

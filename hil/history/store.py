@@ -165,6 +165,8 @@ class History:
         original = getattr(exc, "orig", None)  # SQLAlchemy wraps the driver's exception
         text = _STATEMENT.sub("", str(original if original is not None else exc))
         text = " ".join(text.split()) or type(original or exc).__name__
+        if isinstance(exc, ModuleNotFoundError):
+            text += " (the URL's driver: for PostgreSQL, pip install 'turntable-hil[history]'; docs/history.md)"
         password = self.url.password if self.url is not None else None
         if password:
             text = text.replace(str(password), "***")
