@@ -17,6 +17,7 @@ import sqlalchemy as sa
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 
+from hil.history.spool import spool_dir
 from hil.history.store import History, HistoryError
 from hil.history.tables import metadata
 from tests.history_legacy import STEPS
@@ -110,8 +111,9 @@ def test_a_wrong_password_is_exit_2_for_hil_history_and_one_warning_for_a_trial_
     assert done.returncode == 0 and (tmp_path / "run" / "result.json").exists()
     assert len([line for line in done.stderr.splitlines() if "warning" in line]) == 1
     assert not any("not-the-Pw.17" in line or PASSWORD in line for line in _lines(shown) + _lines(done))
-    written = [path for path in tmp_path.rglob("*") if path.is_file() and b"not-the-Pw.17" in path.read_bytes()]
-    assert written == []  # the outputs, and the spool, hold no password
+    assert len(_spooled()) == 1
+    files = [*tmp_path.rglob("*"), *_spooled()]
+    assert [path for path in files if path.is_file() and b"not-the-Pw.17" in path.read_bytes()] == []
 
 
 def test_a_password_the_driver_reads_from_a_pgpass_file_files_trials_under_a_url_without_it(
@@ -143,20 +145,13 @@ def test_an_unreachable_server_is_one_line_naming_it_without_its_password(host):
     assert line.startswith(f"hil: error: {url.replace(PASSWORD, '***')}: open: ") and PASSWORD not in line
 
 
-def _spooled(tmp_path: Path) -> list[Path]:
-    return sorted((tmp_path / "data" / "turntable-hil" / "spool").glob("*"))
-
-
-@pytest.fixture
-def own_data_dir(tmp_path, monkeypatch) -> Path:
-    """The spool under ``tmp_path/data`` for the hil processes the test starts."""
-    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    return tmp_path
+def _spooled() -> list[Path]:
+    """The spool's files (under the test's own data directory, tests/conftest.py)."""
+    return sorted(spool_dir().glob("*"))
 
 
 def test_a_trial_the_stopped_server_missed_waits_in_the_spool_and_the_next_trial_files_it(
-        postgres, pg_history, own_data_dir):
-    tmp_path = own_data_dir
+        postgres, pg_history, tmp_path):
     trial = subprocess.Popen([sys.executable, "-m", "hil.cli", "simulate", str(short_swing(tmp_path, 1)), "--dut", "S",
                               "--out", str(tmp_path / "run1"), "--no-figures", "--history", pg_history],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -166,30 +161,29 @@ def test_a_trial_the_stopped_server_missed_waits_in_the_spool_and_the_next_trial
         assert trial.returncode == 0 and (tmp_path / "run1" / "result.json").exists()
         (warning,) = err.splitlines()
         assert "trial not filed in the history" in warning and ": open: " in warning and "kept in the spool" in warning
-        (spooled,) = _spooled(tmp_path)
+        (spooled,) = _spooled()
         assert PASSWORD not in spooled.read_text() and PASSWORD not in out + err
         down = hil("history", "--sync", "--history", pg_history)
         assert down.returncode == 2 and len(down.stderr.splitlines()) == 1 and PASSWORD not in down.stderr
-        assert _spooled(tmp_path) == [spooled]  # still there, not claimed
+        assert _spooled() == [spooled]  # still there, not claimed
     finally:
         postgres.start()
     second = hil("simulate", str(short_swing(tmp_path, 2)), "--dut", "S", "--out", str(tmp_path / "run2"),
                  "--no-figures", "--history", pg_history)
     assert second.returncode == 0 and "1 trial(s) from the spool filed" in second.stderr
-    assert _spooled(tmp_path) == []
+    assert _spooled() == []
     trials = History(pg_history).trials("S")
     assert sorted(Path(t["out_dir"]).name for t in trials) == ["run1", "run2"]
 
 
-def test_hil_history_sync_files_a_trial_a_wrong_password_kept_in_the_spool_once(postgres, pg_history, own_data_dir):
-    tmp_path = own_data_dir
+def test_hil_history_sync_files_a_trial_a_wrong_password_kept_in_the_spool_once(postgres, pg_history, tmp_path):
     wrong = pg_history.replace(PASSWORD, "not-the-Pw.17")
     done = hil("simulate", str(short_swing(tmp_path, 1)), "--dut", "W", "--out", str(tmp_path / "run"),
                "--no-figures", "--history", wrong)
-    assert done.returncode == 0 and len(_spooled(tmp_path)) == 1
+    assert done.returncode == 0 and len(_spooled()) == 1
     synced = hil("history", "--sync", "--dut", "W", "--json", "--history", pg_history)
     assert synced.returncode == 0 and synced.stderr.startswith("hil: 1 trial(s) from the spool filed")
     assert [t["dut_serial"] for t in json.loads(synced.stdout)["trials"]] == ["W"]
-    assert _spooled(tmp_path) == []
+    assert _spooled() == []
     again = hil("history", "--sync", "--dut", "W", "--json", "--history", pg_history)
     assert len(json.loads(again.stdout)["trials"]) == 1 and again.stderr == ""
