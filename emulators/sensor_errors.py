@@ -5,6 +5,9 @@ specific force f = dv/T (all per axis x, y, z; products and squares element-wise
 
     1. misalignment and scale (three-stage self-calibration 2018, Eqs. (5)-(6)):
            w1 = (I + S_g) C_g w,          f1 = (I + S_a) C_a f
+       then the gyros' scale asymmetry a (K+ = K (1 + a/2) for positive rates, K (1 - a/2) for negative),
+           w1 <- w1 + (a/2) |w1|,
+       the gyros' second-order low-pass and the output delay (both triads) of :mod:`emulators.sensor_response`
     2. quadratic nonlinearity, accelerometers only (Eq. (6), K_nl term, first order):
            f2 = f1 + K_nl f1^2
     3. bias: repeatability, linear drift (gravity-vector 2018, Eq. (90): b = b_s + k t, here averaged
@@ -35,7 +38,8 @@ import math
 
 import numpy as np
 
-from hil.config import ImuErrors
+from emulators.sensor_response import SensorResponse
+from hil.config import ConfigError, ImuErrors
 from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG, UG_PER_G2
 
 # Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the
@@ -128,7 +132,11 @@ class _Channel:
         nonlinearity: np.ndarray,
         quantum: float,
         period: float,
+        asymmetry: np.ndarray | None = None,
+        response: SensorResponse | None = None,
     ) -> None:
+        self._asymmetry = None if asymmetry is None or not asymmetry.any() else asymmetry / 2.0
+        self._response = response
         matrix = np.diag(1.0 + scale) @ misalignment_matrix(misalignment)
         self._matrix = None if np.array_equal(matrix, np.eye(3)) else matrix
         self._bias, self._noise, self._drift, self._nonlinearity = bias, noise, drift, nonlinearity
@@ -145,6 +153,10 @@ class _Channel:
         period = self._period
         if self._matrix is not None:
             x = x @ self._matrix.T
+        if self._asymmetry is not None:
+            x = x + self._asymmetry * np.abs(x)  # K+ = K (1 + a/2), K- = K (1 - a/2)
+        if self._response is not None:
+            x = self._response(x)
         if self._nonlinearity.any():
             x = x + self._nonlinearity * x * x / period  # K f^2 T with f = x / T
         walk_state = np.cumsum(np.vstack([self._walk, self._walk_step * walk]), axis=0)[1:]
@@ -155,6 +167,17 @@ class _Channel:
             rate_error = rate_error + instability
         x = x + rate_error * period
         return self._quantise(x) if self._quantise is not None else x
+
+
+def _response(errors: ImuErrors, rate_hz: float, lowpass: bool) -> SensorResponse | None:
+    """The output delay (and, ``lowpass``, the gyros' low-pass) of :mod:`emulators.sensor_response`; None without."""
+    bandwidth = errors.bandwidth_hz if lowpass else None
+    if bandwidth is None and errors.delay_ms == 0.0:
+        return None
+    if bandwidth is not None and bandwidth > 0.1 * rate_hz:
+        raise ConfigError(f"imu.errors.bandwidth_hz: {bandwidth:g} Hz is above a tenth of the IMU's output rate "
+                          f"{rate_hz:g} Hz; the emulated low-pass holds its response up to twice its bandwidth only there")
+    return SensorResponse(rate_hz, bandwidth, errors.damping, errors.delay_ms * 1e-3)
 
 
 class SensorErrorModel:
@@ -181,6 +204,8 @@ class SensorErrorModel:
             nonlinearity=np.zeros(3),
             quantum=e.dtheta_quantum_rad,
             period=period,
+            asymmetry=np.array(e.scale_asymmetry_ppm) * PPM,
+            response=_response(e, rate_hz, lowpass=True),
         )
         self._accel = _Channel(
             bias=np.array(e.accel_bias_ug) * UG,
@@ -192,6 +217,7 @@ class SensorErrorModel:
             nonlinearity=np.array(e.accel_nonlinearity_ug_per_g2) * UG_PER_G2,
             quantum=e.dv_quantum_mps,
             period=period,
+            response=_response(e, rate_hz, lowpass=False),
         )
         instability = np.concatenate(
             [np.array(e.gyro_bias_instability_dph) * DEG_PER_H, np.array(e.accel_bias_instability_ug) * UG]

@@ -62,5 +62,9 @@ class ImuErrors(Model):
     gyro_bias_instability_dph: Vec3 = ZERO3
     gyro_scale_ppm: Vec3 = ZERO3
     gyro_misalignment_arcsec: Vec6 = (0.0,) * 6
+    scale_asymmetry_ppm: Vec3 = ZERO3  # gyro scale factor K+ - K- (of K) between positive and negative rates
+    bandwidth_hz: float | None = Field(None, gt=0)  # gyros' second-order low-pass, -3 dB; None: none
+    damping: float = Field(0.7, gt=0, le=2)  # the low-pass's damping ratio
+    delay_ms: float = Field(0.0, ge=0, le=1000)  # pure delay of the IMU's output
     dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
