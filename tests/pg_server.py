@@ -50,7 +50,7 @@ class PostgresServer:
     def start(self) -> None:
         self._run("pg_ctl", "-D", str(self.data), "-l", str(self.data.parent / "log"), "-w", "-o",
                   f"-p {self.port} -c listen_addresses=127.0.0.1 -k {self.data.parent} -c fsync=off "
-                  "-c synchronous_commit=off -c full_page_writes=off", "start")
+                  "-c synchronous_commit=off -c full_page_writes=off -c shared_buffers=16MB -c max_connections=30", "start")
 
     def stop(self) -> None:
         self._run("pg_ctl", "-D", str(self.data), "-w", "-m", "fast", "stop")
