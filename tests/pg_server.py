@@ -48,9 +48,9 @@ class PostgresServer:
         subprocess.run([*as_user, str(self.bin / args[0]), *args[1:]], check=True, capture_output=True, timeout=60)
 
     def start(self) -> None:
-        self._run("pg_ctl", "-D", str(self.data), "-l", str(self.data.parent / "log"), "-w", "-o",
-                  f"-p {self.port} -c listen_addresses=127.0.0.1 -k {self.data.parent} -c fsync=off "
-                  "-c synchronous_commit=off -c full_page_writes=off -c shared_buffers=16MB -c max_connections=30", "start")
+        options = (f"-p {self.port} -c listen_addresses=127.0.0.1 -k {self.data.parent} -c fsync=off "
+                   "-c synchronous_commit=off -c full_page_writes=off -c shared_buffers=16MB -c max_connections=30")
+        self._run("pg_ctl", "-D", str(self.data), "-l", str(self.data.parent / "log"), "-w", "-o", options, "start")
 
     def stop(self) -> None:
         self._run("pg_ctl", "-D", str(self.data), "-w", "-m", "fast", "stop")
