@@ -2,13 +2,15 @@
 
     apt-get install chromium                    (Debian's package: /usr/bin/chromium)
     .venv/bin/pip install -e '.[webcheck]'      (Python Playwright; its own browsers are not needed)
-    .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--out web_viewer.png]
+    .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--layout trial] [--out web_viewer.png]
 
-Logs a 60 s emulated swing through ``TrialViewer("serve", ...)``, checks that the web and gRPC
-servers listen on 127.0.0.1 only, opens the printed URL in headless Chromium with software WebGL
-(``--use-gl=angle --use-angle=swiftshader --enable-unsafe-swiftshader``), waits for the viewer's
-WebAssembly to load and draw, and saves a screenshot. ``chromium --headless --screenshot`` alone
-fires before the WebAssembly has loaded, hence Playwright and the wait.
+Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
+through ``TrialViewer("serve", ...)`` with the default trial's ``output.limits`` (the verdict so far),
+checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
+Chromium at 1600x1000 with software WebGL (``--use-gl=angle --use-angle=swiftshader
+--enable-unsafe-swiftshader``), waits for the viewer's WebAssembly to load and draw, and saves a
+screenshot (docs/viewer.md's, ``docs/images/viewer_<layout>.png``). ``chromium --headless --screenshot``
+alone fires before the WebAssembly has loaded, hence Playwright and the wait.
 
 Requests the page makes to hosts other than 127.0.0.1 are blocked (the check needs no network)
 and listed: the Rerun web viewer itself asks for a web font, its release and example lists and
@@ -28,6 +30,7 @@ import numpy as np
 
 from emulators.simulation import Simulation
 from hil.config import load_config
+from hil.estimation.calibration_schedule import default_schedule
 from hil.estimation.online import OnlineEstimator
 from hil.units import UG
 from hil.viewer.trial_viewer import TrialViewer
@@ -51,13 +54,13 @@ def listening_addresses(port: int) -> set[str]:
     return found
 
 
-def log_trial(out: Path) -> TrialViewer:
+def log_trial(out: Path, layout: str) -> TrialViewer:
     cfg = load_config("configs/emulated_swing.yaml")  # the default trial, shortened
     cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 60.0, "rate_hz": 200.0})})
     sim = Simulation.from_config(cfg)
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
     viewer = TrialViewer("serve", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=True, recording_name="web-check")  # fmt: skip
+                         blocking=True, recording_name="web-check", layout=layout, limits=cfg.limits)  # fmt: skip
     batches = list(sim.batches(chunk=2000))
     for batch in batches:
         est.update_many(batch)
@@ -69,13 +72,28 @@ def log_trial(out: Path) -> TrialViewer:
                   "table": {"frames": 200 * k, "corrupt": 0, "missing": 0, "outages": 0},
                   "aligner": {"aligned": 200 * k, "queue": 1, "latency_p99_ms": 2.0}}  # fmt: skip
         viewer.log_health(float(k), health)
+    if layout == "calibration":
+        log_calibration(viewer)
     viewer.close()
     return viewer
+
+
+def log_calibration(viewer: TrialViewer) -> None:
+    """A calibration's first three dwells and one plateau, with made-up residuals."""
+    schedule = default_schedule()
+    steps = list(schedule.dwells) + list(schedule.plateaus)
+    rng = np.random.default_rng(1)
+    for k in range(3):
+        viewer.log_calibration_step(15.0 * k, k, steps)
+        viewer.log_calibration_window(15.0 * k + 12.0, rng.normal(0.0, 30.0, 3), rng.normal(0.0, 0.02, 3))
+    viewer.log_calibration_step(45.0, len(schedule.dwells), steps)
+    viewer.log_calibration_window(58.0, None, rng.normal(0.0, 0.02, 3))
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load and draw (default 20)")
+    parser.add_argument("--layout", choices=("trial", "calibration"), default="trial", help="blueprint layout")
     parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
     parser.add_argument("--chromium", default=CHROMIUM, help=f"browser executable (default {CHROMIUM})")
     args = parser.parse_args()
@@ -89,7 +107,7 @@ def main() -> int:
         return 2
 
     with tempfile.TemporaryDirectory() as tmp:
-        viewer = log_trial(Path(tmp))
+        viewer = log_trial(Path(tmp), args.layout)
         try:
             web_port = urlsplit(viewer.url).port
             grpc_port = urlsplit(parse_qs(urlsplit(viewer.url).query)["url"][0]).port

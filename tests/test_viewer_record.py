@@ -190,4 +190,7 @@ def test_the_layout_leads_with_the_bias_and_follows_the_converged_estimate(trial
         low, high = followed["range"]
         assert low <= estimate - 5 * sigma and high >= estimate + 5 * sigma
         assert high - low < 25 * sigma  # a few sigma, not the transient's thousand µg
+    (sigma_view,) = [v for name, v in views.items() if name.startswith("bias 1σ")]
+    largest = max(result["estimate"]["accel_bias_sigma_ug"])  # the 1σ panel follows it down, its limit in view
+    assert sigma_view["range"] == pytest.approx([0.0, max(3 * largest, 1.5 * 5.0)])
     assert {v["origin"] for v in views.values()} >= {"/verdict", "/world", "/sigma", "/health/frames"}

@@ -21,7 +21,7 @@ HEALTH_VIEWS = (("frames", "frames decoded, samples aligned"),
                 ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"))
 
 FOLLOW_SIGMAS = 5.0  # the followed bias view spans the latest estimate ± this many sigma (hil.viewer.bias_view)
-LIMIT_COLOR = (200, 0, 0)
+LIMIT_COLOR = (130, 0, 170)  # purple: none of the axes, the truth or the reference
 AXIS_COLORS = {"x": (228, 26, 28), "y": (77, 175, 74), "z": (55, 126, 184)}
 _BAND = 0.55  # band lines: the axis colour mixed with grey
 TRUTH_COLOR = (255, 170, 0)
@@ -50,7 +50,8 @@ def band_color(axis: str) -> tuple[int, int, int]:
 def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tuple[float, float]] | None = None
                       ) -> rrb.Blueprint:
     """The trial layout: the bias first and largest (per axis the whole history beside the view that follows the
-    converged estimate, its range ``follow[axis]`` µg, autoscaled without), its 1σ with the limit under it |
+    converged estimate, its range ``follow[axis]`` µg, autoscaled without), its 1σ with the limit under it (its
+    range ``follow["sigma"]``) |
     the verdict, the 3D table, and the rest in tabs (stream health in one compact grid, observability,
     alignment, drift) [| ``extra``, a further column: a trial kind's own views]."""
     follow = follow or {}
@@ -61,7 +62,8 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
                            axis_y=rrb.ScalarAxis(range=follow[a]) if a in follow else None,
                            plot_legend=rrb.PlotLegend(visible=False)),
         column_shares=[1, 1]) for a in AXES]  # fmt: skip
-    sigma = rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg), limit, convergence deadline")
+    sigma = rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg), limit, convergence deadline",
+                               axis_y=rrb.ScalarAxis(range=follow["sigma"]) if "sigma" in follow else None)
     tabs = rrb.Tabs(
         rrb.Grid(*(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
                  grid_columns=2, name="stream health"),

@@ -18,6 +18,7 @@ from hil.viewer.bias_view import follow_ranges, moved
 from hil.viewer.blueprint import TIMELINE, default_blueprint
 from hil.viewer.verdict import VerdictSoFar
 
+SIGMA_SPAN = 3.0  # the 1σ panel spans 0 to this many times the latest 1σ (and the limit)
 VERDICT_PERIOD_S = 10.0  # the verdict so far and the followed bias ranges are sent again this often (trial time)
 
 Scalars = Callable[[str, np.ndarray, np.ndarray], None]  # rows (N, K) of an entity at trial times (N,)
@@ -51,7 +52,7 @@ class JudgedView:
         self._next_t = self._latest.t + VERDICT_PERIOD_S
         if self.verdict is not None:
             log_verdict(rec, self._latest.t, self.verdict.markdown())
-        follow = follow_ranges(self._latest, self.truth_bias)
+        follow = self._ranges()
         if view is not None and follow is not None and moved(self._follow, follow):
             self._follow = follow
             view.send_blueprint(self.blueprint(follow))
@@ -64,13 +65,23 @@ class JudgedView:
             return
         if self.verdict is not None:
             log_verdict(rec, self._latest.t, self.verdict.markdown())
-        follow = follow_ranges(self._latest, self.truth_bias)
+        follow = self._ranges()
         file.send_blueprint(self.blueprint(follow))
         if view is not None and follow is not None:
             view.send_blueprint(self.blueprint(follow))
 
     def blueprint(self, follow: dict[str, tuple[float, float]] | None) -> rrb.Blueprint:
         return default_blueprint(self.extra, follow)
+
+    def _ranges(self) -> dict[str, tuple[float, float]] | None:
+        """The followed bias ranges (µg) per axis and the 1σ panel's, ``sigma``: from 0 to ``SIGMA_SPAN`` times the
+        largest latest 1σ, the limit in view; None while the bias is not estimated."""
+        follow = follow_ranges(self._latest, self.truth_bias)
+        if follow is None:
+            return None
+        top = SIGMA_SPAN * float(np.max(self._latest.full.bias_sigma)) / UG
+        limit = None if self.limits is None else self.limits.bias_sigma_ug_max
+        return follow | {"sigma": (0.0, top if limit is None else max(top, 1.5 * limit))}
 
     def _limits(self, t: np.ndarray, sigma_ug: np.ndarray, scalars: Scalars) -> None:
         limits = self.limits
