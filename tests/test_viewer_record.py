@@ -19,6 +19,7 @@ from hil.frames import TableGeometry
 from hil.outputs.measurements import FAIL, PASS, measurements
 from hil.viewer import trial_viewer
 from hil.viewer.trial_viewer import TrialViewer
+from hil.viewer.verdict import final_markdown
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "viewer.md"
 
@@ -194,3 +195,11 @@ def test_the_layout_leads_with_the_bias_and_follows_the_converged_estimate(trial
     largest = max(result["estimate"]["accel_bias_sigma_ug"])  # the 1σ panel follows it down, its limit in view
     assert sigma_view["range"] == pytest.approx([0.0, max(3 * largest, 1.5 * 5.0)])
     assert {v["origin"] for v in views.values()} >= {"/verdict", "/world", "/sigma", "/health/frames"}
+
+
+def test_a_trial_that_did_not_complete_ends_its_verdict_as_result_json_says_not_pass(trial_rrd):
+    result = json.loads((trial_rrd.parent / "result.json").read_text())
+    limits = load_config(trial_rrd.parent / "config.yaml").limits
+    for ended, verdict in (("interrupted: SIGINT", "INTERRUPTED"), ("early: the IMU stream stopped", "ENDED EARLY")):
+        text = final_markdown(result | {"ended": ended, "verdict": verdict}, limits)
+        assert text.splitlines()[0] == f"## Verdict: {verdict}"  # never PASS or FAIL
