@@ -1,8 +1,10 @@
-"""Rerun logging of a trial: bias convergence, observability, alignment, the turntable in 3D, stream health.
+"""Rerun logging of a trial: bias convergence against its references, the verdict as it forms, observability,
+alignment, the turntable in 3D, stream health.
 
 :class:`TrialViewer` logs the estimator's snapshots, the gimbal angles and the stream counters to a
 Rerun recording with the default blueprint (:mod:`hil.viewer.blueprint`: the 2019 paper's Figs. 2,
-3/6 and 4/7, live).
+3/6 and 4/7, live), the bias per series (:mod:`hil.viewer.bias_view`) and, given the trial's limits, the
+limits drawn and ``/verdict`` (:mod:`hil.viewer.judged_view`), at the end result.json's (:meth:`TrialViewer.end`).
 
 Logging never blocks the caller: each call hands its data to one background thread that converts it
 and passes it to the Rerun SDK (which writes from its own threads). When that thread falls behind, live
@@ -179,7 +181,7 @@ class TrialViewer:
     def log_streams(self, counts: StreamCounts) -> None:
         """result.json's stream counters so far (a :class:`~hil.samples.StreamCounts`), for the verdict so far."""
         if self._judged.verdict is not None:
-            self._submit(lambda: setattr(self._judged.verdict, "streams", counts.as_dict()))
+            self._submit(lambda: self._judged.verdict.take_streams(counts.as_dict()))
 
     def log_calibration_step(self, t: float, index: int, steps: list) -> None:
         """Calibration step ``index`` (0-based) of ``steps`` (dwells and plateaus) commanded at trial time t

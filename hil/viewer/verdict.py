@@ -52,7 +52,11 @@ class VerdictSoFar:
         self._bias = SolveTrack(7)  # t, bias, its sigma (m/s^2)
         self._method2 = SolveTrack(3)  # t, pitch, roll (rad)
         self._latest: Snapshot | None = None
-        self.streams: dict = {}
+        self.streams: dict = {}  # result.json's streams so far
+
+    def take_streams(self, streams: dict) -> None:
+        """result.json's stream counters so far."""
+        self.streams = streams
 
     def add(self, snaps: list[Snapshot]) -> None:
         """Snapshots in time order."""
@@ -66,25 +70,35 @@ class VerdictSoFar:
 
     def result(self) -> dict:
         """A result.json document of the trial so far (the figures the measurements read)."""
-        s = self._latest
-        t = 0.0 if s is None else s.t
-        full = None if s is None else s.full
-        rows = self._bias.rows
-        converged = convergence_time(rows[:, 0], rows[:, 1:4], rows[:, 4:7], BIAS_TOLERANCE) if len(rows) else None
-        drift = full is not None and full.drift is not None
-        estimate = {"bias_model": "drift" if drift else "constant",
-                    "accel_bias_ug": _ug(full and full.bias), "accel_bias_sigma_ug": _ug(full and full.bias_sigma),
-                    "observable": bool(full and full.observable), "converged_at_s": converged}  # fmt: skip
-        if drift:
-            estimate |= {"accel_bias_t0_ug": _ug(full.bias_t0), "accel_bias_t0_sigma_ug": _ug(full.bias_t0_sigma)}
-        method2 = self._method2.rows
-        tail = method2[method2[:, 0] >= (1.0 - TAIL) * t]
-        result = {"trial": {"duration_s": t}, "streams": dict(self.streams), "estimate": estimate,
-                  "alignment_deg": {"method2": {"pitch": float(np.mean(tail[:, 1])) / DEG,
-                                                "roll": float(np.mean(tail[:, 2])) / DEG} if len(tail) else None}}
+        t = 0.0 if self._latest is None else self._latest.t
+        result = {"trial": {"duration_s": t}, "streams": dict(self.streams), "estimate": self._estimate(),
+                  "alignment_deg": {"method2": self._method2_tail(t)}}
         if self.truth_ug is not None:
             result["truth"] = {"accel_bias_ug": self.truth_ug}
         return result
+
+    def _estimate(self) -> dict:
+        """result.json's ``estimate`` so far: the latest bias and its sigma, the convergence time over every
+        snapshot."""
+        rows = self._bias.rows
+        converged = convergence_time(rows[:, 0], rows[:, 1:4], rows[:, 4:7], BIAS_TOLERANCE) if len(rows) else None
+        if self._latest is None:
+            return {"accel_bias_ug": None, "accel_bias_sigma_ug": None, "observable": False, "converged_at_s": None}
+        full = self._latest.full
+        estimate = {"bias_model": "constant", "accel_bias_ug": _ug(full.bias), "accel_bias_sigma_ug": _ug(full.bias_sigma),
+                    "observable": full.observable, "converged_at_s": converged}  # fmt: skip
+        if full.drift is not None:  # the drift model: the bias at the start is judged against the truth
+            estimate |= {"bias_model": "drift", "accel_bias_t0_ug": _ug(full.bias_t0),
+                         "accel_bias_t0_sigma_ug": _ug(full.bias_t0_sigma)}  # fmt: skip
+        return estimate
+
+    def _method2_tail(self, t: float) -> dict[str, float] | None:
+        """The method-2 pitch and roll errors (deg) averaged over the last ``TAIL`` of the trial so far."""
+        rows = self._method2.rows
+        tail = rows[rows[:, 0] >= (1.0 - TAIL) * t]
+        if not len(tail):
+            return None
+        return {"pitch": float(np.mean(tail[:, 1])) / DEG, "roll": float(np.mean(tail[:, 2])) / DEG}
 
     def measurements(self) -> list[Measurement]:
         """The measurements so far, a judged one without a value yet (or not converged before its deadline)
