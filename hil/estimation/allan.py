@@ -166,9 +166,9 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     alpha = identify(dx, factors)
     nu = _edfs(alpha, factors, counts)
     lower, upper = chi2_interval(avar, nu, level)
-    sd = [np.sqrt(np.diag(f.covariance)) for f in fits]
+    reported = [f.reported() for f in fits]
     gone = Term(None, None, None, REASON_REMOVED)
-    terms = {name: tuple(gone if name in removed else term(f.coefficients[i], s[i], level) for f, s in zip(fits, sd))
+    terms = {name: tuple(gone if name in removed else term(c[i], s[i], level) for c, s in reported)
              for i, name in enumerate(TERM_NAMES)}
     return AllanAnalysis(
         tau=tau,

@@ -56,12 +56,21 @@ class Term:
 
 @dataclass(frozen=True)
 class TermFit:
-    """The fitted coefficients of ``fit_terms``, their covariance, and the model they give."""
+    """The fitted coefficients of ``fit_terms``, their covariance, and the model they give; ``estimates`` and
+    ``sd``, what each term is reported from: the fit's own, or for a term taken out by the elimination, the
+    refit's with it back in beside the others."""
 
     coefficients: np.ndarray  # (5,): Q^2, N^2, B^2, K^2, R^2
     covariance: np.ndarray  # (5, 5)
     model: np.ndarray  # (M,) Allan variance of the fitted model
     parts: np.ndarray  # (M, 5): what each term contributes to it
+    estimates: np.ndarray | None = None  # (5,), the coefficients where None
+    sd: np.ndarray | None = None  # (5,), the covariance's where None
+
+    def reported(self) -> tuple[np.ndarray, np.ndarray]:
+        """(estimates, standard deviations) the terms are reported from."""
+        estimates = self.coefficients if self.estimates is None else self.estimates
+        return estimates, np.sqrt(np.diag(self.covariance)) if self.sd is None else self.sd
 
 
 def design_matrix(tau: np.ndarray) -> np.ndarray:
@@ -84,14 +93,22 @@ def fit_terms(tau: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.
     tau. A term out of the fit keeps the standard deviation it would have were it in (its upper limit); the
     terms ``removed`` (names of TERM_NAMES: taken out of the record before) are never fitted."""
     design = design_matrix(tau)
-    allowed = np.array([name not in removed for name in TERM_NAMES])
+    kept = np.array([name not in removed for name in TERM_NAMES])
+    allowed = kept.copy()
     while True:
         fit = _fit(design, avar, products, allowed)
         sd = np.sqrt(np.diag(fit.covariance))
         weak = np.flatnonzero((fit.coefficients > 0.0) & (fit.coefficients <= sd))
         if not weak.size:
-            return fit
+            break
         allowed[weak[np.argmin(fit.coefficients[weak] / sd[weak])]] = False
+    estimates, sd = fit.coefficients.copy(), sd.copy()
+    for q in np.flatnonzero(kept & ~allowed):  # taken out: reported as it comes out back in beside the others
+        back = allowed.copy()
+        back[q] = True
+        refit = _fit(design, avar, products, back)
+        estimates[q], sd[q] = refit.coefficients[q], math.sqrt(refit.covariance[q, q])
+    return TermFit(fit.coefficients, fit.covariance, fit.model, fit.parts, estimates, sd)
 
 
 def _fit(design: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.ndarray], allowed: np.ndarray) -> TermFit:
