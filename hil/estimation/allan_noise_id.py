@@ -72,7 +72,8 @@ def b1_mu(averaged: np.ndarray, n_samples: int) -> int:
 
 
 def rn_alpha(phase: np.ndarray, m: int) -> int:
-    """White (2) or flicker (1) PM of one column of phase by R(n) = modified / overlapping Allan variance."""
+    """White (2) or flicker (1) PM of one column of phase by R(n) = modified / overlapping Allan variance; white
+    where fewer than m second differences leave no modified variance (a listed grid's first tau)."""
     second = phase[2 * m :] - 2.0 * phase[m:-m] + phase[: -2 * m]
     allan = float(np.mean(second * second))
     if len(second) < m or not allan > 0.0:
