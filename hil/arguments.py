@@ -9,6 +9,7 @@ from pathlib import Path
 
 DEFAULT_CONFIG = "configs/emulated_swing.yaml"
 CALIBRATION_CONFIG = "configs/calibration.yaml"
+RATETEST_CONFIG = "configs/ratetest_acutrol.yaml"
 EXIT_CODES = """exit codes:
   0  done (and PASS against output.limits, or no limits judged)
   1  a trial that ended early (devices lost, table not following, interlock, every sample rejected,
@@ -102,6 +103,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--simulate", action="store_true",
                    help="the emulated table and IMU in this process, as fast as the CPU allows (no ports, no "
                         "recording; --speed does not apply)")
+
+    p = sub.add_parser("ratetest", help="rate-table tests: gyro scale factor, nonlinearity and asymmetry, or the "
+                                        "frequency response; OUT/scale_factor.json or OUT/frequency_response.json")
+    p.add_argument("test", choices=("scale-factor", "frequency-response"))
+    _config_argument(p, RATETEST_CONFIG)
+    _out_options(p, "output.dir or runs/NAME-TIME")
+    _record_options(p)
+    _live_options(p)
+    p.add_argument("--simulate", action="store_true",
+                   help="the emulated table and IMU in this process, as fast as the CPU allows (--speed does not apply)")
 
     p = sub.add_parser("replay", help="re-run the processing on a recording; same results as the live run")
     p.add_argument("source", help="a run directory (its recording.mcap) or a recording file")

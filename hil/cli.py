@@ -111,6 +111,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return _finish(args, *run_calibration(cfg, Path(args.config), out, args.speed, _viewer(args), args.quiet))
 
 
+def cmd_ratetest(args: argparse.Namespace) -> int:
+    from hil.trial.ratetest_command import ratetest_command
+
+    return ratetest_command(args)
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.outputs.figure_process import FigureProcess  # started first: matplotlib loads while the trial runs
 
@@ -246,9 +252,10 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 # the function of each command, by the name the parser gives it
-COMMANDS = {"run": cmd_run, "calibrate": cmd_calibrate, "replay": cmd_replay, "simulate": cmd_simulate,
-            "estimate": cmd_estimate, "noise": cmd_noise, "history": cmd_history, "campaign": cmd_campaign,
-            "worker": cmd_worker, "report": cmd_report, "decode": cmd_decode, "emulate": cmd_emulate}
+COMMANDS = {"run": cmd_run, "calibrate": cmd_calibrate, "ratetest": cmd_ratetest, "replay": cmd_replay,
+            "simulate": cmd_simulate, "estimate": cmd_estimate, "noise": cmd_noise, "history": cmd_history,
+            "campaign": cmd_campaign, "worker": cmd_worker, "report": cmd_report, "decode": cmd_decode,
+            "emulate": cmd_emulate}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ import yaml
 from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
+from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.inputs import InputError
 from hil.plugins import imu_codec_class, imu_options
@@ -234,6 +235,9 @@ class ReportLimits(Model):
     invalid_max: float | None = Field(0.001, ge=0, le=1)  # ... flagged invalid by the IMU itself, ...
     without_angles_max: float | None = Field(0.001, ge=0, le=1)  # ... aligned without table angles
     sync_offset_ms_max: float | None = Field(None, gt=0)  # |streams.sync_offset_ms|; default half an IMU period
+    scale_factor_ppm_max: float | None = Field(None, gt=0)  # |scale factor error| per gyro (hil ratetest)
+    nonlinearity_ppm_max: float | None = Field(None, gt=0)  # scale factor nonlinearity, of full-scale output
+    asymmetry_ppm_max: float | None = Field(None, gt=0)  # |K+ - K-| / K per gyro
 
 
 class CalibrationConfig(Model):
@@ -284,6 +288,8 @@ class Config(Model):
     imu: ImuConfig = ImuConfig()
     estimator: EstimatorConfig = EstimatorConfig()
     calibration: CalibrationConfig = CalibrationConfig()
+    scale_factor: ScaleFactorSettings = ScaleFactorSettings()
+    frequency_response: FrequencyResponseSettings = FrequencyResponseSettings()
     output: OutputConfig = OutputConfig()
     record: RecordConfig = RecordConfig()
 

@@ -3,14 +3,22 @@ runs in simulation against it."""
 
 from __future__ import annotations
 
+import json
 import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from emulators.sensor_errors import SensorErrorModel
 from emulators.sensor_response import continuous_response
-from hil.config import ConfigError, ImuErrors
+from hil.cli import main
+from hil.config import ConfigError, ImuErrors, load_config
+from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
+from hil.trial.rate_steps import RateSequence
+from hil.trial.ratetest_runner import run_frequency_response, run_scale_factor
 
 RATE = 1000.0
 T = 1.0 / RATE
@@ -68,3 +76,104 @@ def test_scale_asymmetry_scales_positive_and_negative_rates_apart():
 def test_emulated_bandwidth_beyond_a_tenth_of_the_rate_is_refused_naming_the_key():
     with pytest.raises(ConfigError, match=r"imu\.errors\.bandwidth_hz: 150 Hz"):
         SensorErrorModel(ImuErrors(bandwidth_hz=150.0), RATE, 0)
+
+
+# --- the tests in simulation ----------------------------------------------------------------------------------------
+
+ACUTROL = Path(__file__).resolve().parent.parent / "configs" / "ratetest_acutrol.yaml"
+AEROSMITH = Path(__file__).resolve().parent.parent / "configs" / "rate_table_aerosmith.yaml"
+
+
+def _config(tmp_path: Path, base: Path = ACUTROL, **blocks) -> Path:
+    """``base`` with ``blocks`` merged one level deep, written to tmp_path."""
+    doc = yaml.safe_load(base.read_text())
+    for key, value in blocks.items():
+        doc[key] = {**doc.get(key, {}), **value} if isinstance(value, dict) else value
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_scale_factor_test_finds_the_emulated_scale_factor_asymmetry_and_bias_within_3_sigma(tmp_path):
+    cfg = load_config(_config(tmp_path))
+    doc = run_scale_factor(cfg, ScaleFactorSettings(rates_dps=[60, 180], dwell_s=2, settle_s=0.2, axes=["x", "z"]))
+    assert doc["ended"] == "completed" and sorted(doc["axes"]) == ["x", "z"]
+    for axis, a in doc["axes"].items():
+        truth = doc["truth"][axis]
+        for key, sigma in (("scale_factor_ppm", "scale_factor_sigma_ppm"), ("bias_dph", "bias_sigma_dph"),
+                           ("asymmetry_signed_ppm", "asymmetry_sigma_ppm")):
+            assert abs(a[key] - truth[key]) < 3.0 * a[sigma], (axis, key, a[key], truth[key], a[sigma])
+        assert a["nonlinearity_ppm"] < 4.0 * a["nonlinearity_sigma_ppm"]  # a linear gyro: its noise alone
+        assert len(a["steps"]) == 4 and {s["rate_dps"] for s in a["steps"]} == {60.0, -60.0, 180.0, -180.0}
+
+
+def test_scale_factor_test_input_rate_is_the_encoders_turn_plus_the_earths_rate_about_the_axis(tmp_path):
+    cfg = load_config(_config(tmp_path, imu={"errors": {}}))
+    doc = run_scale_factor(cfg, ScaleFactorSettings(rates_dps=[30, 90], dwell_s=1, settle_s=0.2, axes=["z"]))
+    earth_dph = 15.041067 * math.sin(math.radians(32.0))  # the outer axis is vertical: Omega sin(latitude)
+    for step in doc["axes"]["z"]["steps"]:
+        assert (step["input_dps"] - step["rate_dps"]) * 3600.0 == pytest.approx(earth_dph, abs=1e-3)
+        assert step["output_dps"] == pytest.approx(step["input_dps"], abs=1e-9)  # an ideal gyro reads its input
+    assert abs(doc["axes"]["z"]["bias_dph"]) < 1e-5
+
+
+def test_scale_factor_test_on_the_single_axis_aerosmith_table_tests_the_gyro_on_its_axis(tmp_path):
+    cfg = load_config(_config(tmp_path, AEROSMITH, imu={"errors": {"gyro_bias_dph": [0.5, -0.3, 0.8],
+                                                                   "gyro_noise_dph": [0.5, 0.5, 0.5],
+                                                                   "gyro_scale_ppm": [0, 0, 400]}}))
+    doc = run_scale_factor(cfg, ScaleFactorSettings(rates_dps=[20, 50], dwell_s=1, settle_s=0.2))
+    assert list(doc["axes"]) == ["z"]
+    z = doc["axes"]["z"]
+    assert abs(z["scale_factor_ppm"] - 400.0) < 3.0 * z["scale_factor_sigma_ppm"]
+    assert abs(z["bias_dph"] - 0.8) < 3.0 * z["bias_sigma_dph"]
+
+
+def test_frequency_response_finds_the_emulated_bandwidth_damping_and_delay(tmp_path):
+    cfg = load_config(_config(tmp_path))
+    doc = run_frequency_response(cfg, FrequencyResponseSettings(frequencies_hz=[5, 20, 50, 80, 100, 150], dwell_s=0.2,
+                                                                settle_s=0.1, axes=["y"]))
+    y = doc["axes"]["y"]
+    assert y["bandwidth_hz"] == pytest.approx(100.0, rel=0.05)
+    assert y["delay_ms"] == pytest.approx(2.0, abs=0.1)
+    assert y["damping"] == pytest.approx(0.7, abs=0.05)
+    assert y["gain_db"][4] == pytest.approx(-3.01, abs=0.1)  # at the bandwidth
+
+
+def test_frequency_response_below_the_bandwidth_says_it_lies_beyond_the_highest_frequency(tmp_path):
+    cfg = load_config(_config(tmp_path))
+    doc = run_frequency_response(cfg, FrequencyResponseSettings(frequencies_hz=[2, 5, 10, 20, 30], dwell_s=0.5,
+                                                                settle_s=0.1, axes=["x"]))
+    x = doc["axes"]["x"]
+    assert x["bandwidth_hz"] is None and x["bandwidth_note"] == "beyond the highest frequency tested (30 Hz)"
+
+
+def test_a_rate_beyond_the_tables_limit_exits_2_naming_the_key_and_limit_before_the_table_moves(tmp_path, capsys,
+                                                                                                monkeypatch):
+    commands = []
+    monkeypatch.setattr(RateSequence, "start", lambda self: commands.append("start"))
+    path = _config(tmp_path, scale_factor={"rates_dps": [90, 400]})
+    assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("hil: error: scale_factor.rates_dps: 400 deg/s is beyond turntable.limits.rate_dps of the outer "
+                   "axis (300 deg/s); nothing was sent")
+    assert not commands and not (tmp_path / "out" / "scale_factor.json").exists()
+
+
+def test_a_frequency_the_tables_acceleration_limit_cannot_serve_exits_2_naming_the_key(tmp_path, capsys):
+    path = _config(tmp_path, turntable={"limits": {"rate_dps": [300, 100, 100], "accel_dps2": [500, 200, 200]}},
+                   frequency_response={"frequencies_hz": [10, 100, 150]})
+    assert main(["ratetest", "frequency-response", str(path), "--simulate", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "frequency_response.frequencies_hz: 100 Hz: turntable.limits.accel_dps2 of the outer axis (500" in err
+
+
+def test_ratetest_command_fails_a_scale_factor_beyond_its_limit_in_report_and_junit(tmp_path):
+    path = _config(tmp_path, scale_factor={"rates_dps": [90, 180], "dwell_s": 1, "settle_s": 0.2, "axes": ["x"]},
+                   output={"limits": {"scale_factor_ppm_max": 250, "asymmetry_ppm_max": 200}})
+    out = tmp_path / "out"
+    assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(out)]) == 3  # x: 300 ppm
+    junit = ET.parse(out / "junit.xml").getroot()
+    failed = {case.get("name") for case in junit.iter("testcase") if case.find("failure") is not None}
+    assert failed == {"scale_factor_error_x"}
+    assert json.loads((out / "scale_factor.json").read_text())["record"]["config_sha256"]
+    assert "FAIL" in (out / "report.html").read_text() and (out / "scale_factor.png").exists()

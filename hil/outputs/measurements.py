@@ -166,6 +166,9 @@ def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
         if key == "sync" and value:
             out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
                     for k, v in value.items()]
+        elif key == "imu_temperature_c":
+            out += [_info(f"imu_temperature_{k}", v, "°C", f"the IMU's own temperature, {k} over the trial")
+                    for k, v in (value or {}).items()]
         elif key == "imu_invalid_by_flag":
             out += [_info(f"imu_invalid_{flag}", n, "", "samples the IMU flagged so") for flag, n in value.items()]
         elif key == "gyro_rate_error_dph":
@@ -234,3 +237,24 @@ def format_value(value, sigma: float | None = None) -> str:
 def _decimals(x: float, digits: int) -> int:
     """The decimals that show ``x`` to ``digits`` significant digits (none for the units of a large x)."""
     return max(0, digits - 1 - math.floor(math.log10(abs(x)))) if x else digits - 1
+
+
+def rate_test_measurements(doc: dict, limits: ReportLimits) -> list[Measurement]:
+    """The measurements of a rate-table test's document (scale_factor.json or frequency_response.json) per gyro
+    axis, the scale factor test's judged against ``limits``; an axis the test could not fit has no values."""
+    out: list[Measurement] = []
+    for axis, a in doc["axes"].items():
+        if doc["test"] == "scale_factor":
+            out += [_at_most(f"scale_factor_error_{axis}", a.get("scale_factor_ppm"), "ppm", limits.scale_factor_ppm_max,
+                             f"scale factor minus nominal, gyro {axis}", True, a.get("scale_factor_sigma_ppm")),
+                    _at_most(f"nonlinearity_{axis}", a.get("nonlinearity_ppm"), "ppm", limits.nonlinearity_ppm_max,
+                             f"largest residual, of full-scale output, gyro {axis}"),
+                    _at_most(f"asymmetry_{axis}", a.get("asymmetry_ppm"), "ppm", limits.asymmetry_ppm_max,
+                             f"|K+ − K−| / K, gyro {axis}", sigma=a.get("asymmetry_sigma_ppm")),
+                    _info(f"bias_{axis}", a.get("bias_dph"), "°/h", f"zero-rate bias, gyro {axis}", a.get("bias_sigma_dph"))]
+        else:
+            out += [_info(f"bandwidth_{axis}", a.get("bandwidth_hz"), "Hz",
+                          f"-3 dB bandwidth, gyro {axis} ({a.get('bandwidth_note') or 'fitted'})", a.get("bandwidth_sigma_hz")),
+                    _info(f"damping_{axis}", a.get("damping"), "", f"damping ratio, gyro {axis}", a.get("damping_sigma")),
+                    _info(f"delay_{axis}", a.get("delay_ms"), "ms", f"pure delay, gyro {axis}", a.get("delay_sigma_ms"))]
+    return out

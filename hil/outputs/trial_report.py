@@ -221,7 +221,7 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
     what = ("Multi-position calibration (2018 three-stage paper): the terms in calibration.html"
             if calibrated else "Accelerometer bias from swinging motion (Liu et al. 2019)")
     fold = (f"<details><summary>{len(folded)} measurements not judged (no limit in output.limits)</summary>"
-            f"{_measurement_table(folded)}</details>" if folded else "")
+            f"{measurement_table(folded)}</details>" if folded else "")
     body = f"""<p class="meta">{format_value(trial.get("duration_s"))} s, {format_value(trial.get("samples"))} samples.
 {e(what)}.</p>
 <p class="meta">{e(calibration_applied_text(result.get("calibration_applied")))}.</p>
@@ -230,7 +230,7 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
 {"".join(f'<p class="note">{e(n)}</p>' for n in notes)}
 {lead}
 <h2>Measurements</h2>
-{_measurement_table(shown)}{fold}
+{measurement_table(shown)}{fold}
 {_history(series)}
 {noise}
 <h2>Figures</h2>{estimate}
@@ -242,7 +242,7 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
     return html_page(header, f"{trial.get('name', 'trial')}: {verdict}", body)
 
 
-def _measurement_table(results: list[Measurement]) -> str:
+def measurement_table(results: list[Measurement]) -> str:
     """The measurements as a table: name and description, value, unit, limit, outcome."""
     e = html.escape
     rows = []

@@ -1,0 +1,57 @@
+"""``hil ratetest scale-factor|frequency-response CONFIG``: one rate-table test, its settings from the config's
+``scale_factor`` or ``frequency_response`` block, into its claimed output directory (docs/ratetests.md)."""
+
+from __future__ import annotations
+
+import argparse
+from datetime import datetime, timezone
+from pathlib import Path
+
+from hil.config import load_config
+from hil.outputs.measurements import format_value
+from hil.outputs.output_dir import claimed
+from hil.outputs.ratetest import RATETEST_OUTPUTS, write_ratetest
+from hil.outputs.record import run_record
+from hil.outputs.result import verdict_exit_code
+from hil.trial.outcome import output_dir
+from hil.trial.ratetest_runner import run_frequency_response, run_scale_factor
+
+TESTS = {"scale-factor": ("scale_factor", run_scale_factor), "frequency-response": ("frequency_response",
+                                                                                     run_frequency_response)}
+SUMMARY = {"scale_factor": (("scale_factor_ppm", "scale_factor_sigma_ppm", "scale factor", "ppm"),
+                            ("asymmetry_ppm", "asymmetry_sigma_ppm", "asymmetry", "ppm"),
+                            ("nonlinearity_ppm", "nonlinearity_sigma_ppm", "nonlinearity", "ppm"),
+                            ("bias_dph", "bias_sigma_dph", "bias", "deg/h")),
+           "frequency_response": (("bandwidth_hz", "bandwidth_sigma_hz", "bandwidth", "Hz"),
+                                  ("damping", "damping_sigma", "damping", ""),
+                                  ("delay_ms", "delay_sigma_ms", "delay", "ms"))}
+
+
+def ratetest_command(args: argparse.Namespace) -> int:
+    """Run the test ``args.test`` names, write its outputs, print its summary; the exit code."""
+    cfg = load_config(args.config)
+    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
+    cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update={k: v for k, v in given.items() if v})})
+    key, run = TESTS[args.test]
+    out = output_dir(args.out, cfg)
+    with claimed(out, RATETEST_OUTPUTS, args.overwrite, (Path(args.config),)):
+        doc = run(cfg, getattr(cfg, key))
+        doc["record"] = run_record(cfg.record.model_dump(), Path(args.config).read_text(), args.started,
+                                   datetime.now(timezone.utc))
+        verdict = write_ratetest(out, doc, cfg.limits, figures=not args.no_figures)
+    print(summary(doc, out))
+    print(f"  report: {verdict} ({out / 'report.html'})")
+    return verdict_exit_code(verdict)
+
+
+def summary(doc: dict, out: Path) -> str:
+    """The console's lines: how the test ended and each axis's figures with their 1-sigmas."""
+    lines = [f"{doc['trial']['name']}: {doc['test'].replace('_', ' ')} {doc['ended']} -> {out}"]
+    for axis, a in doc["axes"].items():
+        shown = []
+        for name, sigma_name, label, unit in SUMMARY[doc["test"]]:
+            value, sigma = a.get(name), a.get(sigma_name)
+            text = a.get("bandwidth_note") if value is None else f"{format_value(value, sigma)} ± {format_value(sigma)}"
+            shown.append(f"{label} {text} {unit}".rstrip())
+        lines.append(f"  gyro {axis}: " + ", ".join(shown))
+    return "\n".join(lines)

@@ -1,0 +1,221 @@
+"""``hil ratetest scale-factor|frequency-response``: the rate-table tests (docs/ratetests.md).
+
+:func:`run_scale_factor` and :func:`run_frequency_response` take the trial's config and the test's settings
+(a config's ``scale_factor`` / ``frequency_response``, or a plan step's), check every step against the table's
+limits before anything is sent, command the steps (:mod:`hil.trial.rate_steps`) and fit the windows; they
+return the test's document (scale_factor.json, frequency_response.json), which
+:func:`hil.outputs.ratetest.write_ratetest` writes with its figure, report and junit.xml.
+
+``--simulate`` runs the emulated table's servo and the emulated IMU in this process (as ``hil calibrate
+--simulate``, :mod:`emulators.servo_simulation`): every command goes through the controller's own
+formatting and parsing, simulated time advances in blocks and the sequence follows the encoder's readings.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from drivers.table_controller import InterlockError, LimitError, TableError
+from emulators.servo_simulation import ServoSimulation
+from hil.config import Config
+from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
+from hil.estimation.frequency_response import DB, fit_response, model, response_at
+from hil.estimation.rate_scale_factor import RatePoint, fit_scale_factor
+from hil.frames import Earth, TableGeometry
+from hil.outputs.result import COMPLETED, TrialEnd
+from hil.samples import GIMBAL_AXES
+from hil.trial.outcome import TrialSetupError
+from hil.trial.rate_steps import RateSequence, RateStep, StepWindow, axis_in_body, placements
+from hil.units import DEG, DEG_PER_H, PPM
+
+MIN_CYCLES = 10  # a frequency's window holds at least this many cycles
+MARGIN = 0.95  # of the table's rate and acceleration limits an oscillation may use
+BOUND_FACTOR, BOUND_S = 4.0, 60.0  # the simulation ends at this many times the steps' nominal length (+ s)
+
+
+def scale_factor_steps(cfg: Config, settings: ScaleFactorSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
+    """Both directions of every rate about each gyro axis; TrialSetupError naming the key for a rate beyond the
+    table's limit."""
+    steps = []
+    for gyro, angles, axis in _placements(cfg, settings.axes, gimbals, "scale_factor.axes"):
+        limit = cfg.turntable.limits.rate_dps[axis]
+        for rate in settings.rates_dps:
+            if not 0.0 < rate <= limit:
+                raise TrialSetupError(f"scale_factor.rates_dps: {rate:g} deg/s is beyond turntable.limits.rate_dps "
+                                      f"of the {GIMBAL_AXES[axis]} axis ({limit:g} deg/s); nothing was sent")
+            turns = max(1, math.floor(settings.dwell_s * rate / 360.0))
+            steps += [RateStep(gyro, angles, axis, turns * 360.0 / rate, settings.settle_s, rate=sign * rate * DEG)
+                      for sign in (1.0, -1.0)]
+    return steps
+
+
+def frequency_steps(cfg: Config, settings: FrequencyResponseSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
+    """An oscillation at each frequency about each gyro axis, its amplitude within the table's rate and
+    acceleration limits; TrialSetupError naming the key for a frequency the IMU or the table cannot serve."""
+    steps = []
+    limits = cfg.turntable.limits
+    for gyro, angles, axis in _placements(cfg, settings.axes, gimbals, "frequency_response.axes"):
+        for f in sorted(settings.frequencies_hz):
+            w = 2.0 * math.pi * f
+            if not 0.0 < f < cfg.imu_rate_hz / 2.0:
+                raise TrialSetupError(f"frequency_response.frequencies_hz: {f:g} Hz is not below half the IMU's "
+                                      f"rate imu.rate_hz ({cfg.imu_rate_hz:g} Hz); nothing was sent")
+            amplitude = min(settings.amplitude_deg, MARGIN * limits.rate_dps[axis] / w,
+                            MARGIN * limits.accel_dps2[axis] / w**2)
+            if amplitude * w < settings.min_rate_dps:
+                raise TrialSetupError(
+                    f"frequency_response.frequencies_hz: {f:g} Hz: turntable.limits.accel_dps2 of the "
+                    f"{GIMBAL_AXES[axis]} axis ({limits.accel_dps2[axis]:g} deg/s^2) allows a rate amplitude of "
+                    f"{amplitude * w:.3g} deg/s, below frequency_response.min_rate_dps ({settings.min_rate_dps:g}); "
+                    "nothing was sent")
+            cycles = max(MIN_CYCLES, math.ceil(settings.dwell_s * f))
+            steps.append(RateStep(gyro, angles, axis, cycles / f, settings.settle_s, amplitude=amplitude * DEG,
+                                  frequency=f))
+    return steps
+
+
+def _placements(cfg: Config, axes: list[str], gimbals: tuple[str, ...], key: str) -> list:
+    try:
+        return placements(gimbals, TableGeometry.from_config(cfg.turntable), axes, key)
+    except ValueError as exc:
+        raise TrialSetupError(str(exc)) from None
+
+
+def simulate_steps(cfg: Config, plan) -> tuple[list[StepWindow], str]:
+    """Run the steps ``plan(gimbals)`` makes on the simulated table and IMU; the windows and how it ended."""
+    sim = ServoSimulation.from_config(cfg)
+    client = sim.command_client(cfg.turntable)
+    rate = cfg.imu_rate_hz
+    try:
+        steps = plan(tuple(client.gimbals))  # refused before anything moves
+        sequence = RateSequence(steps, client, 1.0 / rate)
+        bound = BOUND_FACTOR * sum(s.window_s + s.settle_s + 2.0 * ARRIVE_S for s in steps) + BOUND_S
+        client.apply_limits()
+        sequence.start()
+        while not sequence.done and sequence.failure is None and sim.samples < bound * rate:
+            batch = sim.step(min(sim.samples + cfg.block_samples, bound * rate) / rate)
+            sequence.feed(batch.t, batch.dtheta, batch.angles)
+    except (TableError, LimitError, InterlockError) as exc:
+        raise TrialSetupError(str(exc)) from None
+    finally:
+        try:
+            client.close()
+        except TableError as exc:
+            print(f"hil: WARNING: could not confirm the turntable is off: {exc}", file=sys.stderr)
+    if sequence.failure is not None:
+        return [], str(TrialEnd.early(f"turntable is not moving as commanded: {sequence.failure}"))
+    if not sequence.done:
+        return [], str(TrialEnd.early(f"the steps did not end within {bound:.0f} s of simulated time "
+                                      f"({sequence.progress})"))
+    return sequence.windows(), COMPLETED
+
+
+ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
+
+
+def _input_geometry(cfg: Config, step: RateStep) -> tuple[np.ndarray, float]:
+    """The turning gimbal's unit vector in the body frame and the earth's rate about it (rad/s)."""
+    geometry = TableGeometry.from_config(cfg.turntable)
+    direction = axis_in_body(geometry, step.angles, step.axis)
+    c_bn = geometry.attitude_matrix(np.array(step.angles))[0][0]
+    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+    return direction, float(earth.omega_n @ (c_bn @ direction))
+
+
+def rate_point(cfg: Config, window: StepWindow, period: float) -> RatePoint:
+    """A rate step's input (the encoder's whole turns over the window and the earth's rate about the axis, on
+    the gyro) and the gyro's mean output with its 1-sigma."""
+    step = window.step
+    direction, earth = _input_geometry(cfg, step)
+    n = len(window.t)
+    table = float(np.sum(window.turn[:, step.axis])) / (n * period)
+    gyro = window.dtheta[:, step.gyro] / period
+    return RatePoint(step.rate, direction[step.gyro] * (table + earth), float(np.mean(gyro)),
+                     float(np.std(gyro, ddof=1) / math.sqrt(n)))
+
+
+def scale_factor_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
+    """scale_factor.json's document (docs/ratetests.md) of the windows."""
+    period = 1.0 / cfg.imu_rate_hz
+    axes = {}
+    for gyro in sorted({w.step.gyro for w in windows}):
+        points = [rate_point(cfg, w, period) for w in windows if w.step.gyro == gyro]
+        axes["xyz"[gyro]] = _scale_factor_axis(points)
+    doc = {"test": "scale_factor", "trial": {"name": cfg.trial.name}, "ended": ended,
+           "settings": cfg.scale_factor.model_dump(), "axes": axes}
+    if cfg.imu.source == "emulator":
+        e = cfg.imu.errors
+        doc["truth"] = {"xyz"[k]: {"scale_factor_ppm": e.gyro_scale_ppm[k], "bias_dph": e.gyro_bias_dph[k],
+                                   "asymmetry_ppm": abs(e.scale_asymmetry_ppm[k]),
+                                   "asymmetry_signed_ppm": e.scale_asymmetry_ppm[k], "nonlinearity_ppm": 0.0}
+                        for k in range(3)}
+    return doc
+
+
+def _scale_factor_axis(points: list[RatePoint]) -> dict:
+    fit = fit_scale_factor(points)
+    used = iter(fit.residuals)
+    steps = [{"rate_dps": round(p.commanded / DEG, 9), "input_dps": float(p.input / DEG), "output_dps": p.output / DEG,
+              "sigma_dph": p.sigma / DEG_PER_H, "saturated": p.saturated,
+              "residual_ppm": None if p.saturated else float(next(used)) / PPM} for p in points]
+    return {"scale_factor_ppm": (fit.scale - 1.0) / PPM, "scale_factor_sigma_ppm": fit.scale_sigma / PPM,
+            "bias_dph": fit.bias / DEG_PER_H, "bias_sigma_dph": fit.bias_sigma / DEG_PER_H,
+            "nonlinearity_ppm": fit.nonlinearity / PPM, "nonlinearity_sigma_ppm": fit.nonlinearity_sigma / PPM,
+            "asymmetry_ppm": abs(fit.asymmetry) / PPM, "asymmetry_sigma_ppm": fit.asymmetry_sigma / PPM,
+            "asymmetry_signed_ppm": fit.asymmetry / PPM, "full_scale_dps": float(fit.full_scale / DEG), "steps": steps}
+
+
+def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
+    """frequency_response.json's document (docs/ratetests.md) of the windows."""
+    period = 1.0 / cfg.imu_rate_hz
+    axes = {}
+    for gyro in sorted({w.step.gyro for w in windows}):
+        mine = [w for w in windows if w.step.gyro == gyro]
+        f = np.array([w.step.frequency for w in mine])
+        measured = []
+        for w in mine:
+            direction = axis_in_body(TableGeometry.from_config(cfg.turntable), w.step.angles, w.step.axis)
+            table = w.turn[:, w.step.axis] * direction[gyro] / period
+            measured.append(response_at(w.t, w.dtheta[:, gyro] / period, table, w.step.frequency))
+        ratio, sigma = np.array([m[0] for m in measured]), np.array([m[1] for m in measured])
+        axes["xyz"[gyro]] = _response_axis(f, ratio, sigma, [w.step.amplitude / DEG for w in mine])
+    doc = {"test": "frequency_response", "trial": {"name": cfg.trial.name}, "ended": ended,
+           "settings": cfg.frequency_response.model_dump(), "axes": axes}
+    if cfg.imu.source == "emulator":
+        e = cfg.imu.errors
+        doc["truth"] = {"bandwidth_hz": e.bandwidth_hz, "damping": e.damping if e.bandwidth_hz else None,
+                        "delay_ms": e.delay_ms}
+    return doc
+
+
+def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitudes: list[float]) -> dict:
+    fit = fit_response(f, ratio, sigma)
+    fitted = model(f, fit.natural, fit.damping, fit.delay)
+    phase = np.degrees(np.unwrap(np.angle(ratio)))
+    return {"frequencies_hz": f.tolist(), "amplitude_deg": amplitudes,
+            "gain_db": (DB * np.log(np.abs(ratio))).tolist(), "gain_sigma_db": (DB * sigma).tolist(),
+            "phase_deg": phase.tolist(), "phase_sigma_deg": np.degrees(sigma).tolist(),
+            "model_gain_db": (DB * np.log(np.abs(fitted))).tolist(),
+            "model_phase_deg": (phase + np.degrees(np.angle(fitted / ratio))).tolist(),
+            "bandwidth_hz": fit.bandwidth, "bandwidth_sigma_hz": fit.bandwidth_sigma,
+            "bandwidth_note": None if fit.bandwidth is not None else
+            f"beyond the highest frequency tested ({fit.f_max:g} Hz)",
+            "damping": fit.damping, "damping_sigma": fit.damping_sigma,
+            "delay_ms": fit.delay * 1e3, "delay_sigma_ms": fit.delay_sigma * 1e3}
+
+
+def run_scale_factor(cfg: Config, settings: ScaleFactorSettings) -> dict:
+    """The scale factor test in simulation with ``settings``; its document."""
+    cfg = cfg.model_copy(update={"scale_factor": settings})
+    windows, ended = simulate_steps(cfg, lambda gimbals: scale_factor_steps(cfg, settings, gimbals))
+    return scale_factor_document(cfg, windows, ended)
+
+
+def run_frequency_response(cfg: Config, settings: FrequencyResponseSettings) -> dict:
+    """The frequency response test in simulation with ``settings``; its document."""
+    cfg = cfg.model_copy(update={"frequency_response": settings})
+    windows, ended = simulate_steps(cfg, lambda gimbals: frequency_steps(cfg, settings, gimbals))
+    return frequency_response_document(cfg, windows, ended)
