@@ -79,7 +79,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from emulators.command import add_options as add_emulate_options  # argparse only: no emulator loaded
-    from emulators.command import positive
+    from emulators.command import positive, speed_option
 
     parser = _Parser(prog="hil", description="Turntable IMU trials: emulate, acquire, estimate.",
                                      epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -178,6 +178,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scheduler", help="the cluster's scheduler, tcp://host:8786")
     p.add_argument("--nworkers", type=int, default=1, metavar="N", help="worker processes (default 1)")
     p.add_argument("--host", help="the address the workers listen on (default: dask's choice)")
+
+    p = sub.add_parser("plan", help="a test plan: trials, power steps and waits in order, resumable; OUT/plan.json, "
+                                    "plan.html, junit.xml and each step's outputs in OUT/NN-<kind>/ (docs/plans.md)")
+    p.add_argument("plan", help="plan YAML: {name, config, steps}")
+    p.add_argument("--out", help="output directory (default: runs/plan-NAME)")
+    p.add_argument("--resume", action="store_true", help="go on with OUT/plan.json: completed steps kept, the "
+                                                         "interrupted one run again")
+    p.add_argument("--dry-run", action="store_true", help="check every step and print the schedule; nothing moves")
+    p.add_argument("--no-figures", action="store_true", help="skip each step's PNG figures")
+    p.add_argument("--speed", default="1", type=speed_option,
+                   help="emulated devices: X times real time, or 'max' (default 1); also the plan's waits")
+    _record_options(p)
+    _history_options(p)
 
     p = sub.add_parser("emulate", help="start the emulated devices on pseudo-terminals and print their ports; "
                                        "their statistics on stderr at the end and on a signal")

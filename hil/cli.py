@@ -240,6 +240,12 @@ def cmd_decode(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    from hil.plan.runner import run_plan
+
+    return run_plan(args, COMMANDS)
+
+
 def cmd_emulate(args: argparse.Namespace) -> int:
     from emulators.command import emulate
     from hil.config import load_config
@@ -255,7 +261,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 COMMANDS = {"run": cmd_run, "calibrate": cmd_calibrate, "ratetest": cmd_ratetest, "replay": cmd_replay,
             "simulate": cmd_simulate, "estimate": cmd_estimate, "noise": cmd_noise, "history": cmd_history,
             "campaign": cmd_campaign, "worker": cmd_worker, "report": cmd_report, "decode": cmd_decode,
-            "emulate": cmd_emulate}
+            "emulate": cmd_emulate, "plan": cmd_plan}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,119 @@
+"""``hil plan PLAN.yaml``: the plan's steps run in order into ``OUT/NN-<kind>/``, its state in ``OUT/plan.json``
+after every step, ``--resume`` going on from it, ``--dry-run`` the schedule alone; on every way out the power
+supply is brought to its ``on_exit`` and read back (each trial turns its table Off itself)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from hil.plan.power import PlanPower
+from hil.plan.spec import TRIAL_KINDS, Plan, Step, load_plan
+from hil.plan.state import PlanState
+from hil.plan.steps import ENDED_EARLY, INTERRUPTED, StepContext, run_trial_step
+from hil.trial.stop_signals import StopSignals
+
+Commands = dict[str, Callable[[argparse.Namespace], int]]
+
+
+def run_plan(args: argparse.Namespace, commands: Commands) -> int:
+    """The plan ``args.plan`` run (or with ``--dry-run`` checked and its schedule printed); the exit code."""
+    from emulators.process import parse_speed
+
+    plan = load_plan(args.plan)
+    speed = parse_speed(args.speed)
+    power = PlanPower(plan.config, speed)
+    power.check(plan)
+    if args.dry_run:
+        print(schedule_text(plan, speed))
+        return 0
+    from hil.outputs.output_dir import claimed
+
+    out = Path(args.out) if args.out else Path("runs") / f"plan-{plan.name}"
+    with claimed(out, ()):
+        state = PlanState.open(out, plan, args.resume)
+        ctx = StepContext(out, plan.name, state.doc["run"], args, commands)
+        with StopSignals() as stop, power:
+            ended = _steps(plan, state, ctx, power, stop)
+        return _close(plan, state, ended, power)
+
+
+def _steps(plan: Plan, state: PlanState, ctx: StepContext, power: PlanPower, stop: StopSignals) -> str:
+    """Run the steps not done yet; how the plan ended."""
+    for step in plan.steps:
+        if state.done(step):
+            continue
+        if stop.received:
+            return f"interrupted ({stop.received})"
+        _progress(plan, step, power.speed)
+        state.start(step)
+        ended, verdict = _run_step(step, ctx, power, stop)
+        state.finish(step, ended, verdict)
+        if verdict == INTERRUPTED or stop.received:
+            return f"interrupted ({stop.received or 'during step ' + str(step.index)})"
+        if verdict == ENDED_EARLY and step.on_failure == "stop":
+            return f"ended early at step {step.index} ({step.kind}): {ended}"
+    return "completed"
+
+
+def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals) -> tuple[str, str | None]:
+    """Run one step: how it ended and its verdict."""
+    if step.kind in TRIAL_KINDS:
+        unpowered = power.unpowered()
+        if unpowered:
+            return f"ended early: {unpowered}", ENDED_EARLY
+        ended, verdict, _ = run_trial_step(step, ctx)
+        return ended, verdict
+    if step.kind == "wait":
+        return ("completed", None) if power.sleep(float(step.params["s"]), stop) else ("interrupted", INTERRUPTED)
+    return power.step(step, stop)
+
+
+def _close(plan: Plan, state: PlanState, ended: str, power: PlanPower) -> int:
+    """The plan's end in plan.json, plan.html and junit.xml; its exit code as a trial's."""
+    from hil.plan.pages import write_pages
+    from hil.plan.repeatability import units_figures
+
+    verdicts = [entry["verdict"] for entry in state.doc["steps"]]
+    if ended != "completed":
+        verdict = INTERRUPTED if ended.startswith("interrupted") else ENDED_EARLY
+    elif ENDED_EARLY in verdicts:
+        verdict = ENDED_EARLY
+    else:
+        verdict = "FAIL" if "FAIL" in verdicts else "PASS" if "PASS" in verdicts else None
+    state.close(ended, verdict, units_figures(plan, state))
+    write_pages(state)
+    print(f"plan {plan.name}: {ended}, verdict {verdict or 'none judged'}; {state.out / 'plan.html'}")
+    if power.exit_state:
+        print(f"power supply: {power.exit_state}")
+    return {None: 0, "PASS": 0, "FAIL": 3}.get(verdict, 1)
+
+
+def _progress(plan: Plan, step: Step, speed: float | None) -> None:
+    """One line: the step, its index and the plan's remaining time."""
+    remaining = sum(later.duration_s for later in plan.steps[step.index - 1:])
+    print(f"plan {plan.name}: step {step.index}/{len(plan.steps)} {step.kind} ({step.out_name}); "
+          f"{_duration(remaining, speed)} left", file=sys.stderr, flush=True)
+
+
+def _duration(seconds: float, speed: float | None) -> str:
+    """Trial time as a duration, and the wall time at ``speed`` where it differs."""
+    text = f"{seconds / 60:.1f} min" if seconds >= 90 else f"{seconds:.0f} s"
+    if speed is None:
+        return f"{text} of trial time (--speed max)"
+    return text if speed == 1 else f"{text} of trial time, {_duration(seconds / speed, 1)} at x{speed:g}"
+
+
+def schedule_text(plan: Plan, speed: float | None) -> str:
+    """The plan's schedule: every step with its duration, and the total."""
+    lines = [f"plan {plan.name}: {len(plan.steps)} steps, config {plan.config_path}"]
+    for step in plan.steps:
+        detail = step.params if step.kind in ("power", "wait", "noise") else step.params or "the config as it is"
+        where = f"  (repeat at step {step.block}, pass {step.repeat})" if step.block else ""
+        cycle = f" off {step.off_s:g} s" if step.off_s is not None else ""
+        lines.append(f"  {step.out_name:<14} {_duration(step.duration_s, 1):>10}  {detail}{cycle}{where}")
+    lines.append(f"total {_duration(sum(step.duration_s for step in plan.steps), speed)}")
+    return "\n".join(lines)

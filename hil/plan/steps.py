@@ -1,0 +1,96 @@
+"""A plan's trial steps, each run by its own command's code: a swing step is ``hil run``, a calibrate step
+``hil calibrate``, a noise step ``hil noise``, called with the arguments their command line would take (the
+step's config, with its overrides and the plan's tag, written to ``OUT/configs/NN-<kind>.yaml``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import yaml
+
+from hil.arguments import build_parser
+from hil.inputs import InputError
+from hil.plan.spec import Step
+
+COMMAND_OF = {"swing": "run", "calibrate": "calibrate", "noise": "noise"}
+INTERRUPTED, ENDED_EARLY = "INTERRUPTED", "ENDED EARLY"
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """What every trial step of one plan run shares: the plan's output directory, name and run, the plan
+    command's arguments (speed, history, record options) and the command functions by name (:data:`hil.cli.COMMANDS`)."""
+
+    out: Path
+    name: str
+    run: str
+    args: argparse.Namespace
+    commands: dict[str, Callable[[argparse.Namespace], int]]
+
+
+def plan_tag(name: str, run: str, step: Step) -> str:
+    """The tag a plan's trial carries in ``record.notes`` (and so in the history's ``notes``)."""
+    return f"plan {name} run {run} step {step.out_name}"
+
+
+def run_trial_step(step: Step, ctx: StepContext) -> tuple[str, str | None, int]:
+    """Run ``step`` through its command into ``OUT/NN-<kind>``: how it ended, its verdict and its exit code."""
+    config = _write_config(step, ctx)
+    argv = _argv(step, config, ctx.out / step.out_name, ctx.args)
+    args = build_parser().parse_args(argv)
+    args.func, args.started = ctx.commands[args.command], datetime.now(timezone.utc)
+    try:
+        code = args.func(args)
+    except InputError as exc:
+        print(f"hil: plan: step {step.index}: {exc}", file=sys.stderr)
+        return f"refused: {exc}", ENDED_EARLY, 2
+    ended, verdict = _outcome(step, ctx.out / step.out_name, code)
+    return ended, verdict, code
+
+
+def _write_config(step: Step, ctx: StepContext) -> Path:
+    """The step's config, tagged with the plan's name, run and step in ``record.notes``."""
+    data = dict(step.data)
+    record = dict(data.get("record") or {})
+    notes = record.get("notes")
+    record["notes"] = plan_tag(ctx.name, ctx.run, step) + (f"; {notes}" if notes else "")
+    data["record"] = record
+    path = ctx.out / "configs" / f"{step.out_name}.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def _argv(step: Step, config: Path, out: Path, args: argparse.Namespace) -> list[str]:
+    """The command line of ``step``'s own command."""
+    command = COMMAND_OF[step.kind]
+    argv = [command, str(config), "--out", str(out), "--overwrite", "--quiet"]  # --overwrite: a re-run step
+    if command == "noise":
+        argv += ["--duration", str(step.params["duration_s"])]
+    else:
+        argv += ["--viewer", "none", "--speed", args.speed]
+    argv += ["--no-history"] if args.no_history else ["--history", args.history] if args.history else []
+    for option in ("dut", "operator", "station"):
+        if getattr(args, option) is not None:
+            argv += [f"--{option}", getattr(args, option)]
+    return argv + (["--no-figures"] if args.no_figures else [])
+
+
+def _outcome(step: Step, out: Path, code: int) -> tuple[str, str | None]:
+    """How the step at ``out`` ended and its verdict, from its result.json (a noise step: noise.json)."""
+    result = out / ("noise.json" if step.kind == "noise" else "result.json")
+    if not result.is_file():
+        return ("completed", None) if code == 0 else ("ended early: no result written", ENDED_EARLY)
+    doc = json.loads(result.read_text(encoding="utf-8"))
+    if step.kind == "noise":
+        return ("completed", None) if code == 0 else ("ended early", ENDED_EARLY)
+    ended = doc.get("ended") or "ended early"
+    if ended == "completed":
+        return ended, doc.get("verdict")
+    return ended, INTERRUPTED if ended.startswith("interrupted") else ENDED_EARLY
