@@ -70,7 +70,7 @@ def log_trial(out: Path, layout: str) -> TrialViewer:
     for k in range(1, 61):
         health = {"imu": {"frames": 200 * k, "corrupt": 0, "missing": k // 20, "outages": 0},
                   "table": {"frames": 200 * k, "corrupt": 0, "missing": 0, "outages": 0},
-                  "aligner": {"aligned": 200 * k, "queue": 1, "latency_p99_ms": 2.0}}  # fmt: skip
+                  "aligner": {"aligned": 200 * k, "queue": 1, "latency_p99_ms": 2.0, "table_lag_ms": 0.01}}  # fmt: skip
         viewer.log_health(float(k), health)
     if layout == "calibration":
         log_calibration(viewer)

@@ -28,7 +28,7 @@ HEALTH = {  # the pipeline's figures and a live trial's
     "table": {"frames": 12000, "corrupt": 0, "missing": 0, "outages": 1},
     "aligner": {"aligned": 11990, "filled": 3, "bridged": 0, "without_angles": 4, "queue": 2,
                 "latency_p50_ms": 3.25, "latency_p99_ms": 7.5, "latency_max_ms": 12.0, "age_p50_ms": 4.0,
-                "age_p99_ms": 8.0, "age_max_ms": 15.5},
+                "age_p99_ms": 8.0, "age_max_ms": 15.5, "table_lag_ms": 0.004},
 }
 HEALTH_ENTITIES = {  # entity: its series, in order of appearance
     "/health/frames": [("imu", "frames"), ("table", "frames"), ("aligner", "aligned")],
@@ -36,6 +36,7 @@ HEALTH_ENTITIES = {  # entity: its series, in order of appearance
                       + [("aligner", m) for m in ("filled", "bridged", "without_angles")],
     "/health/queue": [("aligner", "queue")],
     "/health/latency_ms": [("aligner", f"{m}_{p}_ms") for m in ("latency", "age") for p in ("p50", "p99", "max")],
+    "/health/sync_ms": [("aligner", "table_lag_ms")],  # a panel of its own, not among the latencies
 }
 
 

@@ -98,7 +98,7 @@ def finish_viewer(viewer: Viewer | None) -> None:
 class ViewerFeed:
     """A listener of the pipeline logging to a viewer (or nowhere): the table angles of each block the estimator
     took and, with ``snapshots``, each new solution with the stream health (``live`` adds a live trial's
-    figures to it)."""
+    figures to it, and the table's lag behind the IMU once the pipeline has measured it)."""
 
     def __init__(self, viewer: Viewer | None, live: Callable[[], Health] | None = None,
                  snapshots: bool = True) -> None:
@@ -114,7 +114,10 @@ class ViewerFeed:
                 self.viewer.log_table(block.table_t, block.table_angles)
         if not self.snapshots or not progress.snapshots:
             return
-        health = progress.health if self.live is None else progress.with_live(self.live())
+        live = {} if self.live is None else {stream: dict(values) for stream, values in self.live().items()}
+        if progress.time_offset_s is not None:  # a live trial's check of the streams' lag
+            live.setdefault("aligner", {})["table_lag_ms"] = 1e3 * progress.time_offset_s
+        health = progress.with_live(live) if live else progress.health
         self.viewer.log_streams(progress.counts)
         for snap in progress.snapshots:
             self.viewer.log_snapshot(snap)

@@ -15,10 +15,11 @@ ANGLES = ("pitch", "roll", "yaw")
 # the stream-health figures (the pipeline's and a live trial's) by entity: /health/<entity>, a series per stream
 HEALTH_GROUPS = {"frames": "frames", "aligned": "frames", "corrupt": "faults", "missing": "faults",
                  "outages": "faults", "filled": "faults", "bridged": "faults", "without_angles": "faults",
-                 "queue": "queue"}  # fmt: skip
+                 "queue": "queue", "table_lag_ms": "sync_ms"}  # fmt: skip
 HEALTH_VIEWS = (("frames", "frames decoded, samples aligned"),
                 ("faults", "corrupt, missing, outages; filled, bridged, without angles"),
-                ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"))
+                ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"),
+                ("sync_ms", "table's lag behind the IMU (ms)"))
 
 FOLLOW_SIGMAS = 5.0  # the followed bias view spans the latest estimate ± this many sigma (hil.viewer.bias_view)
 LIMIT_COLOR = (130, 0, 170)  # purple: none of the axes, the truth or the reference
@@ -31,11 +32,11 @@ STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (
 
 
 def health_entity(metric: str) -> str:
-    """The health entity of a metric: its group of ``HEALTH_GROUPS``, ``latency_ms`` for a figure in ms
+    """The health entity of a metric: its group of ``HEALTH_GROUPS``, else ``latency_ms`` for a figure in ms
     (``*_ms``), else one of its own (its name, escaped)."""
-    if metric.endswith("_ms"):
-        return "latency_ms"
-    return HEALTH_GROUPS.get(metric) or rr.escape_entity_path_part(metric)
+    if metric in HEALTH_GROUPS:
+        return HEALTH_GROUPS[metric]
+    return "latency_ms" if metric.endswith("_ms") else rr.escape_entity_path_part(metric)
 
 
 def health_series(stream: str, metric: str) -> str:
@@ -66,7 +67,7 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
                                axis_y=rrb.ScalarAxis(range=follow["sigma"]) if "sigma" in follow else None)
     tabs = rrb.Tabs(
         rrb.Grid(*(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
-                 grid_columns=2, name="stream health"),
+                 grid_columns=3, name="stream health"),
         rrb.Vertical(
             rrb.TimeSeriesView(origin="/observability/rank", name="scaled Gram rank",
                                axis_y=rrb.ScalarAxis(range=(0.0, 13.0))),
