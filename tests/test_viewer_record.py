@@ -164,7 +164,10 @@ def test_each_axis_has_its_estimate_band_table_reference_and_the_emulated_truth(
 
 
 def test_the_verdict_forms_as_the_trial_runs_and_ends_as_result_json_judges(trial_rrd):
-    texts = [value[0] for _, value in _rows(trial_rrd)["/verdict"]]
+    rows = _rows(trial_rrd)["/verdict"]
+    texts = [value[0] for _, value in rows]
+    so_far = [t for t, _ in rows[:-1]]
+    assert so_far == sorted(set(so_far)) and so_far[-1] == rows[-1][0] == 60.0  # once a time, the last at the end
     result = json.loads((trial_rrd.parent / "result.json").read_text())
     judged = [m for m in measurements(result, load_config(trial_rrd.parent / "config.yaml").limits)
               if m.outcome in (PASS, FAIL)]

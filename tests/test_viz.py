@@ -151,6 +151,17 @@ def test_a_real_devices_bias_has_its_table_reference_no_truth_and_the_limits_dra
     assert list(marker[:, 0]) == [0.0, pytest.approx(np.nanmax(series["/sigma"][1][series["/sigma"][0] <= 30.0]))]
 
 
+def test_a_batched_trial_gets_its_verdict_so_far_once_at_its_end(trial, tmp_path):
+    sim, snapshots, _ = trial
+    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry, blocking=True,
+                         limits=ReportLimits(bias_sigma_ug_max=5.0))
+    viewer.log_snapshots(snapshots)  # simulate and replay: every snapshot in one call
+    viewer.close()
+    times = [chunk.to_record_batch().column(blueprint.TIMELINE).cast("int64").to_numpy() / 1e9
+             for chunk in RrdReader(tmp_path / "recording.rrd").stream() if chunk.entity_path == "/verdict"]
+    assert np.concatenate(times).tolist() == [60.0]
+
+
 def test_the_verdict_so_far_waits_for_values_and_fails_a_convergence_past_its_deadline(trial):
     _, snapshots, _ = trial
     verdict = VerdictSoFar(ReportLimits(bias_sigma_ug_max=50.0, converged_by_s=30.0, bias_error_ug_max=10.0),

@@ -38,6 +38,7 @@ class JudgedView:
         self._latest: Snapshot | None = None
         self._sigma_max = 0.0  # µg, the largest 1σ so far: the height of the convergence deadline's marker
         self._deadline_drawn = False
+        self._verdict_t: float | None = None  # the trial time of the last verdict so far logged
 
     def snapshots(self, snaps: list[Snapshot], sigma_ug: np.ndarray, scalars: Scalars, rec, view) -> None:
         """New snapshots (their 1σ in µg): the limits' rows through ``scalars``; every ``VERDICT_PERIOD_S`` the
@@ -50,8 +51,7 @@ class JudgedView:
         if self._latest.t < self._next_t:
             return
         self._next_t = self._latest.t + VERDICT_PERIOD_S
-        if self.verdict is not None:
-            log_verdict(rec, self._latest.t, self.verdict.markdown())
+        self._log_verdict(rec)
         follow = self._ranges()
         if view is not None and follow is not None and moved(self._follow, follow):
             self._follow = follow
@@ -63,12 +63,17 @@ class JudgedView:
         if self._latest is None:
             file.send_blueprint(self.blueprint(None))
             return
-        if self.verdict is not None:
-            log_verdict(rec, self._latest.t, self.verdict.markdown())
+        self._log_verdict(rec)
         follow = self._ranges()
         file.send_blueprint(self.blueprint(follow))
         if view is not None and follow is not None:
             view.send_blueprint(self.blueprint(follow))
+
+    def _log_verdict(self, rec) -> None:
+        """The verdict so far at the latest snapshot's time, unless logged there already."""
+        if self.verdict is not None and self._latest.t != self._verdict_t:
+            self._verdict_t = self._latest.t
+            log_verdict(rec, self._latest.t, self.verdict.markdown())
 
     def blueprint(self, follow: dict[str, tuple[float, float]] | None) -> rrb.Blueprint:
         return default_blueprint(self.extra, follow)
