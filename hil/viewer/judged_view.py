@@ -21,7 +21,7 @@ from hil.viewer.verdict import VerdictSoFar
 SIGMA_SPAN = 3.0  # the 1σ panel spans 0 to this many times the latest 1σ (and the limit)
 VERDICT_PERIOD_S = 10.0  # the verdict so far and the followed bias ranges are sent again this often (trial time)
 
-Scalars = Callable[[str, np.ndarray, np.ndarray], None]  # rows (N, K) of an entity at trial times (N,)
+ScalarRows = Callable[[str, np.ndarray, np.ndarray], None]  # rows (N, K) of an entity at trial times (N,)
 
 
 class JudgedView:
@@ -40,7 +40,7 @@ class JudgedView:
         self._deadline_drawn = False
         self._verdict_t: float | None = None  # the trial time of the last verdict so far logged
 
-    def snapshots(self, snaps: list[Snapshot], sigma_ug: np.ndarray, scalars: Scalars, rec, view) -> None:
+    def snapshots(self, snaps: list[Snapshot], sigma_ug: np.ndarray, scalars: ScalarRows, rec, view) -> None:
         """New snapshots (their 1σ in µg): the limits' rows through ``scalars``; every ``VERDICT_PERIOD_S`` the
         verdict so far to ``rec`` (all streams) and, when moved, the followed ranges to the live ``view``."""
         t = np.fromiter((s.t for s in snaps), float, len(snaps))
@@ -88,7 +88,7 @@ class JudgedView:
         limit = None if self.limits is None else self.limits.bias_sigma_ug_max
         return follow | {"sigma": (0.0, top if limit is None else max(top, 1.5 * limit))}
 
-    def _limits(self, t: np.ndarray, sigma_ug: np.ndarray, scalars: Scalars) -> None:
+    def _limits(self, t: np.ndarray, sigma_ug: np.ndarray, scalars: ScalarRows) -> None:
         limits = self.limits
         if limits is None:
             return
