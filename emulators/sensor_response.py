@@ -62,22 +62,25 @@ class SensorResponse:
     def __init__(self, rate_hz: float, bandwidth_hz: float | None, damping: float, delay_s: float) -> None:
         whole = math.floor(delay_s * rate_hz + 1e-9)
         self._b, self._a = discrete_filter(rate_hz, bandwidth_hz, damping, delay_s * rate_hz - whole)
+        self._lfilter = self._lfilter_zi = None
+        if len(self._b) > 1:  # scipy.signal here, not with the module nor at the first sample: ~1 s to import
+            from scipy.signal import lfilter, lfilter_zi
+
+            self._lfilter, self._lfilter_zi = lfilter, lfilter_zi
         self._whole = whole
         self._state: np.ndarray | None = None  # the filter's state (order, 3)
         self._line: np.ndarray | None = None  # the last ``whole`` filtered samples (whole, 3)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The increments as the sensor outputs them."""
-        from scipy import signal  # with the first call only: ~1 s of start-up for IMUs without dynamics
-
         if not len(x):
             return x
         if self._state is None:
-            zi = signal.lfilter_zi(self._b, self._a) if len(self._b) > 1 else np.zeros(0)
+            zi = self._lfilter_zi(self._b, self._a) if self._lfilter_zi is not None else np.zeros(0)
             self._state = zi[:, None] * x[0]
             self._line = np.repeat(x[:1], self._whole, axis=0)
-        if len(self._b) > 1:
-            x, self._state = signal.lfilter(self._b, self._a, x, axis=0, zi=self._state)
+        if self._lfilter is not None:
+            x, self._state = self._lfilter(self._b, self._a, x, axis=0, zi=self._state)
         joined = np.vstack([self._line, x])
         self._line = joined[len(joined) - self._whole:]
         return joined[: len(x)]

@@ -110,6 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p, RATETEST_CONFIG)
     _out_options(p, "output.dir or runs/NAME-TIME")
     _record_options(p)
+    _history_options(p)
     _live_options(p)
     p.add_argument("--simulate", action="store_true",
                    help="the emulated table and IMU in this process, as fast as the CPU allows (--speed does not apply)")

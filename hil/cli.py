@@ -112,7 +112,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_ratetest(args: argparse.Namespace) -> int:
-    from hil.trial.ratetest_command import ratetest_command
+    from hil.ratetest_command import ratetest_command
 
     return ratetest_command(args)
 

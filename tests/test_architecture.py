@@ -20,7 +20,7 @@ LAYERS = (
     ("hil.outputs", "hil.viewer"),
     ("hil.trial",),
     ("hil.campaign", "hil.history"),
-    ("hil.arguments", "hil.cli", "hil.pytest_plugin", "hil.plan"),
+    ("hil.arguments", "hil.cli", "hil.pytest_plugin", "hil.plan", "hil.ratetest_command"),
 )
 
 

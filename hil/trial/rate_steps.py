@@ -52,12 +52,14 @@ class RateStep:
 
 @dataclass(frozen=True)
 class StepWindow:
-    """A step's samples: times (s), the gyro's increments (N, 3) and the encoder's turn of each interval (N, 3)."""
+    """A step's samples: times (s), the gyro's increments (N, 3), and the encoder's turn (N, 3) and time (N,)
+    since the sample before (one period, or the gap the pipeline left where it took samples out)."""
 
     step: RateStep
     t: np.ndarray
     dtheta: np.ndarray
     turn: np.ndarray
+    dt: np.ndarray
 
 
 def placements(gimbals: tuple[str, ...], geometry: TableGeometry, axes: list[str], key: str
@@ -95,8 +97,8 @@ class RateSequence:
         self._phase = ""
         self._since: float | None = None
         self._window_start = 0.0
-        self._last: np.ndarray | None = None
-        self._kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._last: tuple[float, np.ndarray] | None = None
+        self._kept: list[tuple[np.ndarray, ...]] = []
 
     @property
     def done(self) -> bool:
@@ -110,15 +112,21 @@ class RateSequence:
     def start(self) -> None:
         self._next()
 
+    def on_progress(self, progress) -> None:
+        """A listener of the pipeline (a :class:`~hil.pipeline.progress.Progress`): the samples it took."""
+        for run in progress.samples():
+            self.feed(run.t, run.dtheta, run.angles)
+
     def feed(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
         """Aligned samples (times (N,), gyro increments and encoder angles (N, 3)): kept, and the steps advanced."""
         if not len(t):
             return
-        before = angles[:1] if self._last is None else self._last[None, :]
-        turn = wrapped(np.diff(np.vstack([before, angles]), axis=0))
-        self._last = angles[-1]
-        self._kept.append((t, dtheta, turn))
-        rates = turn / self.period
+        before = (t[0] - self.period, angles[0]) if self._last is None else self._last
+        turn = wrapped(np.diff(np.vstack([before[1], angles]), axis=0))
+        dt = np.diff(np.concatenate([[before[0]], t]))
+        self._last = (float(t[-1]), angles[-1])
+        self._kept.append((t, dtheta, turn, dt))
+        rates = turn / dt[:, None]
         for k in range(len(t)):
             if self.done or self.failure is not None:
                 return
@@ -178,10 +186,10 @@ class RateSequence:
                 self.client.set_mode(gimbal, "position")
 
     def windows(self) -> list[StepWindow]:
-        """Each found window's samples: the intervals inside it."""
-        t, dtheta, turn = (np.concatenate(parts) for parts in zip(*self._kept))
+        """Each found window's samples: the intervals inside it that have the encoder's turn."""
+        t, dtheta, turn, dt = (np.concatenate(parts) for parts in zip(*self._kept))
         out = []
         for step, (start, end) in zip(self.steps, self.found):
-            sel = (t - self.period >= start - 1e-9) & (t <= end + 1e-9)
-            out.append(StepWindow(step, t[sel], dtheta[sel], turn[sel]))
+            sel = (t - dt >= start - 1e-9) & (t <= end + 1e-9) & np.isfinite(turn).all(axis=1)
+            out.append(StepWindow(step, t[sel], dtheta[sel], turn[sel], dt[sel]))
         return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 
 import numpy as np
 
@@ -31,8 +32,11 @@ from hil.trial.outcome import TrialSetupError
 from hil.trial.rate_steps import RateSequence, RateStep, StepWindow, axis_in_body, placements
 from hil.units import DEG, DEG_PER_H, PPM
 
+# Runs the steps ``plan(gimbals)`` makes (the table's gimbals given) on a trial's devices: the windows and how it ended
+StepsRun = Callable[[Config, Callable[[tuple[str, ...]], list[RateStep]]], tuple[list[StepWindow], str]]
 MIN_CYCLES = 10  # a frequency's window holds at least this many cycles
 MARGIN = 0.95  # of the table's rate and acceleration limits an oscillation may use
+ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
 BOUND_FACTOR, BOUND_S = 4.0, 60.0  # the simulation ends at this many times the steps' nominal length (+ s)
 
 
@@ -113,9 +117,6 @@ def simulate_steps(cfg: Config, plan) -> tuple[list[StepWindow], str]:
     return sequence.windows(), COMPLETED
 
 
-ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
-
-
 def _input_geometry(cfg: Config, step: RateStep) -> tuple[np.ndarray, float]:
     """The turning gimbal's unit vector in the body frame and the earth's rate about it (rad/s)."""
     geometry = TableGeometry.from_config(cfg.turntable)
@@ -131,7 +132,7 @@ def rate_point(cfg: Config, window: StepWindow, period: float) -> RatePoint:
     step = window.step
     direction, earth = _input_geometry(cfg, step)
     n = len(window.t)
-    table = float(np.sum(window.turn[:, step.axis])) / (n * period)
+    table = float(np.sum(window.turn[:, step.axis]) / np.sum(window.dt))
     gyro = window.dtheta[:, step.gyro] / period
     return RatePoint(step.rate, direction[step.gyro] * (table + earth), float(np.mean(gyro)),
                      float(np.std(gyro, ddof=1) / math.sqrt(n)))
@@ -178,7 +179,7 @@ def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: s
         measured = []
         for w in mine:
             direction = axis_in_body(TableGeometry.from_config(cfg.turntable), w.step.angles, w.step.axis)
-            table = w.turn[:, w.step.axis] * direction[gyro] / period
+            table = w.turn[:, w.step.axis] * direction[gyro] / w.dt
             measured.append(response_at(w.t, w.dtheta[:, gyro] / period, table, w.step.frequency))
         ratio, sigma = np.array([m[0] for m in measured]), np.array([m[1] for m in measured])
         axes["xyz"[gyro]] = _response_axis(f, ratio, sigma, [w.step.amplitude / DEG for w in mine])
@@ -207,15 +208,17 @@ def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitud
             "delay_ms": fit.delay * 1e3, "delay_sigma_ms": fit.delay_sigma * 1e3}
 
 
-def run_scale_factor(cfg: Config, settings: ScaleFactorSettings) -> dict:
-    """The scale factor test in simulation with ``settings``; its document."""
+def run_scale_factor(cfg: Config, settings: ScaleFactorSettings, steps_run: StepsRun = simulate_steps) -> dict:
+    """The scale factor test with ``settings``, its steps run by ``steps_run`` (by default in simulation, else
+    e.g. :func:`hil.trial.ratetest_live.live_steps` with its trial's arguments); its document."""
     cfg = cfg.model_copy(update={"scale_factor": settings})
-    windows, ended = simulate_steps(cfg, lambda gimbals: scale_factor_steps(cfg, settings, gimbals))
+    windows, ended = steps_run(cfg, lambda gimbals: scale_factor_steps(cfg, settings, gimbals))
     return scale_factor_document(cfg, windows, ended)
 
 
-def run_frequency_response(cfg: Config, settings: FrequencyResponseSettings) -> dict:
-    """The frequency response test in simulation with ``settings``; its document."""
+def run_frequency_response(cfg: Config, settings: FrequencyResponseSettings,
+                           steps_run: StepsRun = simulate_steps) -> dict:
+    """The frequency response test with ``settings``, its steps run by ``steps_run``; its document."""
     cfg = cfg.model_copy(update={"frequency_response": settings})
-    windows, ended = simulate_steps(cfg, lambda gimbals: frequency_steps(cfg, settings, gimbals))
+    windows, ended = steps_run(cfg, lambda gimbals: frequency_steps(cfg, settings, gimbals))
     return frequency_response_document(cfg, windows, ended)

@@ -1,0 +1,54 @@
+"""The rate-table tests as live trials (``hil ratetest`` without ``--simulate``): the devices read from their
+ports, or the emulated ones started in their own process, as ``hil calibrate`` does (:mod:`hil.trial.live_runner`):
+the :class:`~hil.trial.rate_steps.RateSequence` listens to the pipeline and commands the table through the
+trial's table control, and the trial ends when the last window is complete. The table is turned off on every
+way out. An emulated trial runs for at most ``EMULATED_MARGIN`` times the steps' nominal length (+ 120 s).
+
+The pipeline's gyro/table gate takes out samples whose gyro disagrees with the table by more than 1 % of the
+rotation: at a constant rate the windows keep every sample, but a gyro whose response lags the table's motion
+(a sinusoid) is gated, so the frequency response runs in this form only where the gyro follows within that.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from drivers.controllers import make_controller
+from hil.config import Config
+from hil.outputs.result import COMPLETED, TrialEnd
+from hil.trial.live import TrialHooks
+from hil.trial.live_runner import emulated, run_live
+from hil.trial.outcome import TrialSetupError
+from hil.trial.rate_steps import RateSequence, RateStep
+from hil.trial.viewer_feed import ViewerOptions
+
+EMULATED_MARGIN = 4.0
+QUEUE_ITEMS = 4  # the emulated devices close behind the processing: commands act without lag
+
+
+def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quiet: bool = False):
+    """Run the steps ``plan(gimbals)`` makes as a live trial; the windows and how it ended."""
+    if not cfg.turntable.command_port:
+        raise TrialSetupError("turntable.command_port: hil ratetest commands the table; set its port "
+                              "('emulator' for the emulated table)")
+    steps: list[RateStep] = plan(tuple(make_controller(cfg.turntable, "").gimbals))  # refused before anything starts
+    nominal = sum(s.window_s + s.settle_s + 5.0 for s in steps)
+    duration = EMULATED_MARGIN * nominal + 120.0 if emulated(cfg) else None
+    sequences: list[RateSequence] = []
+
+    def commanded(control, cfg: Config, viewer) -> TrialHooks:
+        control.client.apply_limits()
+        sequence = RateSequence(steps, control.client, 1.0 / cfg.imu_rate_hz)
+        sequence.start()
+        control.client.sync_output(True)
+        sequences.append(sequence)
+        return TrialHooks(motion_check=sequence, finished=lambda: sequence.done, queue_items=QUEUE_ITEMS)
+
+    outcome, _ = run_live(cfg, config_path, out, duration, speed, ViewerOptions(), quiet, commanded)
+    sequence = sequences[0] if sequences else None
+    if outcome.ended != COMPLETED:
+        return [], outcome.ended
+    if sequence is None or not sequence.done:
+        where = sequence.progress if sequence is not None else "not started"
+        return [], str(TrialEnd.early(f"the devices stopped before the steps ended ({where})"))
+    return sequence.windows(), COMPLETED

@@ -1,0 +1,59 @@
+"""``hil ratetest scale-factor LAB.yaml``: the scale factor test on a running ``hil emulate`` (its own process,
+the harness attached late), commanding the emulated Acutrol table, and on the emulated Aerosmith rate table."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from lab_form import Emulator, lab_config
+
+from hil.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.xdist_group("lab")
+
+
+def _lab_scale_factor(tmp_path: Path, config: str, settings: dict, **imu: object) -> tuple[int, dict, dict]:
+    """The test on a running emulator of ``configs/CONFIG`` (a 200 Hz IMU): exit code, scale_factor.json and the
+    emulator's statistics."""
+    cfg = yaml.safe_load((ROOT / "configs" / config).read_text())
+    cfg["imu"].update(rate_hz=200, **imu)
+    cfg["imu"]["errors"].pop("bandwidth_hz", None)
+    cfg["scale_factor"] = settings
+    with Emulator(tmp_path, cfg, duration=300.0) as emulator:
+        lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
+        time.sleep(1.0)
+        out = tmp_path / "sf"
+        code = main(["ratetest", "scale-factor", str(lab), "--out", str(out), "--quiet", "--no-figures"])
+        emulator.stop()
+        stats = json.loads(emulator.stats_file.read_text())
+    return code, json.loads((out / "scale_factor.json").read_text()), {**stats, "config": cfg}
+
+
+def test_the_scale_factor_test_of_a_running_emulated_acutrol_table_finds_its_truth_within_3_sigma(tmp_path):
+    code, doc, stats = _lab_scale_factor(tmp_path, "ratetest_acutrol.yaml",
+                                         {"rates_dps": [90, 180], "dwell_s": 1, "settle_s": 0.3, "axes": ["x"]})
+    assert code == 0 and doc["ended"] == "completed" and "truth" not in doc  # the lab config knows no truth
+    errors = stats["config"]["imu"]["errors"]
+    x = doc["axes"]["x"]
+    assert abs(x["scale_factor_ppm"] - errors["gyro_scale_ppm"][0]) <= 3.0 * x["scale_factor_sigma_ppm"]
+    assert abs(x["asymmetry_signed_ppm"] - errors["scale_asymmetry_ppm"][0]) <= 3.0 * x["asymmetry_sigma_ppm"]
+    assert abs(x["bias_dph"] - errors["gyro_bias_dph"][0]) <= 3.0 * x["bias_sigma_dph"]
+    assert stats["table_modes"] == "Off,Off,Off"
+
+
+def test_the_scale_factor_test_of_a_running_emulated_aerosmith_table_finds_its_truth_within_3_sigma(tmp_path):
+    errors = {"gyro_bias_dph": [0.5, -0.3, 0.8], "gyro_noise_dph": [0.5] * 3, "gyro_scale_ppm": [0, 0, 400],
+              "scale_asymmetry_ppm": [0, 0, -150]}
+    code, doc, stats = _lab_scale_factor(tmp_path, "rate_table_aerosmith.yaml",
+                                         {"rates_dps": [30, 60], "dwell_s": 1, "settle_s": 0.3}, errors=errors)
+    assert code == 0 and list(doc["axes"]) == ["z"]
+    z = doc["axes"]["z"]
+    assert abs(z["scale_factor_ppm"] - 400.0) <= 3.0 * z["scale_factor_sigma_ppm"]
+    assert abs(z["asymmetry_signed_ppm"] + 150.0) <= 3.0 * z["asymmetry_sigma_ppm"]
+    assert abs(z["bias_dph"] - 0.8) <= 3.0 * z["bias_sigma_dph"]
+    assert stats["table_modes"] == "Off"
