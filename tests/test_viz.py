@@ -178,6 +178,16 @@ def test_the_verdict_so_far_waits_for_values_and_fails_a_convergence_past_its_de
     assert verdict.markdown().startswith("## Verdict so far: FAIL (trial running, 60 s)")
 
 
+def test_a_calibrations_fitted_figures_are_pending_while_it_runs(trial):
+    _, snapshots, _ = trial
+    limits = ReportLimits(calibration_residual_ug_max=20.0, calibration_error_sigma_max=4.0)
+    verdict = VerdictSoFar(limits, np.array(PAPER_ERRORS["accel_bias_ug"], dtype=float), calibration=True)
+    verdict.add(snapshots)
+    judged = {m.name: (m.limit, m.outcome) for m in verdict.measurements() if m.limit}
+    assert judged["calibration_residual_max"] == ("≤ 20", PENDING)
+    assert judged["calibration_error_worst"] == ("≤ 4", PENDING)
+
+
 def test_the_followed_bias_view_spans_a_few_sigma_about_the_latest_estimate(trial):
     _, snapshots, _ = trial
     final = snapshots[-1]

@@ -31,8 +31,9 @@ class JudgedView:
                  ) -> None:
         self.limits = limits
         self.truth_bias = truth_bias
-        self.extra = extra  # the trial kind's own column of the blueprint
-        self.verdict = None if limits is None else VerdictSoFar(limits, None if truth_bias is None else truth_bias / UG)
+        self.extra = extra  # the trial kind's own column of the blueprint (a calibration's)
+        truth_ug = None if truth_bias is None else truth_bias / UG
+        self.verdict = None if limits is None else VerdictSoFar(limits, truth_ug, calibration=extra is not None)
         self._next_t = 0.0
         self._follow: dict[str, tuple[float, float]] | None = None  # the followed ranges the live view was sent
         self._latest: Snapshot | None = None

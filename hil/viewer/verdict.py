@@ -4,7 +4,8 @@ the values shown by :func:`~hil.outputs.measurements.format_value`).
 
 While the trial runs the measurements are those of a result.json document of the trial so far
 (:class:`VerdictSoFar`): a measurement without a value yet, or a convergence time not reached before its
-deadline, is ``pending``; at the end the text is that of the trial's result.json, its verdict included.
+deadline, is ``pending`` (a calibration's figures, fitted at the end, stay so); at the end the text is that of
+the trial's result.json, its verdict included.
 """
 
 from __future__ import annotations
@@ -44,10 +45,12 @@ def final_markdown(result: dict, limits: ReportLimits) -> str:
 class VerdictSoFar:
     """The measurements of the trial so far, from the snapshots and stream counters a viewer is given.
 
-    ``truth`` is result.json's (``accel_bias_ug``, µg), None for a real device."""
+    ``truth`` is result.json's (``accel_bias_ug``, µg), None for a real device; ``calibration``: a calibration
+    trial, whose fit's figures are pending until the end."""
 
-    def __init__(self, limits: ReportLimits, truth_ug: np.ndarray | None = None) -> None:
+    def __init__(self, limits: ReportLimits, truth_ug: np.ndarray | None = None, calibration: bool = False) -> None:
         self.limits = limits
+        self.calibration = calibration
         self.truth_ug = None if truth_ug is None else [float(b) for b in truth_ug]
         self._bias = SolveTrack(7)  # t, bias, its sigma (m/s^2)
         self._method2 = SolveTrack(3)  # t, pitch, roll (rad)
@@ -75,6 +78,8 @@ class VerdictSoFar:
                   "alignment_deg": {"method2": self._method2_tail(t)}}
         if self.truth_ug is not None:
             result["truth"] = {"accel_bias_ug": self.truth_ug}
+        if self.calibration:
+            result["calibration"] = {"residual_max_ug": None, "worst_error_sigma": None}
         return result
 
     def _estimate(self) -> dict:
