@@ -16,7 +16,8 @@ specific force f = dv/T (all per axis x, y, z; products and squares element-wise
            f3 = f2 + b_a + k_a (t_k - T/2) + r_a[k] + sigma_a n_a[k]
        with r[k] = r[k-1] + q sqrt(T) m[k], r[0] = 0 (a Wiener process sampled per interval), n, m ~ N(0, 1);
        plus the bias instability, a sum of Gauss-Markov processes (``BiasInstability``)
-    4. output quantisation with the remainder carried to the next sample:
+    4. the gyros' range (``gyro_range_dps``): their output clipped at +- it, then
+       output quantisation with the remainder carried to the next sample:
            dtheta_out = Q_dtheta(w3 T),   dv_out = Q_dv(f3 T)
 
 Eq. (6) writes the ideal force through SF^-1 C_p^a; here SF^-1 = I + S with S = diag(scale factor
@@ -40,7 +41,7 @@ import numpy as np
 
 from emulators.sensor_response import SensorResponse
 from hil.config import ConfigError, ImuErrors
-from hil.units import ARCSEC, DEG_PER_H, HOUR, PPM, UG, UG_PER_G2
+from hil.units import ARCSEC, DEG, DEG_PER_H, HOUR, PPM, UG, UG_PER_G2
 
 # Quantisation remainders are folded back to [-0.5, 0.5] quanta every this many samples (counted from the
 # first sample) so that the running fractional sum keeps its precision over long trials.
@@ -134,7 +135,9 @@ class _Channel:
         period: float,
         asymmetry: np.ndarray | None = None,
         response: SensorResponse | None = None,
+        limit: float | None = None,
     ) -> None:
+        self._limit = None if limit is None else limit * period  # the output's range, as an increment
         self._asymmetry = None if asymmetry is None or not asymmetry.any() else asymmetry / 2.0
         self._response = response
         matrix = np.diag(1.0 + scale) @ misalignment_matrix(misalignment)
@@ -166,6 +169,8 @@ class _Channel:
         if instability is not None:
             rate_error = rate_error + instability
         x = x + rate_error * period
+        if self._limit is not None:
+            x = np.clip(x, -self._limit, self._limit)
         return self._quantise(x) if self._quantise is not None else x
 
 
@@ -206,6 +211,7 @@ class SensorErrorModel:
             period=period,
             asymmetry=np.array(e.scale_asymmetry_ppm) * PPM,
             response=_response(e, rate_hz, lowpass=True),
+            limit=None if e.gyro_range_dps is None else e.gyro_range_dps * DEG,
         )
         self._accel = _Channel(
             bias=np.array(e.accel_bias_ug) * UG,

@@ -66,5 +66,6 @@ class ImuErrors(Model):
     bandwidth_hz: float | None = Field(None, gt=0)  # gyros' second-order low-pass, -3 dB; None: none
     damping: float = Field(0.7, gt=0, le=2)  # the low-pass's damping ratio
     delay_ms: float = Field(0.0, ge=0, le=1000)  # pure delay of the IMU's output
+    gyro_range_dps: float | None = Field(None, gt=0)  # the gyros' output clips at +- this; None: no range
     dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment

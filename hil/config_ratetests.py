@@ -19,6 +19,7 @@ class ScaleFactorSettings(Model):
     dwell_s: float = Field(10.0, gt=0)  # each step's window: the whole turns that fit in it (at least one)
     settle_s: float = Field(1.0, ge=0)  # after the rate is reached, before the window
     axes: list[GyroAxis] = ["x", "y", "z"]  # gyro axes tested (a single-axis table: those on its axis)
+    gyro_range_dps: float | None = Field(None, gt=0)  # the gyros' range: a step reading it is saturated; None: unknown
 
 
 class FrequencyResponseSettings(Model):

@@ -177,3 +177,24 @@ def test_ratetest_command_fails_a_scale_factor_beyond_its_limit_in_report_and_ju
     assert failed == {"scale_factor_error_x"}
     assert json.loads((out / "scale_factor.json").read_text())["record"]["config_sha256"]
     assert "FAIL" in (out / "report.html").read_text() and (out / "scale_factor.png").exists()
+
+
+def test_emulated_gyro_range_clips_its_output():
+    dtheta = np.array([[3.0, -3.0, 1.0]]) * T  # rad/s
+    out = _gyro({"gyro_range_dps": math.degrees(2.0)}, dtheta, chunks=1)
+    np.testing.assert_allclose(out[0] / T, [2.0, -2.0, 1.0], rtol=1e-12)
+
+
+def test_steps_at_the_gyros_range_are_left_out_of_the_fit_and_named_in_the_report(tmp_path):
+    path = _config(tmp_path, imu={"errors": {**yaml.safe_load(ACUTROL.read_text())["imu"]["errors"],
+                                             "gyro_range_dps": 150.0}},
+                   scale_factor={"rates_dps": [30, 90, 180], "dwell_s": 1, "settle_s": 0.2, "axes": ["x"],
+                                 "gyro_range_dps": 150.0})
+    out = tmp_path / "out"
+    assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(out), "--no-figures"]) == 0
+    x = json.loads((out / "scale_factor.json").read_text())["axes"]["x"]
+    left = {s["rate_dps"]: s["left_out"] for s in x["steps"] if s["saturated"]}
+    assert left == {180.0: "the gyro reads its range, 150 deg/s (scale_factor.gyro_range_dps)",
+                    -180.0: "the gyro reads its range, 150 deg/s (scale_factor.gyro_range_dps)"}
+    assert abs(x["scale_factor_ppm"] - 300.0) < 3.0 * x["scale_factor_sigma_ppm"]  # from the steps below the range
+    assert "steps_left_out_x" in (out / "report.html").read_text()

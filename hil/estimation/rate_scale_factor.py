@@ -27,7 +27,7 @@ class RatePoint:
     input: float  # the encoder's rate over the window's whole turns plus the earth's about the rate axis, on the gyro
     output: float  # the gyro's mean rate over the window
     sigma: float  # 1-sigma of ``output`` (the samples' scatter over their number)
-    saturated: bool = False  # the gyro clipped or flagged in the window: left out of the fit
+    saturated: str | None = None  # why the step is left out of the fit (the gyro at its range, samples flagged)
 
 
 @dataclass(frozen=True)

@@ -252,6 +252,10 @@ def rate_test_measurements(doc: dict, limits: ReportLimits) -> list[Measurement]
                     _at_most(f"asymmetry_{axis}", a.get("asymmetry_ppm"), "ppm", limits.asymmetry_ppm_max,
                              f"|K+ − K−| / K, gyro {axis}", sigma=a.get("asymmetry_sigma_ppm")),
                     _info(f"bias_{axis}", a.get("bias_dph"), "°/h", f"zero-rate bias, gyro {axis}", a.get("bias_sigma_dph"))]
+            left = [f"{s['rate_dps']:g} °/s: {s['left_out']}" for s in a.get("steps", []) if s.get("left_out")]
+            if left or a.get("unfitted"):
+                out.append(_info(f"steps_left_out_{axis}", "; ".join(left + [a.get("unfitted") or ""]).strip("; "), "",
+                                 f"steps left out of the fit, gyro {axis}"))
         else:
             out += [_info(f"bandwidth_{axis}", a.get("bandwidth_hz"), "Hz",
                           f"-3 dB bandwidth, gyro {axis} ({a.get('bandwidth_note') or 'fitted'})", a.get("bandwidth_sigma_hz")),

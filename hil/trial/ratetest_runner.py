@@ -37,7 +37,11 @@ StepsRun = Callable[[Config, Callable[[tuple[str, ...]], list[RateStep]]], tuple
 MIN_CYCLES = 10  # a frequency's window holds at least this many cycles
 MARGIN = 0.95  # of the table's rate and acceleration limits an oscillation may use
 ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
-BOUND_FACTOR, BOUND_S = 4.0, 60.0  # the simulation ends at this many times the steps' nominal length (+ s)
+BOUND_FACTOR, BOUND_S = 4.0, 60.0
+SCALE_FACTOR_KEYS = ("scale_factor_ppm", "scale_factor_sigma_ppm", "bias_dph", "bias_sigma_dph", "nonlinearity_ppm",
+                     "nonlinearity_sigma_ppm", "asymmetry_ppm", "asymmetry_sigma_ppm", "asymmetry_signed_ppm",
+                     "full_scale_dps")
+LACKING_MAX = 0.01  # a rate step's window lacking more of its samples is left out of the fit  # the simulation ends at this many times the steps' nominal length (+ s)
 
 
 def scale_factor_steps(cfg: Config, settings: ScaleFactorSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
@@ -128,14 +132,28 @@ def _input_geometry(cfg: Config, step: RateStep) -> tuple[np.ndarray, float]:
 
 def rate_point(cfg: Config, window: StepWindow, period: float) -> RatePoint:
     """A rate step's input (the encoder's whole turns over the window and the earth's rate about the axis, on
-    the gyro) and the gyro's mean output with its 1-sigma."""
+    the gyro) and the gyro's mean output with its 1-sigma; saturated (:func:`saturation`) or not."""
     step = window.step
     direction, earth = _input_geometry(cfg, step)
     n = len(window.t)
     table = float(np.sum(window.turn[:, step.axis]) / np.sum(window.dt))
     gyro = window.dtheta[:, step.gyro] / period
     return RatePoint(step.rate, direction[step.gyro] * (table + earth), float(np.mean(gyro)),
-                     float(np.std(gyro, ddof=1) / math.sqrt(n)))
+                     float(np.std(gyro, ddof=1) / math.sqrt(n)), saturation(window, gyro, period,
+                                                                          cfg.scale_factor.gyro_range_dps))
+
+
+def saturation(window: StepWindow, gyro: np.ndarray, period: float, range_dps: float | None) -> str | None:
+    """Why a step's window is no measure of the gyro's scale factor: samples the IMU flagged invalid (the
+    pipeline takes them out, as it does lost ones) beyond ``LACKING_MAX`` of its samples, or a sample at the
+    gyro's range; None when it is one."""
+    expected = round(window.step.window_s / period)
+    lacking = expected - len(window.t)
+    if lacking > max(1.0, LACKING_MAX * expected):
+        return f"{lacking} of its {expected} samples flagged invalid by the IMU or lost"
+    if range_dps is not None and np.max(np.abs(gyro)) >= (1.0 - 1e-6) * range_dps * DEG:
+        return f"the gyro reads its range, {range_dps:g} deg/s (scale_factor.gyro_range_dps)"
+    return None
 
 
 def scale_factor_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
@@ -157,16 +175,21 @@ def scale_factor_document(cfg: Config, windows: list[StepWindow], ended: str) ->
 
 
 def _scale_factor_axis(points: list[RatePoint]) -> dict:
-    fit = fit_scale_factor(points)
-    used = iter(fit.residuals)
+    """One gyro's block of scale_factor.json: its fit (every figure null, ``unfitted`` saying why, when too few
+    steps are left) and its steps, those left out named with the reason."""
     steps = [{"rate_dps": round(p.commanded / DEG, 9), "input_dps": float(p.input / DEG), "output_dps": p.output / DEG,
-              "sigma_dph": p.sigma / DEG_PER_H, "saturated": p.saturated,
-              "residual_ppm": None if p.saturated else float(next(used)) / PPM} for p in points]
-    return {"scale_factor_ppm": (fit.scale - 1.0) / PPM, "scale_factor_sigma_ppm": fit.scale_sigma / PPM,
-            "bias_dph": fit.bias / DEG_PER_H, "bias_sigma_dph": fit.bias_sigma / DEG_PER_H,
-            "nonlinearity_ppm": fit.nonlinearity / PPM, "nonlinearity_sigma_ppm": fit.nonlinearity_sigma / PPM,
-            "asymmetry_ppm": abs(fit.asymmetry) / PPM, "asymmetry_sigma_ppm": fit.asymmetry_sigma / PPM,
-            "asymmetry_signed_ppm": fit.asymmetry / PPM, "full_scale_dps": float(fit.full_scale / DEG), "steps": steps}
+              "sigma_dph": p.sigma / DEG_PER_H, "saturated": p.saturated is not None, "left_out": p.saturated,
+              "residual_ppm": None} for p in points]
+    try:
+        fit = fit_scale_factor(points)
+    except ValueError as exc:
+        return {**dict.fromkeys(SCALE_FACTOR_KEYS), "unfitted": str(exc), "steps": steps}
+    for step, residual in zip((s for s in steps if not s["saturated"]), fit.residuals):
+        step["residual_ppm"] = float(residual) / PPM
+    figures = ((fit.scale - 1.0) / PPM, fit.scale_sigma / PPM, fit.bias / DEG_PER_H, fit.bias_sigma / DEG_PER_H,
+               fit.nonlinearity / PPM, fit.nonlinearity_sigma / PPM, abs(fit.asymmetry) / PPM,
+               fit.asymmetry_sigma / PPM, fit.asymmetry / PPM, fit.full_scale / DEG)
+    return {**{key: float(value) for key, value in zip(SCALE_FACTOR_KEYS, figures)}, "unfitted": None, "steps": steps}
 
 
 def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
