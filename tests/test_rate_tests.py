@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from pages import clipped_columns, layout_width, needs_chromium
 
 from emulators.sensor_errors import SensorErrorModel
 from emulators.sensor_response import continuous_response
@@ -137,6 +138,17 @@ def test_frequency_response_finds_the_emulated_bandwidth_damping_and_delay(tmp_p
     assert y["delay_ms"] == pytest.approx(2.0, abs=0.1)
     assert y["damping"] == pytest.approx(0.7, abs=0.05)
     assert y["gain_db"][4] == pytest.approx(-3.01, abs=0.1)  # at the bandwidth
+    assert y["latch_check"].startswith("disagrees: the gyro lags the encoder by 1.99")  # 2 ms the config does not state
+
+
+def test_frequency_response_of_an_imu_without_output_delay_agrees_with_the_stated_latch_delays(tmp_path):
+    cfg = load_config(_config(tmp_path, imu={"rate_hz": 1000, "errors": {"bandwidth_hz": 100.0,
+                                                                          "gyro_noise_dph": [3.0] * 3}}))
+    doc = run_frequency_response(cfg, FrequencyResponseSettings(frequencies_hz=[5, 20, 50, 100, 150], dwell_s=0.2,
+                                                                settle_s=0.1, axes=["z"]))
+    assert abs(doc["axes"]["z"]["delay_ms"]) < 0.05
+    assert doc["axes"]["z"]["latch_check"] == ("agrees with the latch delays stated (imu.latch_delay_us 0, "
+                                               "turntable.latch_delay_us 0)")
 
 
 def test_frequency_response_below_the_bandwidth_says_it_lies_beyond_the_highest_frequency(tmp_path):
@@ -198,3 +210,15 @@ def test_steps_at_the_gyros_range_are_left_out_of_the_fit_and_named_in_the_repor
                     -180.0: "the gyro reads its range, 150 deg/s (scale_factor.gyro_range_dps)"}
     assert abs(x["scale_factor_ppm"] - 300.0) < 3.0 * x["scale_factor_sigma_ppm"]  # from the steps below the range
     assert "steps_left_out_x" in (out / "report.html").read_text()
+
+
+@needs_chromium
+def test_the_scale_factor_report_fits_1400_px_without_a_clipped_column(tmp_path):
+    path = _config(tmp_path, imu={"errors": {**yaml.safe_load(ACUTROL.read_text())["imu"]["errors"],
+                                             "gyro_range_dps": 150.0}},
+                   scale_factor={"rates_dps": [30, 90, 180], "dwell_s": 1, "settle_s": 0.2, "axes": ["x", "y"],
+                                 "gyro_range_dps": 150.0})
+    out = tmp_path / "out"
+    assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(out)]) == 0
+    assert layout_width(out / "report.html", tmp_path) <= 1400
+    assert clipped_columns(out / "report.html", tmp_path) == []

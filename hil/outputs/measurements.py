@@ -254,11 +254,12 @@ def rate_test_measurements(doc: dict, limits: ReportLimits) -> list[Measurement]
                     _info(f"bias_{axis}", a.get("bias_dph"), "°/h", f"zero-rate bias, gyro {axis}", a.get("bias_sigma_dph"))]
             left = [f"{s['rate_dps']:g} °/s: {s['left_out']}" for s in a.get("steps", []) if s.get("left_out")]
             if left or a.get("unfitted"):
-                out.append(_info(f"steps_left_out_{axis}", "; ".join(left + [a.get("unfitted") or ""]).strip("; "), "",
-                                 f"steps left out of the fit, gyro {axis}"))
+                why = "; ".join(left + ([f"not fitted: {a['unfitted']}"] if a.get("unfitted") else []))
+                out.append(_info(f"steps_left_out_{axis}", len(left), "", f"steps left out of the fit, gyro {axis}: {why}"))
         else:
             out += [_info(f"bandwidth_{axis}", a.get("bandwidth_hz"), "Hz",
                           f"-3 dB bandwidth, gyro {axis} ({a.get('bandwidth_note') or 'fitted'})", a.get("bandwidth_sigma_hz")),
                     _info(f"damping_{axis}", a.get("damping"), "", f"damping ratio, gyro {axis}", a.get("damping_sigma")),
-                    _info(f"delay_{axis}", a.get("delay_ms"), "ms", f"pure delay, gyro {axis}", a.get("delay_sigma_ms"))]
+                    _info(f"delay_{axis}", a.get("delay_ms"), "ms", f"pure delay, gyro {axis}", a.get("delay_sigma_ms")),
+                    _info(f"delay_vs_latch_{axis}", a.get("latch_check"), "", "the delay against the stated latch delays")]
     return out

@@ -41,6 +41,7 @@ BOUND_FACTOR, BOUND_S = 4.0, 60.0
 SCALE_FACTOR_KEYS = ("scale_factor_ppm", "scale_factor_sigma_ppm", "bias_dph", "bias_sigma_dph", "nonlinearity_ppm",
                      "nonlinearity_sigma_ppm", "asymmetry_ppm", "asymmetry_sigma_ppm", "asymmetry_signed_ppm",
                      "full_scale_dps")
+LATCH_TOLERANCE = 0.05  # of an IMU period: a fitted delay within it (and 3 sigma) agrees with the stated latches
 LACKING_MAX = 0.01  # a rate step's window lacking more of its samples is left out of the fit  # the simulation ends at this many times the steps' nominal length (+ s)
 
 
@@ -206,6 +207,7 @@ def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: s
             measured.append(response_at(w.t, w.dtheta[:, gyro] / period, table, w.step.frequency))
         ratio, sigma = np.array([m[0] for m in measured]), np.array([m[1] for m in measured])
         axes["xyz"[gyro]] = _response_axis(f, ratio, sigma, [w.step.amplitude / DEG for w in mine])
+        axes["xyz"[gyro]]["latch_check"] = latch_check(cfg, axes["xyz"[gyro]])
     doc = {"test": "frequency_response", "trial": {"name": cfg.trial.name}, "ended": ended,
            "settings": cfg.frequency_response.model_dump(), "axes": axes}
     if cfg.imu.source == "emulator":
@@ -213,6 +215,18 @@ def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: s
         doc["truth"] = {"bandwidth_hz": e.bandwidth_hz, "damping": e.damping if e.bandwidth_hz else None,
                         "delay_ms": e.delay_ms}
     return doc
+
+
+def latch_check(cfg: Config, axis: dict) -> str:
+    """Whether the fitted delay agrees with the latch delays the config states: the aligner puts each sample at
+    its device's stated latch, so a delay beyond 3 sigma (and ``LATCH_TOLERANCE`` of a period) is the IMU's
+    output lagging what ``imu.latch_delay_us`` says, or the stated latch delays being off."""
+    stated = f"imu.latch_delay_us {cfg.imu.latch_delay_us:g}, turntable.latch_delay_us {cfg.turntable.latch_delay_us:g}"
+    delay, sigma = axis["delay_ms"], axis["delay_sigma_ms"]
+    if abs(delay) <= 3.0 * sigma + LATCH_TOLERANCE * 1e3 / cfg.imu_rate_hz:
+        return f"agrees with the latch delays stated ({stated})"
+    return (f"disagrees: the gyro lags the encoder by {delay:.3f} ms beyond the latch delays stated ({stated}): "
+            "the IMU's output delay, or latch delays that are off")
 
 
 def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitudes: list[float]) -> dict:
