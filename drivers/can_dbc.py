@@ -41,22 +41,25 @@ KNOWN_MAPPINGS: tuple[dict[str, Any], ...] = (
     CanSignals().model_dump(),
     {"gyro": ("ARI.PitchRate", "ARI.RollRate", "ARI.YawRate"),
      "accel": ("ACCS.LateralAcceleration", "ACCS.LongitudinalAcceleration", "ACCS.VerticalAcceleration"),
-     "sync": None, "status": None},
+     "sync": None, "status": None, "temperature": None},
 )
 
 
-# One sample as a row: signal values in the DBC's units, the counter (-1: none) and the status.
-FIELDS = np.dtype([("gyro", "f8", 3), ("accel", "f8", 3), ("sync_counter", "i8"), ("status", "i8")])
+# One sample as a row: signal values in the DBC's units, the counter (-1: none), the status and the temperature
+# (deg C, NaN: none).
+FIELDS = np.dtype([("gyro", "f8", 3), ("accel", "f8", 3), ("sync_counter", "i8"), ("status", "i8"),
+                   ("temperature", "f8")])
 
 
 @dataclass(frozen=True, slots=True)
 class CanImuFrame:
-    """One sample's signal values in the DBC's units (gyro and accel x, y, z), counter and status."""
+    """One sample's signal values in the DBC's units (gyro and accel x, y, z), counter, status and temperature."""
 
     gyro: Vec3
     accel: Vec3
     sync_counter: int | None
     status: int
+    temperature: float | None = None  # deg C, when a temperature signal is configured
 
 
 class CanDbcCodec(Codec[CanImuFrame]):
@@ -73,13 +76,16 @@ class CanDbcCodec(Codec[CanImuFrame]):
                                                  "imu.can.dbc (the gyro signals' unit)", "imu.can.signals")
 
     def __init__(self, dbc: str | Path, rate_hz: float, gyro: tuple[str, str, str], accel: tuple[str, str, str],
-                 sync: str | None = None, status: str | None = None) -> None:
-        """``dbc`` is a path or a shipped DBC's name (:func:`hil.inputs.resolve_path`)."""
+                 sync: str | None = None, status: str | None = None, temperature: str | None = None) -> None:
+        """``dbc`` is a path or a shipped DBC's name (:func:`hil.inputs.resolve_path`); ``temperature`` the signal
+        of the IMU's temperature in deg C (its message one more of a sample's)."""
         super().__init__(rate_hz)
         self.db = cantools.database.load_file(str(resolve_path(dbc)))
         self.sync, self.status = sync, status
         self.quantities = [self._signal(name) for name in (*gyro, *accel)]  # (message, signal)
-        self.messages = list(dict.fromkeys(message for message, _ in self.quantities))
+        self.temperature = self._signal(temperature) if temperature else None
+        self.messages = list(dict.fromkeys([message for message, _ in self.quantities]
+                                           + ([self.temperature[0]] if self.temperature else [])))
         self.units = [signal.unit or "" for _, signal in self.quantities]
         self.scales = [self._scale(i, name) for i, name in enumerate((*gyro, *accel))]
         for message in self.messages:
@@ -94,7 +100,8 @@ class CanDbcCodec(Codec[CanImuFrame]):
     def from_config(cls, imu: Any, rate_hz: float) -> CanDbcCodec:
         """The DBC and its signals are the ``imu.can`` block's (the bus's description), not options."""
         c = imu.can
-        return cls(c.dbc, rate_hz, c.signals.gyro, c.signals.accel, c.signals.sync, c.signals.status)
+        return cls(c.dbc, rate_hz, c.signals.gyro, c.signals.accel, c.signals.sync, c.signals.status,
+                   c.signals.temperature)
 
     @classmethod
     def for_dbc(cls, dbc: str | Path, rate_hz: float, **signals: Any) -> CanDbcCodec:
@@ -133,6 +140,8 @@ class CanDbcCodec(Codec[CanImuFrame]):
     def encode(self, record: CanImuFrame) -> list[can.Message]:
         """The CAN messages of one sample, in DBC order."""
         values = dict(zip(((m.name, s.name) for m, s in self.quantities), (*record.gyro, *record.accel)))
+        if self.temperature is not None:
+            values[self.temperature[0].name, self.temperature[1].name] = record.temperature or 0.0
         out = []
         for message in self.messages:
             data: dict[str, float] = {}
@@ -155,13 +164,15 @@ class CanDbcCodec(Codec[CanImuFrame]):
 
     def record(self, row: Any) -> CanImuFrame:
         counter = int(row["sync_counter"])
+        temperature = float(row["temperature"])
         return CanImuFrame(tuple(row["gyro"].tolist()), tuple(row["accel"].tolist()), None if counter < 0 else counter,
-                           int(row["status"]))
+                           int(row["status"]), None if math.isnan(temperature) else temperature)
 
     def samples(self, frames: FrameBatch) -> ImuSamples:
         scales = np.array(self.scales)
         return ImuSamples(frames.sync_index, frames.rows["gyro"] * scales[:3], frames.rows["accel"] * scales[3:],
-                          np.full(len(frames), frames.host_time), frames.rows["status"].copy())
+                          np.full(len(frames), frames.host_time), frames.rows["status"].copy(),
+                          frames.rows["temperature"].copy())
 
     @property
     def counter_modulus(self) -> int | None:
@@ -171,15 +182,18 @@ class CanDbcCodec(Codec[CanImuFrame]):
         s = self.scales
         counter = sample.sync_index % self.sync_modulus if self.sync_modulus else None
         return CanImuFrame(tuple(x / k for x, k in zip(sample.dtheta, s[:3])),
-                           tuple(x / k for x, k in zip(sample.dv, s[3:])), counter, self.sent_status(sample))
+                           tuple(x / k for x, k in zip(sample.dv, s[3:])), counter, self.sent_status(sample),
+                           None if math.isnan(sample.temperature_c) else sample.temperature_c)
 
     def csv_header(self) -> list[str]:
         units = [u.replace("/", "_").replace("^", "") for u in self.units]
         return ([f"gyro_{c}_{u}" for c, u in zip("xyz", units[:3])]
-                + [f"accel_{c}_{u}" for c, u in zip("xyz", units[3:])] + ["sync_counter", "status"])
+                + [f"accel_{c}_{u}" for c, u in zip("xyz", units[3:])] + ["sync_counter", "status"]
+                + (["temperature_c"] if self.temperature else []))
 
     def csv_row(self, record: CanImuFrame) -> list[Any]:
-        return [*record.gyro, *record.accel, record.sync_counter, record.status]
+        return [*record.gyro, *record.accel, record.sync_counter, record.status,
+                *([record.temperature] if self.temperature else [])]
 
 
 class CanFramer(Framer):
@@ -231,7 +245,9 @@ class CanFramer(Framer):
             for values in pending.values():
                 status |= int(values[codec.status])
         counter = -1 if self._counter is None else self._counter
-        row = np.array([(numbers[:3], numbers[3:], counter, status)], dtype=FIELDS)
+        temperature = float(pending[codec.temperature[0].name][codec.temperature[1].name]) if codec.temperature \
+            else math.nan
+        row = np.array([(numbers[:3], numbers[3:], counter, status, temperature)], dtype=FIELDS)
         index, missing, repeated = self.unwrapper.next_many(None if self._counter is None else np.array([counter]),
                                                             np.array([host_time]))
         deliver = self.unwrapper.count_many(self.counters, missing, repeated)

@@ -103,13 +103,15 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
     def samples(self, frames: FrameBatch) -> ImuSamples:
         dtheta, dv = self.increments(frames.rows["gyro"], frames.rows["accel"])
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
-                          frames.rows["status"].astype(np.int64))
+                          frames.rows["status"].astype(np.int64), frames.rows["temperature"].astype(float))
 
     def from_sample(self, sample: ImuSample) -> KvhFrame:
-        """The frame for an SI sample at 25 deg C; its status byte is ``sample.status`` (None: STATUS_ALL_VALID)."""
+        """The frame for an SI sample; its status byte is ``sample.status`` (None: STATUS_ALL_VALID), its temperature
+        ``sample.temperature_c`` to the nearest deg C (25 when it has none)."""
         g, a = self._gyro_scale, self._accel_scale
         return KvhFrame(tuple(x / g for x in sample.dtheta), tuple(x / a for x in sample.dv),
-                        self.sent_status(sample), sample.sync_index % 128, 25)
+                        self.sent_status(sample), sample.sync_index % 128,
+                        25 if math.isnan(sample.temperature_c) else round(sample.temperature_c))
 
     def csv_header(self) -> list[str]:
         gyro = self.gyro_unit + ("_s" if self.gyro_output == "rate" else "")

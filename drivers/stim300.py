@@ -28,6 +28,7 @@ INTERNAL_HZ = 2000  # the counter counts internal samples at this rate
 # identifier -> (inclinometers, temperatures, dummy bytes for the CRC), Tables 5-21 and 5-22
 DATAGRAMS: dict[int, tuple[bool, bool, int]] = {0x91: (False, False, 0), 0x93: (True, False, 2),
                                                 0xA5: (False, True, 2), 0xA7: (True, True, 1)}
+TEMP_LSB = 256.0  # counts per deg C of a temperature field (Equation 9)
 GYRO_LSB = {"rate": 2.0 ** -14, "increment": 2.0 ** -21}  # deg/s or deg per bit (Equations 1 and 2)
 # accelerometer range (g) -> bits of the fraction: acceleration (g, Equation 3), increment (m/s, Equation 4)
 ACCEL_FRACTION = {5: (20, 23), 10: (19, 22), 30: (18, 21), 80: (16, 19)}
@@ -176,12 +177,17 @@ class Stim300Codec(ByteCodec[StimDatagram]):
                 | (rows["incl_status"].astype(np.int64) << 16))
 
     def samples(self, frames: FrameBatch) -> ImuSamples:
+        """The increments; the temperature the mean of the gyros' and accelerometers' six (NaN in a datagram
+        without temperatures)."""
         rows = frames.rows
+        temperature = (np.concatenate((rows["gyro_temp"], rows["accel_temp"]), axis=1).mean(axis=1) / TEMP_LSB
+                       if DATAGRAMS[self.options.datagram][1] else np.full(len(rows), np.nan))
         return ImuSamples(frames.sync_index, rows["gyro"] * self.gyro_scale, rows["accel"] * self.accel_scale,
-                          np.full(len(frames), frames.host_time), self.status_words(rows))
+                          np.full(len(frames), frames.host_time), self.status_words(rows), temperature)
 
     def from_sample(self, sample: ImuSample) -> StimDatagram:
-        """The datagram of an SI sample (outputs rounded to the nearest count; its status, 0 us latency)."""
+        """The datagram of an SI sample (outputs rounded to the nearest count; its status, its temperature in every
+        temperature field of a datagram that has them, 0 us latency)."""
         limit = 1 << 23
         status = self.sent_status(sample)
 
@@ -191,8 +197,9 @@ class Stim300Codec(ByteCodec[StimDatagram]):
                 raise ValueError(f"stim300: {values} is outside the 24-bit output range")
             return raw
 
+        temp = (0 if math.isnan(sample.temperature_c) else round(sample.temperature_c * TEMP_LSB),) * 3
         return StimDatagram(counts(sample.dtheta, self.gyro_scale), counts(sample.dv, self.accel_scale),
-                            status & 0xFF, (status >> 8) & 0xFF, (status >> 16) & 0xFF,
+                            status & 0xFF, (status >> 8) & 0xFF, (status >> 16) & 0xFF, temp, temp,
                             counter=(sample.sync_index * self.step) & 0xFF)
 
     def csv_header(self) -> list[str]:
@@ -208,4 +215,4 @@ class Stim300Codec(ByteCodec[StimDatagram]):
         bits = ACCEL_FRACTION[o.accel_range_g][o.accel_output == "increment"]
         return ([v * GYRO_LSB[o.gyro_output] for v in record.gyro] + [v * 2.0 ** -bits for v in record.accel]
                 + [f"0x{s:02X}" for s in (record.gyro_status, record.accel_status, record.incl_status)]
-                + [t / 256.0 for t in record.gyro_temp + record.accel_temp] + [record.counter, record.latency_us])
+                + [t / TEMP_LSB for t in record.gyro_temp + record.accel_temp] + [record.counter, record.latency_us])

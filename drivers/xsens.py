@@ -40,6 +40,7 @@ class MtData2Frame:
     acceleration: Vec3 | None = None  # m/s^2
     rate_of_turn: Vec3 | None = None  # rad/s
     status_byte: int | None = None  # uint8, the low byte of the status word
+    temperature: float | None = None  # deg C, the sensor's (Temperature 0x0810)
 
 
 # The low two bits of a data identifier select the precision of its numbers (MTData2 specification):
@@ -48,7 +49,7 @@ PRECISIONS: dict[str, tuple[int, int]] = {"float32": (0, 4), "fp12.20": (1, 4), 
 _BYTES = {bits: size for bits, size in PRECISIONS.values()}
 # Quantities in the sensor frame: identifier with the low nibble clear -> (record field, numbers).
 VECTORS: dict[int, tuple[str, int]] = {0x8030: ("delta_q", 4), 0x4010: ("delta_v", 3), 0x4020: ("acceleration", 3),
-                                       0x8020: ("rate_of_turn", 3)}
+                                       0x8020: ("rate_of_turn", 3), 0x0810: ("temperature", 1)}
 # Counters and status: identifier -> (record field, struct).
 SCALARS: dict[int, tuple[str, struct.Struct]] = {
     0x1020: ("packet_counter", struct.Struct(">H")),
@@ -71,7 +72,7 @@ _SCALAR_NAMES = tuple(name for name, _ in SCALARS.values())
 # identifiers of the items not read (0 after the last).
 FIELDS = np.dtype([("packet_counter", "i8"), ("sample_time_fine", "i8"), ("status_byte", "i8"), ("status_word", "i8"),
                    ("delta_q", "f8", 4), ("delta_v", "f8", 3), ("acceleration", "f8", 3), ("rate_of_turn", "f8", 3),
-                   ("other", "u2", MAX_OTHER)])
+                   ("temperature", "f8", 1), ("other", "u2", MAX_OTHER)])
 _VALUES = tuple(name for name in FIELDS.names if name != "other")
 _EMPTY_ROW = {name: -1 if name in _SCALAR_NAMES else (math.nan,) * FIELDS[name].shape[0] for name in _VALUES}
 
@@ -163,6 +164,7 @@ class XsensOptions(Model):
 
     precision: Literal["float32", "fp12.20", "fp16.32", "float64"] = "float32"
     outputs: Literal["increments", "rates"] = "increments"  # DeltaQ and DeltaV, or RateOfTurn and Acceleration
+    temperature: bool = False  # the Temperature item (0x0810) too
 
 
 class XsensCodec(ByteCodec[MtData2Frame]):
@@ -219,8 +221,10 @@ class XsensCodec(ByteCodec[MtData2Frame]):
             value = row[name]
             if name in _SCALAR_NAMES:
                 values[name] = None if value < 0 else int(value)
+            elif np.isnan(value[0]):
+                values[name] = None
             else:
-                values[name] = None if np.isnan(value[0]) else tuple(value.tolist())
+                values[name] = float(value[0]) if name == "temperature" else tuple(value.tolist())
         return MtData2Frame(**values)
 
     def encode(self, record: MtData2Frame) -> bytes:
@@ -234,6 +238,7 @@ class XsensCodec(ByteCodec[MtData2Frame]):
             if name in _SCALAR_NAMES:
                 payload += struct.pack(">HB", xdi, SCALARS[xdi][1].size) + SCALARS[xdi][1].pack(value)
             else:
+                value = (value,) if name == "temperature" else value
                 payload += struct.pack(">HB", xdi | bits, size * len(value)) + pack_numbers(value, bits)
         if len(payload) < 0xFF:
             message = PREAMBLE + bytes([len(payload)]) + payload
@@ -262,18 +267,20 @@ class XsensCodec(ByteCodec[MtData2Frame]):
 
     def samples(self, frames: FrameBatch) -> ImuSamples:
         """Messages with neither increments nor rates are left out (counted by the caller); the status is
-        :meth:`status_words`'."""
+        :meth:`status_words`', the temperature the Temperature item's (NaN without one)."""
         dtheta, dv, usable = self.increments(frames.rows)
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
-                          self.status_words(frames.rows)).take(usable)
+                          self.status_words(frames.rows), frames.rows["temperature"][:, 0].copy()).take(usable)
 
     def from_sample(self, sample: ImuSample) -> MtData2Frame:
-        """The message for an SI sample, with the items ``outputs`` names."""
+        """The message for an SI sample, with the items ``outputs`` names (and its temperature with ``temperature``)."""
         frame = MtData2Frame(
             packet_counter=sample.sync_index & 0xFFFF,
             sample_time_fine=None if sample.device_time is None
             else round(sample.device_time * SAMPLE_TIME_HZ) & 0xFFFFFFFF,
-            status_word=self.sent_status(sample))
+            status_word=self.sent_status(sample),
+            temperature=sample.temperature_c if self.options.temperature and not math.isnan(sample.temperature_c)
+            else None)
         if self.outputs == "increments":
             return replace(frame, delta_q=rotation_vector_to_quaternion(sample.dtheta), delta_v=sample.dv)
         return replace(frame, rate_of_turn=tuple(x * self.rate_hz for x in sample.dtheta),
@@ -282,7 +289,7 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     def csv_header(self) -> list[str]:
         return (["packet_counter", "sample_time_fine_100us", "status_byte", "status_word"]
                 + [f"delta_q_{c}" for c in "wxyz"] + [f"delta_v_{c}_mps" for c in "xyz"]
-                + [f"acc_{c}_mps2" for c in "xyz"] + [f"gyr_{c}_rad_s" for c in "xyz"])
+                + [f"acc_{c}_mps2" for c in "xyz"] + [f"gyr_{c}_rad_s" for c in "xyz"] + ["temperature_c"])
 
     def csv_row(self, record: MtData2Frame) -> list[Any]:
         row: list[Any] = [record.packet_counter, record.sample_time_fine,
@@ -291,4 +298,4 @@ class XsensCodec(ByteCodec[MtData2Frame]):
         for value, n in ((record.delta_q, 4), (record.delta_v, 3), (record.acceleration, 3),
                          (record.rate_of_turn, 3)):
             row += list(value) if value is not None else [None] * n
-        return row
+        return [*row, record.temperature]

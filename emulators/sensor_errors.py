@@ -230,6 +230,11 @@ class SensorErrorModel:
         )
         self._gyro_instability, self._accel_instability = instability[:3].any(), instability[3:].any()
         self._instability = BiasInstability(instability, period, seed) if instability.any() else None
+        self._temperature_c = e.temperature_c
+
+    def temperature_c(self, t: np.ndarray) -> np.ndarray:
+        """The sensor's temperature (deg C) at trial times t (N,): the configured constant."""
+        return np.full(len(t), self._temperature_c)
 
     def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Measured increments from ideal ones over consecutive intervals ending at t (N,).

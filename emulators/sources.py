@@ -56,7 +56,8 @@ class FrameSource:
 
 class ImuSource(FrameSource):
     """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``; the status
-    word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised)."""
+    word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised); the sensor's
+    temperature where the frames carry one."""
 
     def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
                  faults: ImuFaultConfig | None = None) -> None:
@@ -76,11 +77,13 @@ class ImuSource(FrameSource):
         dev = clock.device_time(latch).tolist() if codec.device_time else [None] * len(k)
         flagged = flagged_samples(self.faults, latch, clock.since_power_on(k), s["flags_rng"])
         statuses = (codec.healthy_status, codec.flagged_status(codec.start_up_flags))
+        temperature = s["errors"].temperature_c(latch).tolist()
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=statuses[bad]))), bool(on), bad)
-                for i, c, t, end, a, b, d, on, bad in zip(
+                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=statuses[bad], temperature_c=temp))),
+                         bool(on), bad)
+                for i, c, t, end, a, b, d, on, bad, temp in zip(
                     clock.pulses(k), clock.counters(k), clock.tick_times(k), latch, dtheta.tolist(), dv.tolist(), dev,
-                    clock.powered(k), flagged.tolist())]
+                    clock.powered(k), flagged.tolist(), temperature)]
 
 
 class TableSource(FrameSource):

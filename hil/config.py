@@ -139,6 +139,7 @@ class CanSignals(Model):
     accel: tuple[str, str, str] = ("IMU_DVX.DVX", "IMU_DVY.DVY", "IMU_DVZ.DVZ")
     sync: str | None = "SyncCounter"  # signal name present in every message above; None: count samples
     status: str | None = "Status"  # fault flags present in every message above (OR-ed), or None
+    temperature: str | None = None  # the IMU's temperature (deg C) as Message.Signal, or None
 
 
 class CanConfig(Model):

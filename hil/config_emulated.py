@@ -69,3 +69,4 @@ class ImuErrors(Model):
     gyro_range_dps: float | None = Field(None, gt=0)  # the gyros' output clips at +- this; None: no range
     dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
+    temperature_c: float = Field(25.0, ge=-60, le=125)  # the sensor's temperature the IMU reports in its frames

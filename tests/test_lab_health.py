@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import time
 
 import pytest
@@ -51,3 +52,21 @@ def test_one_percent_flagged_completes_counted_never_estimated_and_judged_by_inv
         assert within_sigmas(doc, 3.0), doc["estimate"]
     assert (strict[0], strict[2]) == (3, ["imu_invalid_fraction"]), strict[2]
     assert (loose[0], loose[2]) == (0, []), loose[2]
+
+
+def test_an_imu_streaming_at_another_rate_than_configured_ends_the_trial_naming_imu_rate_hz(tmp_path, capsys):
+    """An emulated KVH 1750 at 1000 Hz, the config saying 200 Hz: the trial ends early within seconds naming
+    both rates and the key, not the table."""
+    cfg = emulated(1000.0, baudrate=921600)
+    with Emulator(tmp_path, cfg) as emulator:
+        time.sleep(max(0.0, 1.0 - (time.monotonic() - emulator.started)))
+        lab = lab_config({**cfg, "imu": {**cfg["imu"], "rate_hz": RATE_HZ}}, emulator.ports, tmp_path)
+        started = time.monotonic()
+        code = main(["run", str(lab), "--duration", "20", "--out", str(tmp_path / "run"), "--viewer", "none",
+                     "--quiet", "--no-figures"])
+        took = time.monotonic() - started
+    ended = result(tmp_path / "run")["ended"]
+    assert code == 1 and took < 8.0, (code, took, ended)
+    sends = re.search(r"the IMU sends ([0-9.]+) frames/s", ended)
+    assert sends and abs(float(sends[1]) - 1000.0) < 150.0 and "imu.rate_hz is 200 Hz" in ended, ended  # a busy host
+    assert "turntable" not in ended, ended

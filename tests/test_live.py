@@ -84,8 +84,8 @@ def test_replay_of_a_trial_that_fails_its_limits_exits_3(live_run, tmp_path):
     recorder.close()
     assert main(["replay", str(tmp_path / "strict.mcap"), "--out", str(tmp_path / "out"), "--no-figures"]) == 3
     suite = ET.parse(tmp_path / "out" / "junit.xml").getroot().find("testsuite")
-    # the three sigmas fail; the judged data (missing, gated, without angles, sync offset) pass
-    assert (suite.get("tests"), suite.get("failures")) == ("7", "3")
+    # the three sigmas fail; the judged data (missing, gated, flagged invalid, without angles, sync offset) pass
+    assert (suite.get("tests"), suite.get("failures")) == ("8", "3")
 
 
 def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):

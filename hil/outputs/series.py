@@ -1,8 +1,11 @@
-"""series.csv: the estimates over time, one row per snapshot (column names carry the units)."""
+"""series.csv: the estimates over time, one row per snapshot (column names carry the units), with the IMU's
+temperature where its frames report one."""
 
 from __future__ import annotations
 
 import csv
+import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,12 +26,15 @@ SERIES_COLUMNS = (
     "method2_pitch_deg", "method2_roll_deg", "method2_yaw_deg",
     "theoretical_pitch_deg", "theoretical_roll_deg",
     "drift_x_ug_per_h", "drift_y_ug_per_h", "drift_z_ug_per_h",
-    "drift_sigma_x_ug_per_h", "drift_sigma_y_ug_per_h", "drift_sigma_z_ug_per_h",
+    "drift_sigma_x_ug_per_h", "drift_sigma_y_ug_per_h", "drift_sigma_z_ug_per_h", "temperature_c",
 )  # fmt: skip
 
 
-def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
-    """One row per snapshot, in SERIES_COLUMNS order (empty cells where a value does not exist)."""
+def series_rows(snapshots: list[Snapshot], temperatures: Mapping[float, float] | None = None
+                ) -> list[list[float | int | str]]:
+    """One row per snapshot, in SERIES_COLUMNS order (empty cells where a value does not exist); the temperature
+    (deg C) is ``temperatures``' at the snapshot's time, NaN where it has none."""
+    temperatures = temperatures or {}
     nan3 = [float("nan")] * 3
     rows = []
     for s in snapshots:
@@ -42,15 +48,17 @@ def series_rows(snapshots: list[Snapshot]) -> list[list[float | int | str]]:
         obs = s.full.observability
         rows.append(
             [s.t, s.samples, *bias, *sigma, int(s.full.observable), obs.rank, obs.condition,
-             s.gravity_only.observability.rank, *m1, *m2, *theo, *drift, *drift_sigma]
+             s.gravity_only.observability.rank, *m1, *m2, *theo, *drift, *drift_sigma,
+             temperatures.get(float(s.t), math.nan)]
         )  # fmt: skip
     return rows
 
 
-def write_series(out: Path, snapshots: list[Snapshot]) -> np.ndarray:
+def write_series(out: Path, snapshots: list[Snapshot], temperatures: Mapping[float, float] | None = None
+                 ) -> np.ndarray:
     """Write ``out/series.csv`` (empty cells where a value does not exist); returns the rows as an array
     (NaN for the empty cells), in SERIES_COLUMNS order."""
-    rows = series_rows(snapshots)
+    rows = series_rows(snapshots, temperatures)
     with open(out / SERIES_NAME, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(SERIES_COLUMNS)

@@ -1,5 +1,6 @@
 """The decode stage: each stream's raw chunks and events into samples (SI), by that stream's
-:class:`~drivers.decoder.StreamDecoder`."""
+:class:`~drivers.decoder.StreamDecoder`; the IMU's frame rate measured on the receive times against
+``imu.rate_hz`` (:class:`FrameRate`), and its temperature (:class:`~hil.pipeline.temperature.TemperatureTrack`)."""
 
 from __future__ import annotations
 
@@ -9,15 +10,54 @@ from drivers.decoder import StreamDecoder
 from drivers.registry import imu_codec
 from hil.config import Config
 from hil.pipeline.plausibility import UnitKeys
+from hil.pipeline.temperature import TemperatureTrack
 from hil.samples import ImuSamples, TableSamples
 
 IMU, TABLE = "imu", "table"
 Samples = ImuSamples | TableSamples
+RATE_WINDOW_S = 2.0  # s of the devices' time over which the IMU's frame rate is measured, once, ...
+RATE_HOST_S = 1.0  # ... and at least this long on the host's clock (a fast emulator's reads jitter alike)
+RATE_TOLERANCE = 0.05  # the measured rate may differ from imu.rate_hz by this fraction
 
 
 def stream_codecs(cfg: Config) -> dict[str, Codec]:
     """The codecs of the IMU's and the table's data streams, as the config sets them."""
     return {IMU: imu_codec(cfg.imu, cfg.imu_rate_hz), TABLE: data_codec(cfg.turntable, cfg.table_counts_per_frame)}
+
+
+class FrameRate:
+    """The IMU's frame rate on the receive times: the frames decoded from the end of the first read over the next
+    ``RATE_WINDOW_S`` of the devices' time (the host's times the devices' speed ``time_scale``, and ``RATE_HOST_S``
+    of the host's), judged once against ``rate_hz``. A gap of the IMU's counter (frames lost, a power cycle's
+    silence) or an outage starts the window again at the read: only a stream that lost nothing is judged. At
+    ``--speed max`` (None) the host times say nothing of the devices' rate: nothing is judged."""
+
+    def __init__(self, rate_hz: float, time_scale: float | None) -> None:
+        self.rate_hz, self.time_scale = rate_hz, time_scale
+        self._start: tuple[float, int, int] | None = None  # (host time, frames, gaps) at the window's start
+        self.judged = time_scale is None
+        self.mismatch: str | None = None
+
+    def fed(self, host_time: float, frames: int, gaps: int) -> None:
+        """A read of the IMU's stream at ``host_time``: the frames decoded and the counter's gaps so far."""
+        if self.judged:
+            return
+        if self._start is None or gaps != self._start[2]:
+            self._start = (host_time, frames, gaps)
+            return
+        host = host_time - self._start[0]
+        span = host * self.time_scale
+        if span < RATE_WINDOW_S or host < RATE_HOST_S:
+            return
+        self.judged = True
+        measured = (frames - self._start[1]) / span
+        if abs(measured / self.rate_hz - 1.0) > RATE_TOLERANCE:
+            self.mismatch = (f"the IMU sends {measured:.4g} frames/s but imu.rate_hz is {self.rate_hz:g} Hz: set "
+                             "imu.rate_hz to the IMU's output rate (or the IMU to the configured rate)")
+
+    def restart(self) -> None:
+        """An outage: the window starts again at the next read."""
+        self._start = None
 
 
 class Decoding:
@@ -26,6 +66,8 @@ class Decoding:
     def __init__(self, cfg: Config, time_scale: float | None) -> None:
         self.decoders = {stream: StreamDecoder(codec, time_scale, cfg.read_s)
                          for stream, codec in stream_codecs(cfg).items()}
+        self.imu_rate = FrameRate(cfg.imu_rate_hz, time_scale)
+        self.temperature = TemperatureTrack()
 
     def codec(self, stream: str) -> Codec:
         return self.decoders[stream].codec
@@ -38,17 +80,29 @@ class Decoding:
         """A reader's event on a known stream: the samples of the read before it (a message stream's tick
         still held), then the event to the decoder (an outage is counted)."""
         decoder = self.decoders[event.stream]
-        held = decoder.flush()
+        held = self._taken(event.stream, decoder.flush())
         decoder.event(event)
+        if event.stream == IMU:
+            self.imu_rate.restart()
         return held
 
     def chunk(self, chunk: RawChunk) -> Samples | None:
         """The samples of a known stream's chunk (None: none yet)."""
-        return self.decoders[chunk.stream].feed(chunk)
+        samples = self.decoders[chunk.stream].feed(chunk)
+        if chunk.stream == IMU:
+            counters = self.decoders[IMU].counters
+            self.imu_rate.fed(chunk.host_time, counters.frames, counters.gaps)
+        return self._taken(chunk.stream, samples)
 
     def flush(self) -> list[tuple[str, Samples | None]]:
         """End of data: every stream's samples still held."""
-        return [(stream, decoder.flush()) for stream, decoder in self.decoders.items()]
+        return [(stream, self._taken(stream, decoder.flush())) for stream, decoder in self.decoders.items()]
+
+    def _taken(self, stream: str, samples: Samples | None) -> Samples | None:
+        """Samples on their way out: the IMU's temperatures to the track."""
+        if stream == IMU and samples is not None:
+            self.temperature.add(samples.temperature_c)
+        return samples
 
     def counters(self, stream: str) -> Counters:
         """A stream's framer counters (frames, corrupt, missing, skipped bytes, gaps)."""

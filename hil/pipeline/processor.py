@@ -132,7 +132,7 @@ class TrialProcessor:
                 "gyro_rate_error_dph": None if rate_error is None else (rate_error / DEG_PER_H).tolist(),
                 "sync": None if self._pairing is None else self._pairing.report.as_dict()}))
         applied = self._compensation.applied if self._compensation is not None else None
-        return Finished(self._estimation.estimator, streams, applied, self._last)
+        return Finished(self._estimation.estimator, streams, applied, self._last, self._decoding.temperature.at)
 
     def _read(self, stream: str, samples: Samples | None) -> list[Released]:
         """One read's samples of a stream through compensation, the plausibility check and the pairing to the
@@ -192,8 +192,9 @@ class TrialProcessor:
         if self._next_offset is not None and trial_time >= self._next_offset:
             self._offset = self._estimation.time_offset_s()
             self._next_offset = trial_time + self._offset_every
+        self._decoding.temperature.solved([s.t for s in snapshots[self._step[0]:]])
         counts = self._counts()
-        stalled = self._pairing.failure if self._pairing is not None and self._pairing.failure else None
+        stalled = self._decoding.imu_rate.mismatch or (self._pairing.failure if self._pairing is not None else None)
         progress = Progress(trial_time, self._aligner.counters.aligned, self._blocks.waiting, self._estimation.updates,
                             self._complete(), stalled or self._judge.stalled(self._decoding.unit_keys()),
                             self._decoding.frames(), counts, self._health(counts), tuple(self._step[1]),
@@ -215,6 +216,7 @@ class TrialProcessor:
             "skipped_bytes": imu.skipped_bytes + table.skipped_bytes,
             "imu_missing": imu.missing,
             **self._judge.counts(),
+            "imu_temperature_c": self._decoding.temperature.summary(),
             "imu_force_outliers": 0 if estimator is None else estimator.outliers,
             "table_missing": table.missing,
             "imu_unpaired": 0 if self._pairing is None else self._pairing.report.unpaired,

@@ -81,13 +81,15 @@ Listener = Callable[[Progress], None]
 @dataclass(frozen=True)
 class Finished:
     """The pipeline at the end of its data: the estimator with everything it took (None when no IMU sample
-    reached it), result.json's ``streams``, the ``imu.calibration`` terms applied (None: none), and the last
-    :class:`Progress` (None: no item was fed)."""
+    reached it), result.json's ``streams``, the ``imu.calibration`` terms applied (None: none), the last
+    :class:`Progress` (None: no item was fed), and the IMU's temperature (deg C, NaN: none) at each solution
+    by its trial time (:class:`~hil.pipeline.temperature.TemperatureTrack`)."""
 
     estimator: OnlineEstimator | None
     streams: StreamCounts
     calibration_applied: dict | None
     progress: Progress | None
+    temperatures: Mapping[float, float]
 
     @property
     def snapshots(self) -> list[Snapshot]:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,13 +50,15 @@ def output_dir(out: str | Path | None, cfg: Config) -> Path:
 
 @dataclass
 class TrialOutcome:
-    """A finished trial: its config, where its outputs go, the result.json document and the snapshots."""
+    """A finished trial: its config, where its outputs go, the result.json document, the snapshots and the IMU's
+    temperature at each (by its time)."""
 
     cfg: Config
     config_text: str
     out: Path
     result: dict
     snapshots: list[Snapshot]
+    temperatures: Mapping[float, float] = field(default_factory=dict)
 
     @property
     def ended(self) -> str:
@@ -73,7 +76,7 @@ class TrialOutcome:
             ended = str(TrialEnd.early(f"{figure} is not finite: the data holds values the estimator cannot take"))
         result = {"trial": result["trial"], "ended": ended, "calibration_applied": finished.calibration_applied,
                   **{k: v for k, v in result.items() if k != "trial"}}
-        return cls(cfg, config_text, out, result, finished.snapshots)
+        return cls(cfg, config_text, out, result, finished.snapshots, finished.temperatures)
 
     def exit_code(self, verdict: str) -> int:
         """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that
@@ -84,7 +87,8 @@ class TrialOutcome:
         """Write every output and print the summary (the figures drawn by ``draw``); returns the verdict: PASS or
         FAIL against ``output.limits`` for a completed trial, else INTERRUPTED or ENDED EARLY."""
         verdict = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
-                                      self.config_text, figures=figures and self.cfg.output.figures, draw=draw)
+                                      self.config_text, figures=figures and self.cfg.output.figures, draw=draw,
+                                      temperatures=self.temperatures)
         print(summary_text(self.result, self.out))
         judged = "against output.limits" if self.ended == COMPLETED else \
             "(did not complete: not judged against output.limits)"
