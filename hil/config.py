@@ -17,6 +17,7 @@ import yaml
 from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
+from hil.config_environment import EnvironmentConfig
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.inputs import InputError
@@ -293,6 +294,7 @@ class Config(Model):
     frequency_response: FrequencyResponseSettings = FrequencyResponseSettings()
     output: OutputConfig = OutputConfig()
     record: RecordConfig = RecordConfig()
+    environment: EnvironmentConfig = EnvironmentConfig()
 
     @model_validator(mode="after")
     def _imu_rate_divides_into_table_latches(self) -> Config:

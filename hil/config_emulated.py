@@ -48,6 +48,7 @@ class ImuErrors(Model):
     """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
 
     accel_bias_ug: Vec3 = ZERO3
+    turn_on_bias_ug: Vec3 = ZERO3  # 1-sigma spread of the accel bias between power-ons (hil plan's emulated supply)
     accel_noise_ug: Vec3 = ZERO3  # white, 1-sigma per sample
     accel_drift_ug_per_h: Vec3 = ZERO3  # linear bias drift b = b_s + k t
     accel_random_walk_ug_per_sqrt_h: Vec3 = ZERO3  # bias random walk

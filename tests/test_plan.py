@@ -78,10 +78,10 @@ def test_the_dry_run_prints_the_schedule_with_its_duration(tmp_path, capsys):
 
 
 def test_a_plan_killed_in_its_third_step_resumes_without_running_the_first_two_again(tmp_path):
-    plan = write_plan(tmp_path, [{"swing": {"trial": {"duration_s": 10}}}, {"wait": {"s": 5}},
+    plan = write_plan(tmp_path, [{"swing": {"trial": {"duration_s": 5}}}, {"wait": {"s": 1}},
                                  {"swing": {"trial": {"duration_s": 600}}}, {"wait": {"s": 1}}])
     out = tmp_path / "out"
-    argv = [sys.executable, "-m", "hil.cli", "plan", str(plan), "--out", str(out), "--speed", "4", "--no-history",
+    argv = [sys.executable, "-m", "hil.cli", "plan", str(plan), "--out", str(out), "--speed", "1", "--no-history",
             "--no-figures"]
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=Path.cwd())
     try:

@@ -15,7 +15,8 @@ from hil.samples import AlignedBatch
 from tests.helpers import make_config
 
 ROOT = Path(__file__).resolve().parent.parent
-TRIAL_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("*.yaml") if not p.name.startswith("campaign_"))
+TRIAL_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("*.yaml")
+                       if not p.name.startswith(("campaign_", "plan_")))  # campaigns and plans name a config
 ERRORS = {"accel_bias_ug": [50, 0, 0], "accel_noise_ug": [20, 20, 20], "gyro_random_walk_dph_per_sqrt_h": [0.01] * 3}
 
 

@@ -28,7 +28,15 @@ import numpy as np
 
 from hil.estimation.allan_cov import noise_products
 from hil.estimation.allan_edf import greenhall_edf
-from hil.estimation.allan_fit import REASON_REMOVED, TERM_NAMES, Term, design_matrix, fit_terms, term
+from hil.estimation.allan_fit import (
+    REASON_REMOVED,
+    RESOLVED_AT,
+    TERM_NAMES,
+    Term,
+    design_matrix,
+    fit_terms,
+    term,
+)
 from hil.estimation.allan_noise_id import identify
 from hil.estimation.allan_taus import octave_factors, tau_factors
 from hil.units import DEG_PER_H, DEG_PER_H_PER_SQRT_H, DEG_PER_SQRT_H, HOUR, PER_SQRT_H, UG
@@ -168,7 +176,7 @@ def analyse(increments: np.ndarray, period: float, level: float = DEFAULT_LEVEL,
     lower, upper = chi2_interval(avar, nu, level)
     reported = [f.reported() for f in fits]
     gone = Term(None, None, None, REASON_REMOVED)
-    terms = {name: tuple(gone if name in removed else term(c[i], s[i], level) for c, s in reported)
+    terms = {name: tuple(gone if name in removed else term(c[i], s[i], level, RESOLVED_AT[i]) for c, s in reported)
              for i, name in enumerate(TERM_NAMES)}
     return AllanAnalysis(
         tau=tau,

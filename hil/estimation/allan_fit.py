@@ -29,11 +29,15 @@ from hil.estimation.allan_cov import avar_covariance
 FLICKER_FLOOR = 2.0 * math.log(2.0) / math.pi  # avar floor / B^2 (IEEE 952 Eq. C.15); sqrt: 0.664
 TERM_NAMES = ("quantization", "white", "bias_instability", "random_walk", "ramp")
 WHITE = TERM_NAMES.index("white")
+# Standard deviations a term's estimate must exceed to be resolved: quantization and the ramp, which most records
+# hold none of, enter the fit only beyond 1.5 (docs/noise.md: at 1 a false ramp takes a random walk's longest
+# tau, at 2 a true one is left out of short records and its slope biases the others)
+RESOLVED_AT = np.array([1.5 if name in ("quantization", "ramp") else 1.0 for name in TERM_NAMES])
 _MAX_ITERATIONS = 100
 # An estimate's standard deviation is taken as at least this part of the model there (a record that is
 # all ramp, whose estimates have no noise, would otherwise weigh infinitely).
 _RELATIVE_SD_FLOOR = 1e-9
-REASON_ZERO = "consistent with zero: its estimate is within one standard deviation of 0"
+REASON_ZERO = "consistent with zero: its estimate is within {} of 0"
 REASON_OUT = "out of the non-negative fit: the record holds none of it beside the other terms"
 REASON_SILENT = "the record holds no noise"
 REASON_REMOVED = "removed from the record before the analysis (noise.json detrend)"
@@ -88,17 +92,18 @@ def _root_weights(products: tuple[np.ndarray, np.ndarray], parts: np.ndarray) ->
 def fit_terms(tau: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.ndarray],
               removed: tuple[str, ...] = ()) -> TermFit:
     """Weighted non-negative least-squares fit of the five-term model to avar (M,) (module docstring), then
-    backward elimination: while a fitted term is within its standard deviation of zero, the least
-    significant is taken out and the rest refitted, so that an unresolved term takes no share of the others'
-    tau. A term out of the fit keeps the standard deviation it would have were it in (its upper limit); the
-    terms ``removed`` (names of TERM_NAMES: taken out of the record before) are never fitted."""
+    backward elimination: while quantization or the ramp is fitted within RESOLVED_AT standard deviations of
+    zero, the less significant is taken out and the rest refitted, so that a term the record does not hold
+    takes no share of its neighbours' tau. A term out of the fit keeps the standard deviation it would have
+    were it in (its upper limit); the terms ``removed`` (names of TERM_NAMES: taken out of the record before)
+    are never fitted."""
     design = design_matrix(tau)
     kept = np.array([name not in removed for name in TERM_NAMES])
     allowed = kept.copy()
     while True:
         fit = _fit(design, avar, products, allowed)
         sd = np.sqrt(np.diag(fit.covariance))
-        weak = np.flatnonzero((fit.coefficients > 0.0) & (fit.coefficients <= sd))
+        weak = np.flatnonzero((fit.coefficients > 0.0) & (fit.coefficients <= RESOLVED_AT * sd) & (RESOLVED_AT > 1.0))
         if not weak.size:
             break
         allowed[weak[np.argmin(fit.coefficients[weak] / sd[weak])]] = False
@@ -144,14 +149,14 @@ def _fit(design: np.ndarray, avar: np.ndarray, products: tuple[np.ndarray, np.nd
     return TermFit(coefficients, covariance, parts.sum(axis=1), parts)
 
 
-def term(coefficient: float, sd: float, level: float) -> Term:
+def term(coefficient: float, sd: float, level: float, resolved_at: float = 1.0) -> Term:
     """sqrt(coefficient) and its interval at ``level``; the value None, with the reason, when the record
     cannot resolve it.
 
     The interval is the normal one, coefficient -/+ z sd (z the two-sided normal quantile of ``level``),
     cut at zero, then the square root: the coefficient is a weighted sum of many estimates with weights of
     both signs, not one chi-square variance (docs/noise.md). It is given also where the value is not:
-    unresolved when coefficient <= sd (consistent with zero), and then the interval is the upper limit a
+    unresolved when coefficient <= resolved_at sd (consistent with zero), and then the interval is the upper limit a
     lab quotes; for a term out of the non-negative fit (coefficient 0), [0, sqrt(z sd)] with sd its
     standard deviation were it in. A record without noise (sd 0) has neither.
     """
@@ -161,6 +166,7 @@ def term(coefficient: float, sd: float, level: float) -> Term:
         return Term(None, None, None, REASON_SILENT)
     z = float(stats.norm.ppf(0.5 + level / 2.0))
     lower, upper = (math.sqrt(max(v, 0.0)) for v in (coefficient - z * sd, coefficient + z * sd))
-    if coefficient > sd:
+    if coefficient > resolved_at * sd:
         return Term(math.sqrt(coefficient), lower, upper)
-    return Term(None, lower, upper, REASON_ZERO if coefficient > 0.0 else REASON_OUT)
+    within = "one standard deviation" if resolved_at == 1.0 else f"{resolved_at:g} standard deviations"
+    return Term(None, lower, upper, REASON_ZERO.format(within) if coefficient > 0.0 else REASON_OUT)

@@ -52,13 +52,16 @@ def _step_row(entry: dict[str, Any], state: PlanState) -> str:
 
 def _unit_section(name: str, figures: dict[str, Any]) -> str:
     e = html.escape
+    truth = figures.get("truth_turn_on_bias_ug")
     rows = "".join(
         f"<tr><td>{axis}</td><td>{figures['turn_on_repeatability_ug'][k]:.2f}</td>"
         f"<td>{figures['turn_on_repeatability_ci_ug'][k][0]:.2f} to {figures['turn_on_repeatability_ci_ug'][k][1]:.2f}"
-        f"</td><td>{figures['in_run_sigma_ug'][k]:.2f}</td></tr>" for k, axis in enumerate(AXES))
+        f"</td><td>{figures['in_run_sigma_ug'][k]:.2f}</td>{f'<td>{truth[k]:g}</td>' if truth else ''}</tr>"
+        for k, axis in enumerate(AXES))
     return (f"<h2>Unit {e(name)}: turn-on-to-turn-on bias repeatability</h2><p>{figures['power_ons']} power-ons; "
             f"interval {figures['confidence']:.0%} (chi-square)</p><table><tr><th>axis</th><th>repeatability (ug, "
-            f"1&sigma;)</th><th>interval (ug)</th><th>in-run &sigma; (ug)</th></tr>{rows}</table>"
+            f"1&sigma;)</th><th>interval (ug)</th><th>in-run &sigma; (ug)</th>"
+            f"{'<th>emulated truth (ug, 1&sigma;)</th>' if truth else ''}</tr>{rows}</table>"
             f"{_bias_plot(figures['biases_ug'])}")
 
 

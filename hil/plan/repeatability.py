@@ -50,8 +50,9 @@ def units_figures(plan: Plan, state: PlanState) -> dict[str, Any]:
     biases = np.array([doc["estimate"]["accel_bias_ug"] for doc in swings], dtype=float)
     sigmas = np.array([doc["estimate"]["accel_bias_sigma_ug"] for doc in swings], dtype=float)
     figures = repeatability(biases, sigmas)
-    truth = [doc.get("truth", {}).get("accel_bias_ug") for doc in swings]
-    if all(truth):
+    truth = [(doc.get("truth") or {}).get("accel_bias_ug") for doc in swings]
+    if all(truth):  # emulated: the biases the unit had, and the spread they were drawn with
         figures["truth_biases_ug"] = truth
+        figures["truth_turn_on_bias_ug"] = list(plan.config.imu.errors.turn_on_bias_ug)
     name = next((doc["record"].get("dut_serial") for doc in swings if doc.get("record")), None) or DEFAULT_UNIT
     return {name: figures}

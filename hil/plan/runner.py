@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -37,6 +36,7 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
         state = PlanState.open(out, plan, args.resume)
         ctx = StepContext(out, plan.name, state.doc["run"], args, commands)
         with StopSignals() as stop, power:
+            power.restore(plan, state)
             ended = _steps(plan, state, ctx, power, stop)
         return _close(plan, state, ended, power)
 
@@ -50,8 +50,8 @@ def _steps(plan: Plan, state: PlanState, ctx: StepContext, power: PlanPower, sto
             return f"interrupted ({stop.received})"
         _progress(plan, step, power.speed)
         state.start(step)
-        ended, verdict = _run_step(step, ctx, power, stop)
-        state.finish(step, ended, verdict)
+        ended, verdict, more = _run_step(step, ctx, power, stop)
+        state.finish(step, ended, verdict, **more)
         if verdict == INTERRUPTED or stop.received:
             return f"interrupted ({stop.received or 'during step ' + str(step.index)})"
         if verdict == ENDED_EARLY and step.on_failure == "stop":
@@ -59,17 +59,20 @@ def _steps(plan: Plan, state: PlanState, ctx: StepContext, power: PlanPower, sto
     return "completed"
 
 
-def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals) -> tuple[str, str | None]:
-    """Run one step: how it ended and its verdict."""
+def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals) -> tuple[str, str | None, dict]:
+    """Run one step: how it ended, its verdict and what else its entry in plan.json holds (the supply's reading
+    before a trial step)."""
     if step.kind in TRIAL_KINDS:
+        more = {"power": power.reading()} if power.supply is not None else {}
         unpowered = power.unpowered()
         if unpowered:
-            return f"ended early: {unpowered}", ENDED_EARLY
-        ended, verdict, _ = run_trial_step(step, ctx)
-        return ended, verdict
+            return f"ended early: {unpowered}", ENDED_EARLY, more
+        ended, verdict, _ = run_trial_step(step, ctx, power.overrides())
+        return ended, verdict, more
     if step.kind == "wait":
-        return ("completed", None) if power.sleep(float(step.params["s"]), stop) else ("interrupted", INTERRUPTED)
-    return power.step(step, stop)
+        done = power.sleep(float(step.params["s"]), stop)
+        return ("completed", None, {}) if done else ("interrupted", INTERRUPTED, {})
+    return (*power.step(step, stop), {})
 
 
 def _close(plan: Plan, state: PlanState, ended: str, power: PlanPower) -> int:

@@ -16,7 +16,7 @@ import yaml
 
 from hil.arguments import build_parser
 from hil.inputs import InputError
-from hil.plan.spec import Step
+from hil.plan.spec import Step, merged
 
 COMMAND_OF = {"swing": "run", "calibrate": "calibrate", "noise": "noise"}
 INTERRUPTED, ENDED_EARLY = "INTERRUPTED", "ENDED EARLY"
@@ -39,9 +39,10 @@ def plan_tag(name: str, run: str, step: Step) -> str:
     return f"plan {name} run {run} step {step.out_name}"
 
 
-def run_trial_step(step: Step, ctx: StepContext) -> tuple[str, str | None, int]:
-    """Run ``step`` through its command into ``OUT/NN-<kind>``: how it ended, its verdict and its exit code."""
-    config = _write_config(step, ctx)
+def run_trial_step(step: Step, ctx: StepContext, overrides: dict) -> tuple[str, str | None, int]:
+    """Run ``step`` through its command into ``OUT/NN-<kind>``, its config with ``overrides`` (the unit's state
+    since its last power-on): how it ended, its verdict and its exit code."""
+    config = _write_config(step, ctx, overrides)
     argv = _argv(step, config, ctx.out / step.out_name, ctx.args)
     args = build_parser().parse_args(argv)
     args.func, args.started = ctx.commands[args.command], datetime.now(timezone.utc)
@@ -54,9 +55,9 @@ def run_trial_step(step: Step, ctx: StepContext) -> tuple[str, str | None, int]:
     return ended, verdict, code
 
 
-def _write_config(step: Step, ctx: StepContext) -> Path:
-    """The step's config, tagged with the plan's name, run and step in ``record.notes``."""
-    data = dict(step.data)
+def _write_config(step: Step, ctx: StepContext, overrides: dict) -> Path:
+    """The step's config with ``overrides``, tagged with the plan's name, run and step in ``record.notes``."""
+    data = merged(step.data, overrides, f"step {step.index}")
     record = dict(data.get("record") or {})
     notes = record.get("notes")
     record["notes"] = plan_tag(ctx.name, ctx.run, step) + (f"; {notes}" if notes else "")
