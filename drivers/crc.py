@@ -48,3 +48,13 @@ def crc_rows(crc: Callable[[bytes], int], rows: np.ndarray) -> np.ndarray:
     """``crc`` of every row of ``rows`` (N, L) uint8 at once, from per-position tables (uint32 (N,))."""
     tables, constant = _position_tables(crc, rows.shape[1])
     return np.bitwise_xor.reduce(tables[np.arange(rows.shape[1]), rows], axis=1) ^ np.uint32(constant)
+
+
+def crc16_modbus(data: bytes) -> int:
+    """CRC-16/MODBUS: poly 0x8005 reflected (0xA001), init 0xFFFF, xorout 0 (check 0x4B37); sent low byte first."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
