@@ -38,6 +38,8 @@ def ratetest_command(args: argparse.Namespace) -> int:
     given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
     cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update={k: v for k, v in given.items() if v})})
     key, run = TESTS[args.test]
+    if args.simulate:
+        cfg.emulated_only(str(args.config), "hil ratetest --simulate")
     out = output_dir(args.out, cfg)
     with claimed(out, RATETEST_OUTPUTS, args.overwrite, (Path(args.config),)):
         steps_run = simulate_steps if args.simulate else \
