@@ -45,8 +45,9 @@ def ratetest_command(args: argparse.Namespace) -> int:
         steps_run = simulate_steps if args.simulate else \
             partial(live_steps, config_path=Path(args.config), out=out, speed=args.speed, quiet=args.quiet)
         doc = run(cfg, getattr(cfg, key), steps_run)
-        doc["record"] = run_record(cfg.record.model_dump(), Path(args.config).read_text(), args.started,
-                                   datetime.now(timezone.utc))
+        text = Path(args.config).read_text()
+        doc["record"] = run_record(cfg.record.model_dump(), text, args.started, datetime.now(timezone.utc))
+        (out / "config.yaml").write_text(text)  # the config as given, as every trial keeps it
         verdict = write_ratetest(out, doc, cfg.limits, figures=not args.no_figures)
     if not args.no_history:
         file_trial(args.history, trial_row(doc["test"], out, doc, verdict, history_figures(doc)))

@@ -188,6 +188,7 @@ def test_ratetest_command_fails_a_scale_factor_beyond_its_limit_in_report_and_ju
     failed = {case.get("name") for case in junit.iter("testcase") if case.find("failure") is not None}
     assert failed == {"scale_factor_error_x"}
     assert json.loads((out / "scale_factor.json").read_text())["record"]["config_sha256"]
+    assert (out / "config.yaml").read_text() == path.read_text()
     assert "FAIL" in (out / "report.html").read_text() and (out / "scale_factor.png").exists()
 
 

@@ -18,7 +18,8 @@ from hil.outputs.result import trial_verdict
 from hil.outputs.trial_report import REPORT_NAME, figures_html, html_page, measurement_table
 
 RATETEST_OUTPUTS = ("scale_factor.json", "scale_factor.png", "frequency_response.json", "bode.png", REPORT_NAME,
-                    "junit.xml", "recording.mcap", "ports.json", "emulator.json", "emulator.log")  # live: the trial's
+                    "junit.xml", "config.yaml", "recording.mcap", "ports.json", "emulator.json",
+                    "emulator.log")  # the config's copy; live: the trial's
 TITLES = {"scale_factor": "Scale factor test", "frequency_response": "Frequency response test"}
 
 
