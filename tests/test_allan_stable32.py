@@ -1,5 +1,8 @@
 """The overlapping Allan deviation, its noise type and its 68.3 % interval at each tau, against Stable32's
-published runs (tests/data/stable32/README.md): the type equal, the bounds within 0.5 % of the deviation."""
+published runs (tests/data/stable32/README.md): the type equal, the bounds within 0.5 % of the deviation.
+
+    .venv/bin/python -m tests.test_allan_stable32      # the agreement per tau (HIL_STABLE32_DATA: all four)
+"""
 
 from __future__ import annotations
 
@@ -71,3 +74,16 @@ def test_nbs14_noise_type_equals_stable32s_at_all_139_taus_lag1_b1_and_rn():
     result = allan.analyse(nbs14_frequency(), 1.0, taus=tuple(float(m) for m in table["m"]))
     np.testing.assert_array_equal(result.alpha[:, 0], table["alpha"])
     assert np.count_nonzero(table["alpha"] == 1) == 55
+
+
+if __name__ == "__main__":
+    for run in RUNS:
+        external = hasattr(run, "marks")  # a pytest.param: a record kept outside the repository
+        name, rates = run.values if external else run
+        if external and EXTERNAL is None:
+            continue
+        table = stable32_table(name)
+        result, bounds = _agreement(rates(), table)
+        print(f"{name}: tau (s), alpha ours / Stable32's, our lower and upper bound less Stable32's in % of the deviation")
+        for m, ours, theirs, (low, high) in zip(table["m"], result.alpha[:, 0], table["alpha"], bounds):
+            print(f"  {m:6d}  {ours:+d} / {theirs:+d}  {100 * low:+.3f} %  {100 * high:+.3f} %")
