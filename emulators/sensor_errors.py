@@ -40,6 +40,7 @@ import math
 import numpy as np
 
 from emulators.sensor_response import SensorResponse
+from emulators.thermal import ThermalModel
 from hil.config import ConfigError, ImuErrors
 from hil.units import ARCSEC, DEG, DEG_PER_H, HOUR, PPM, UG, UG_PER_G2
 
@@ -192,7 +193,8 @@ class SensorErrorModel:
     series (random-walk state, random stream and quantisation remainders carry over).
     """
 
-    def __init__(self, errors: ImuErrors, rate_hz: float, seed: int) -> None:
+    def __init__(self, errors: ImuErrors, rate_hz: float, seed: int, chamber_c: float | None = None) -> None:
+        """``chamber_c``: the chamber's air (deg C) that ``errors.thermal`` follows (None: ``errors.temperature_c``)."""
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         period = 1.0 / rate_hz
@@ -231,9 +233,13 @@ class SensorErrorModel:
         self._gyro_instability, self._accel_instability = instability[:3].any(), instability[3:].any()
         self._instability = BiasInstability(instability, period, seed) if instability.any() else None
         self._temperature_c = e.temperature_c
+        self._thermal = None if e.thermal is None else ThermalModel(
+            e.thermal, e.temperature_c if chamber_c is None else chamber_c, e.temperature_c, period)
 
     def temperature_c(self, t: np.ndarray) -> np.ndarray:
-        """The sensor's temperature (deg C) at trial times t (N,): the configured constant."""
+        """The sensor's temperature (deg C) at trial times t (N,): the configured constant, or the thermal model's."""
+        if self._thermal is not None:
+            return self._thermal.temperature_c(t)
         return np.full(len(t), self._temperature_c)
 
     def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -252,6 +258,9 @@ class SensorErrorModel:
         # A fixed number of draws per sample, in a fixed order, keeps the stream independent of chunking.
         draws = self._rng.standard_normal((n, 12))
         bias = self._instability(n) if self._instability is not None else np.zeros((n, 6))
+        if self._thermal is not None:  # on the ideal increments, before the sensor's response and quantisation
+            thermal_dtheta, thermal_dv = self._thermal.errors(t, dtheta, dv)
+            dtheta, dv = dtheta + thermal_dtheta, dv + thermal_dv
         return (
             self._gyro(t, dtheta, draws[:, 0:3], draws[:, 6:9], bias[:, :3] if self._gyro_instability else None),
             self._accel(t, dv, draws[:, 3:6], draws[:, 9:12], bias[:, 3:] if self._accel_instability else None),

@@ -58,10 +58,12 @@ class Simulation:
 
 def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:
     """The truth (site, table, the configured ``turntable.motion``) and the IMU's errors (seeded with
-    ``trial.seed``) of a config."""
+    ``trial.seed``) of a config, its temperature after the chamber held at ``environment.chamber.set_point_c``."""
     earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
     site = cfg.site
     truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
                   (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),
                   site.gravity_anomaly_mgal * MGAL)
-    return truth, SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed)
+    chamber = cfg.environment.chamber
+    chamber_c = None if chamber is None else chamber.ambient_c if chamber.set_point_c is None else chamber.set_point_c
+    return truth, SensorErrorModel(cfg.imu.errors, cfg.imu_rate_hz, cfg.trial.seed, chamber_c)

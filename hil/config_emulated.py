@@ -44,6 +44,21 @@ class ImuFaultConfig(FaultConfig):
     start_up_s: float = Field(0.0, ge=0)  # after power-on (the trial's start, a power cycle's end) flagged this long
 
 
+class ThermalErrors(Model):
+    """``imu.errors.thermal``: the sensor's temperature after the chamber's and power-on, and its bias and scale
+    factor errors as polynomials in T - reference_c (emulators/thermal.py)."""
+
+    reference_c: float = Field(25.0, ge=-60, le=125)
+    accel_bias_ug_per_c: Vec3 = ZERO3
+    accel_bias_ug_per_c2: Vec3 = ZERO3
+    gyro_bias_dph_per_c: Vec3 = ZERO3
+    accel_scale_ppm_per_c: Vec3 = ZERO3
+    gyro_scale_ppm_per_c: Vec3 = ZERO3
+    case_tau_s: float = Field(600.0, gt=0)  # the case follows the chamber's air with this time constant
+    self_heating_c: float = Field(0.0, ge=-20, le=50)  # the electronics' rise above the case after power-on ...
+    warmup_tau_s: float = Field(300.0, gt=0)  # ... with this time constant
+
+
 class ImuErrors(Model):
     """Sensor errors applied by the emulator; per-axis lists (x, y, z). All off by default."""
 
@@ -71,3 +86,4 @@ class ImuErrors(Model):
     dtheta_quantum_rad: float = Field(0.0, ge=0)  # output quantisation of the angle increment
     dv_quantum_mps: float = Field(0.0, ge=0)  # output quantisation of the velocity increment
     temperature_c: float = Field(25.0, ge=-60, le=125)  # the sensor's temperature the IMU reports in its frames
+    thermal: ThermalErrors | None = None  # temperature_c is then the sensor's at power-on, and it follows the chamber

@@ -1,0 +1,65 @@
+"""The emulated IMU's thermal model (imu.errors.thermal): its temperature against the first-order step response
+and the warm-up, its biases and scale factors against their polynomials at a temperature, and the emulated
+world's chamber at environment.chamber.set_point_c."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from emulators.sensor_errors import SensorErrorModel
+from emulators.simulation import emulated_world
+from hil.config import load_config
+from hil.config_emulated import ImuErrors
+from hil.units import DEG_PER_H, UG
+
+RATE = 100.0
+THERMAL = {"reference_c": 25.0, "accel_bias_ug_per_c": [10.0, -20.0, 5.0], "accel_bias_ug_per_c2": [0.5, 0.1, -0.2],
+           "gyro_bias_dph_per_c": [0.02, -0.01, 0.03], "accel_scale_ppm_per_c": [2.0, 0.0, -1.0],
+           "gyro_scale_ppm_per_c": [-3.0, 1.0, 4.0], "case_tau_s": 600.0, "self_heating_c": 0.0,
+           "warmup_tau_s": 300.0}
+
+
+def _model(start_c: float, chamber_c: float, **thermal) -> SensorErrorModel:
+    return SensorErrorModel(ImuErrors(temperature_c=start_c, thermal={**THERMAL, **thermal}), RATE, 1, chamber_c)
+
+
+def test_the_sensor_follows_a_chamber_step_through_the_case_time_constant():
+    model = _model(start_c=25.0, chamber_c=-40.0)
+    t = np.array([0.0, 600.0, 1800.0])
+    assert model.temperature_c(t) == pytest.approx([25.0, -40.0 + 65.0 / math.e, -40.0 + 65.0 * math.exp(-3.0)])
+
+
+def test_self_heating_after_power_on_rises_with_the_warm_up_time_constant():
+    model = _model(start_c=25.0, chamber_c=25.0, self_heating_c=4.0, warmup_tau_s=300.0)
+    assert model.temperature_c(np.array([0.0, 300.0, 1e6])) == pytest.approx([25.0, 25.0 + 4.0 * (1 - 1 / math.e),
+                                                                               29.0])
+
+
+def test_biases_and_scale_factors_are_the_polynomials_at_the_sensor_temperature():
+    model = _model(start_c=70.0, chamber_c=70.0)  # soaked: dT = 45 deg C throughout
+    n, d = 200, 45.0
+    t = np.arange(1, n + 1) / RATE
+    rate = np.array([0.5, -1.0, 2.0])  # rad/s
+    specific_force = np.array([0.0, 0.0, 9.8])  # m/s^2
+    dtheta, dv = model.apply(t, np.tile(rate / RATE, (n, 1)), np.tile(specific_force / RATE, (n, 1)))
+    c = THERMAL
+    gyro = rate * (1 + np.array(c["gyro_scale_ppm_per_c"]) * 1e-6 * d) + np.array(c["gyro_bias_dph_per_c"]) * d * DEG_PER_H
+    accel = (specific_force * (1 + np.array(c["accel_scale_ppm_per_c"]) * 1e-6 * d)
+             + (np.array(c["accel_bias_ug_per_c"]) * d + np.array(c["accel_bias_ug_per_c2"]) * d * d) * UG)
+    assert dtheta.mean(axis=0) * RATE == pytest.approx(gyro, rel=1e-12, abs=1e-15)
+    assert dv.mean(axis=0) * RATE == pytest.approx(accel, rel=1e-12, abs=1e-12)
+    assert (dv.mean(axis=0) * RATE - specific_force)[0] / UG == pytest.approx(10.0 * 45 + 0.5 * 45 ** 2)
+
+
+def test_the_emulated_world_holds_the_chamber_at_its_set_point(tmp_path):
+    cfg_path = tmp_path / "c.yaml"
+    data = yaml.safe_load(open("configs/emulated_swing.yaml"))
+    data.setdefault("imu", {}).setdefault("errors", {}).update({"temperature_c": 20.0, "thermal": THERMAL})
+    data["environment"] = {"chamber": {"source": "emulator", "set_point_c": -20.0}}
+    cfg_path.write_text(yaml.safe_dump(data))
+    _, errors = emulated_world(load_config(cfg_path))
+    assert errors.temperature_c(np.array([0.0, 600.0])) == pytest.approx([20.0, -20.0 + 40.0 / math.e])
