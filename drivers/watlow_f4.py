@@ -9,10 +9,12 @@ written is read back, and a controller that does not confirm it is a :class:`Cha
 
 from __future__ import annotations
 
+import logging
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+logging.getLogger("pymodbus").addHandler(logging.NullHandler())  # its errors reach the user as ChamberError
 PROCESS_VALUE, SET_POINT_1, DECIMALS, UNITS = 100, 300, 606, 901
 DEG_F, DEG_C = 0, 1
 
@@ -61,11 +63,11 @@ class WatlowF4:
         self._client = ModbusSerialClient(self.port, baudrate=self.options.baudrate, bytesize=8, parity="N",
                                           stopbits=1, timeout=self.options.timeout_s, retries=0)
         if not self._client.connect():
-            raise ChamberError(f"chamber {self.port}: cannot open the serial port")
+            raise ChamberError(f"chamber at {self.port}: cannot open the serial port")
         self.decimals = self._read(DECIMALS)
         self.units = self._read(UNITS)
         if self.decimals not in (0, 1, 2, 3) or self.units not in (DEG_F, DEG_C):
-            raise ChamberError(f"chamber {self.port}: decimals {self.decimals}, units {self.units}: "
+            raise ChamberError(f"chamber at {self.port}: decimals {self.decimals}, units {self.units}: "
                                "not a Series F4's settings")
         return self
 
@@ -86,11 +88,11 @@ class WatlowF4:
         """Write set point 1, rounded to the controller's decimals, and read it back."""
         raw = round(c_to_unit(value_c, self.units) * 10 ** self.decimals)
         if not -0x8000 <= raw <= 0x7FFF:
-            raise ChamberError(f"chamber {self.port}: set point {value_c:g} deg C is beyond a 16-bit register")
+            raise ChamberError(f"chamber at {self.port}: set point {value_c:g} deg C is beyond a 16-bit register")
         self._call("write register 300", self._client.write_register, SET_POINT_1, raw & 0xFFFF)
         back = to_signed(self._read(SET_POINT_1))
         if back != raw:
-            raise ChamberError(f"chamber {self.port}: set point 1 written {raw}, read back {back}")
+            raise ChamberError(f"chamber at {self.port}: set point 1 written {raw}, read back {back}")
 
     def _to_c(self, raw: int) -> float:
         return unit_to_c(raw / 10 ** self.decimals, self.units)
@@ -106,7 +108,7 @@ class WatlowF4:
         try:
             reply = request(*args, device_id=self.options.address, **kwargs)
         except (ModbusException, OSError) as exc:
-            raise ChamberError(f"chamber {self.port}: {what}: {exc}") from None
+            raise ChamberError(f"chamber at {self.port}: {what}: {exc}") from None
         if reply.isError():
-            raise ChamberError(f"chamber {self.port}: {what}: refused ({reply})")
+            raise ChamberError(f"chamber at {self.port}: {what}: refused ({reply})")
         return reply

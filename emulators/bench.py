@@ -19,6 +19,7 @@ import numpy as np
 from drivers.codec import check_baudrate
 from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from drivers.registry import imu_codec
+from emulators.chamber import EmulatedChamber, emulated_chamber
 from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.ports import CanPort, PtyPort
@@ -116,6 +117,7 @@ class Bench:
         self.ports: dict = {}
         self.writers: dict[str, DeviceWriter] = {}
         self.server: TableServer | None = None
+        self.chamber: EmulatedChamber | None = None
         unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
         private = any(unplugging) and link_dir is None
         self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
@@ -137,6 +139,9 @@ class Bench:
             check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)  # it sends tts1
             self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
             self.server = TableServer(emulated_table(cfg, self.servo, log=True))
+            chamber = cfg.environment.chamber
+            if chamber is not None and chamber.source == "emulator":
+                self.chamber = emulated_chamber(chamber, speed)
             for k, (name, damage, baud, faults) in enumerate((
                     ("imu", imu_damage, imu_baud, imu_cfg.faults),
                     ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
@@ -148,12 +153,15 @@ class Bench:
 
     def names(self) -> dict:
         """The ports JSON."""
+        chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
         return {"imu": self.ports["imu"].path, "turntable_data": self.ports["turntable_data"].path,
-                "turntable_cmd": self.server.url}
+                "turntable_cmd": self.server.url, **chamber}
 
     def close(self) -> None:
         if self.server is not None:
             self.server.close()
+        if self.chamber is not None:
+            self.chamber.close()
         for port in self.ports.values():
             port.close()
         if self._links is not None:

@@ -10,11 +10,13 @@ import math
 import os
 import select
 import threading
+import time
 import tty
 from collections.abc import Callable
 
 from drivers.crc import crc16_modbus
 from drivers.watlow_f4 import DECIMALS, DEG_C, PROCESS_VALUE, SET_POINT_1, UNITS, c_to_unit, to_signed, unit_to_c
+from hil.config_environment import ChamberConfig
 
 READ, WRITE = 0x03, 0x06
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE = 0x01, 0x02, 0x03
@@ -132,3 +134,12 @@ class EmulatedChamber:
         self._thread.join()
         os.close(self.master)
         os.close(self._slave)
+
+
+def emulated_chamber(cfg: ChamberConfig, speed: float | None) -> EmulatedChamber:
+    """The emulated chamber of ``environment.chamber`` (``source: emulator``) at address 1, its air starting at
+    ``set_point_c`` (else ``ambient_c``), its time running at ``speed`` times the wall clock's (unpaced: 1)."""
+    start, scale = time.monotonic(), speed or 1.0
+    start_c = cfg.ambient_c if cfg.set_point_c is None else cfg.set_point_c
+    model = ChamberModel(cfg.tau_s, cfg.ramp_c_per_min_max, start_c)
+    return EmulatedChamber(F4Registers(model, lambda: (time.monotonic() - start) * scale))

@@ -3,17 +3,20 @@ by pymodbus's own client), and the emulated chamber's first-order model with its
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import threading
 import tty
 
 import pytest
+import yaml
 from crccheck.crc import Crc16Modbus
 
 from drivers.crc import crc16_modbus
 from drivers.watlow_f4 import ChamberError, WatlowF4, WatlowF4Options
 from emulators.chamber import ChamberModel, EmulatedChamber, F4Registers
+from hil.cli import main
 
 # Typed from the Modbus specifications: the serial line guide's read-holding-registers example (device 0x11,
 # registers 0x006B.., 3 of them) and, for a Series F4 at address 1, reads of 606 (0x025E, decimals), 901
@@ -87,7 +90,7 @@ def test_a_set_point_the_controller_does_not_confirm_is_refused():
 
 def test_a_controller_that_does_not_answer_is_an_error_naming_the_port():
     device = ScriptedDevice([])
-    with pytest.raises(ChamberError, match=f"chamber {device.path}: read register 606"):
+    with pytest.raises(ChamberError, match=f"chamber at {device.path}: read register 606"):
         WatlowF4(device.path, WatlowF4Options(timeout_s=0.2)).open()
     device.close()
 
@@ -147,3 +150,39 @@ def test_the_chamber_model_ramps_at_its_limit_then_follows_the_first_order_step_
     small = ChamberModel(tau, ramp, 25.0)
     small.set_point_c = 35.0  # a 10 deg C step is never ramp-limited
     assert small.advance(300.0) == pytest.approx(35.0 - 10.0 * math.exp(-0.5), abs=1e-9)
+
+
+def _config(tmp_path, chamber: dict, duration_s: float = 4.0, **errors) -> str:
+    data = yaml.safe_load(open("configs/emulated_swing.yaml"))
+    data["trial"]["duration_s"] = duration_s
+    data["imu"]["errors"].update(errors)
+    data["environment"] = {"chamber": chamber}
+    path = tmp_path / "chamber.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def test_a_chamber_that_does_not_answer_ends_a_trial_with_exit_2_naming_the_key_and_port(tmp_path, capsys):
+    silent = ScriptedDevice([])
+    config = _config(tmp_path, {"controller": "watlow-f4", "port": silent.path, "options": {"timeout_s": 0.2}})
+    code = main(["run", config, "--out", str(tmp_path / "out"), "--speed", "max"])
+    silent.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"hil: error: environment.chamber: chamber at {silent.path}: read register 606: Modbus Error: "
+                   "[Input/Output] No response received after 0 retries, continue with next request"]
+
+
+def test_a_set_point_beyond_the_chamber_limits_is_refused_naming_the_key(tmp_path, capsys):
+    config = _config(tmp_path, {"source": "emulator", "set_point_c": 200.0})
+    assert main(["run", config, "--out", str(tmp_path / "out"), "--speed", "max"]) == 2
+    assert "environment.chamber: set_point_c: 200 deg C is outside limits_c [-70, 180]" in capsys.readouterr().err
+
+
+def test_an_emulated_trial_in_the_emulated_chamber_reports_the_imu_warming_towards_its_set_point(tmp_path):
+    thermal = {"case_tau_s": 20.0, "self_heating_c": 0.0}
+    config = _config(tmp_path, {"source": "emulator", "set_point_c": 40.0}, temperature_c=22.0, thermal=thermal)
+    main(["run", config, "--out", str(tmp_path / "out"), "--speed", "max", "--no-history"])
+    seen = json.loads((tmp_path / "out" / "result.json").read_text())["streams"]["imu_temperature_c"]
+    assert seen["min"] == 22.0
+    assert seen["max"] == round(40.0 - 18.0 * math.exp(-4.0 / 20.0))  # the KVH 1750 reports whole deg C

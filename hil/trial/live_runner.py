@@ -12,6 +12,7 @@ from pathlib import Path
 from drivers.table_controller import InterlockError, LimitError, TableError
 from emulators.process import EmulatorError, parse_speed, spawn_emulator, stop_emulator
 from hil.config import Config
+from hil.trial.chamber import open_chamber, release_chamber
 from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.stop_signals import StopSignals
@@ -62,7 +63,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
 def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
              time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested, commanded: Commanded):
     """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
-    emulator, ports, control, viewer = None, None, None, None
+    emulator, ports, control, viewer, chamber = None, None, None, None, None
     try:
         if emulated(cfg):
             try:
@@ -71,6 +72,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
                                                  hold=True)
             except EmulatorError as exc:
                 raise TrialSetupError(f"{config_path}: {exc}") from None
+        chamber = open_chamber(cfg.environment.chamber, ports)  # before the table moves
         viewer = open_viewer(options, cfg, out, blocking=False)
         command_url = _command_url(cfg, ports)
         with ConsoleProgress(duration, quiet=quiet) as progress:
@@ -95,6 +97,8 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
             control.stop()
             if control.stop_error:
                 print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
+        if chamber is not None:  # after the table is off
+            release_chamber(chamber, cfg.environment.chamber)
         if emulator is not None:
             stop_emulator(emulator)
 
