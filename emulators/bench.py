@@ -141,7 +141,8 @@ class Bench:
             self.server = TableServer(emulated_table(cfg, self.servo, log=True))
             chamber = cfg.environment.chamber
             if chamber is not None and chamber.source == "emulator":
-                self.chamber = emulated_chamber(chamber, speed)
+                self.chamber = emulated_chamber(chamber)
+                self.streams["imu"].source.state["errors"].follow_chamber(self.chamber.air_at)
             for k, (name, damage, baud, faults) in enumerate((
                     ("imu", imu_damage, imu_baud, imu_cfg.faults),
                     ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):

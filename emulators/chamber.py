@@ -10,7 +10,6 @@ import math
 import os
 import select
 import threading
-import time
 import tty
 from collections.abc import Callable
 
@@ -129,6 +128,15 @@ class EmulatedChamber:
                 if reply is not None:
                     os.write(self.master, reply)
 
+    def __deepcopy__(self, memo: dict) -> EmulatedChamber:
+        """One chamber: a copied sensor state (emulators.sources re-computes a chunk from one) still reads it."""
+        return self
+
+    def air_at(self, t: float) -> float:
+        """The air's temperature (deg C) at trial time ``t`` (no earlier than the last), the model moved there."""
+        with self.registers.lock:
+            return self.registers.model.advance(t)
+
     def close(self) -> None:
         self._stop.set()
         self._thread.join()
@@ -136,10 +144,8 @@ class EmulatedChamber:
         os.close(self._slave)
 
 
-def emulated_chamber(cfg: ChamberConfig, speed: float | None) -> EmulatedChamber:
+def emulated_chamber(cfg: ChamberConfig) -> EmulatedChamber:
     """The emulated chamber of ``environment.chamber`` (``source: emulator``) at address 1, its air starting at
-    ``set_point_c`` (else ``ambient_c``), its time running at ``speed`` times the wall clock's (unpaced: 1)."""
-    start, scale = time.monotonic(), speed or 1.0
-    start_c = cfg.ambient_c if cfg.set_point_c is None else cfg.set_point_c
-    model = ChamberModel(cfg.tau_s, cfg.ramp_c_per_min_max, start_c)
-    return EmulatedChamber(F4Registers(model, lambda: (time.monotonic() - start) * scale))
+    ``set_point_c`` (else ``ambient_c``); its time is the emulated IMU's, moved on by :meth:`EmulatedChamber.air_at`."""
+    model = ChamberModel(cfg.tau_s, cfg.ramp_c_per_min_max, cfg.ambient_c if cfg.set_point_c is None else cfg.set_point_c)
+    return EmulatedChamber(F4Registers(model, lambda: model.t))

@@ -36,6 +36,7 @@ first order in K_nl: the square is of the misaligned, scaled force f1.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -233,13 +234,23 @@ class SensorErrorModel:
         self._gyro_instability, self._accel_instability = instability[:3].any(), instability[3:].any()
         self._instability = BiasInstability(instability, period, seed) if instability.any() else None
         self._temperature_c = e.temperature_c
-        self._thermal = None if e.thermal is None else ThermalModel(
-            e.thermal, e.temperature_c if chamber_c is None else chamber_c, e.temperature_c, period)
+        held_c = e.temperature_c if chamber_c is None else chamber_c
+        self._chamber: Callable[[float], float] = lambda _t: held_c
+        self._thermal = None if e.thermal is None else ThermalModel(e.thermal, self._chamber, e.temperature_c, period)
+
+    def follow_chamber(self, air: Callable[[float], float]) -> None:
+        """Take the chamber's air (deg C) at trial time t from ``air(t)``, called once a batch (an emulated
+        chamber's time runs with the samples')."""
+        self._chamber = air
+        if self._thermal is not None:
+            self._thermal.chamber = air
 
     def temperature_c(self, t: np.ndarray) -> np.ndarray:
         """The sensor's temperature (deg C) at trial times t (N,): the configured constant, or the thermal model's."""
         if self._thermal is not None:
             return self._thermal.temperature_c(t)
+        if len(t):
+            self._chamber(float(t[-1]))
         return np.full(len(t), self._temperature_c)
 
     def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,9 @@ starts at, and the electronics add ``self_heating_c`` after power-on with time c
 
     T(t) = T_ch + (T_0 - T_ch) exp(-t / case_tau_s) + self_heating_c (1 - exp(-t / warmup_tau_s))
 
-with t the trial time (the device powered at 0) and the chamber held at T_ch. With dT = T - reference_c, the
+with t the trial time (the device powered at 0) and the chamber held at T_ch; a chamber whose air moves is
+taken as constant over each batch of samples (its value at the batch's first time), the case's lag carried
+from batch to batch. With dT = T - reference_c, the
 accelerometer bias is ``a1 dT + a2 dT^2`` (ug), the gyro bias ``g1 dT`` (deg/h), and each scale factor error
 ``s dT`` (ppm), per axis."""
 
@@ -13,22 +15,35 @@ from __future__ import annotations
 
 import numpy as np
 
+from collections.abc import Callable
+
 from hil.config_emulated import ThermalErrors
 from hil.units import DEG_PER_H, PPM, UG
 
 
 class ThermalModel:
-    """The sensor's temperature and the thermal part of its errors, with the chamber at ``chamber_c`` and the
-    sensor at ``start_c`` at trial time 0; ``period`` (s) is the sample interval."""
+    """The sensor's temperature and the thermal part of its errors, with the chamber's air ``chamber(t)`` (deg C
+    at trial time t) and the sensor's case at ``start_c`` at trial time 0; ``period`` (s) is the sample interval.
+    Called on consecutive batches of times; a batch asked for again gets the same temperatures."""
 
-    def __init__(self, thermal: ThermalErrors, chamber_c: float, start_c: float, period: float) -> None:
-        self.cfg, self.chamber_c, self.start_c, self.period = thermal, chamber_c, start_c, period
+    def __init__(self, thermal: ThermalErrors, chamber: Callable[[float], float], start_c: float,
+                 period: float) -> None:
+        self.cfg, self.chamber, self.period = thermal, chamber, period
+        self._case_c, self._t = start_c, 0.0
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last batch's times and temperatures
 
     def temperature_c(self, t: np.ndarray) -> np.ndarray:
-        """The sensor's temperature (deg C) at trial times t (N,)."""
+        """The sensor's temperature (deg C) at trial times t (N,), the batch after the last one."""
         c, t = self.cfg, np.asarray(t, dtype=float)
-        case = self.chamber_c + (self.start_c - self.chamber_c) * np.exp(-t / c.case_tau_s)
-        return case + c.self_heating_c * -np.expm1(-t / c.warmup_tau_s)
+        if self._last is not None and np.array_equal(t, self._last[0]):
+            return self._last[1]
+        if not len(t):
+            return t
+        air = self.chamber(float(t[0]))
+        case = air + (self._case_c - air) * np.exp(-(t - self._t) / c.case_tau_s)
+        self._case_c, self._t = float(case[-1]), float(t[-1])
+        self._last = (t.copy(), case + c.self_heating_c * -np.expm1(-t / c.warmup_tau_s))
+        return self._last[1]
 
     def biases(self, temperature_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(gyro rad/s, accel m/s^2) biases (N, 3) at the temperatures (N,)."""

@@ -63,3 +63,26 @@ def test_the_emulated_world_holds_the_chamber_at_its_set_point(tmp_path):
     cfg_path.write_text(yaml.safe_dump(data))
     _, errors = emulated_world(load_config(cfg_path))
     assert errors.temperature_c(np.array([0.0, 600.0])) == pytest.approx([20.0, -20.0 + 40.0 / math.e])
+
+
+def test_the_sensor_follows_the_emulated_chamber_after_a_set_point_written_over_modbus():
+    """Two first-order lags in cascade, the chamber's air (600 s, not ramp-limited) and the case (100 s), after
+    a 10 deg C step: T(t) = 35 - 10 (600 exp(-t/600) - 100 exp(-t/100)) / 500."""
+    from drivers.watlow_f4 import WatlowF4
+    from emulators.chamber import emulated_chamber
+    from hil.config_environment import ChamberConfig
+
+    chamber = emulated_chamber(ChamberConfig(source="emulator", set_point_c=25.0, tau_s=600.0, ramp_c_per_min_max=2.0))
+    model = SensorErrorModel(ImuErrors(temperature_c=25.0, thermal={**THERMAL, "case_tau_s": 100.0}), 10.0, 1)
+    model.follow_chamber(chamber.air_at)
+    driver = WatlowF4(chamber.path).open()
+    try:
+        driver.set_set_point_c(35.0)
+        seen = [model.temperature_c(np.arange(1, 11) / 10.0 + s)[-1] for s in range(300)]
+        assert driver.temperature_c() == pytest.approx(35.0 - 10.0 * math.exp(-0.5), abs=0.05)  # one decimal
+    finally:
+        driver.close()
+        chamber.close()
+    expected = 35.0 - 10.0 * (600.0 * math.exp(-0.5) - 100.0 * math.exp(-3.0)) / 500.0
+    assert seen[-1] == pytest.approx(expected, abs=0.02)
+    assert np.all(np.diff(seen) > 0)
