@@ -219,6 +219,7 @@ class EstimatorConfig(Model):
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # relative eigenvalue floor of the scaled Gram matrix
     batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples a block spans (Config.block_samples)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
+    gyro_table_gate: bool = True  # off: no gyro sample is held to the table's rotation (hil ratetest's live form)
 
 
 class ReportLimits(Model):

@@ -186,3 +186,19 @@ def test_an_emulated_trial_in_the_emulated_chamber_reports_the_imu_warming_towar
     seen = json.loads((tmp_path / "out" / "result.json").read_text())["streams"]["imu_temperature_c"]
     assert seen["min"] == 22.0
     assert seen["max"] == round(40.0 - 18.0 * math.exp(-4.0 / 20.0))  # the KVH 1750 reports whole deg C
+
+
+@pytest.mark.parametrize("on_exit, after", [("hold", 400), (30.0, 300)])
+def test_the_chamber_goes_to_its_on_exit_set_point_when_released(on_exit, after):
+    from hil.config_environment import ChamberConfig
+    from hil.trial.chamber import open_chamber, release_chamber
+
+    cfg = ChamberConfig(source="emulator", set_point_c=40.0, on_exit=on_exit)
+    chamber, _ = _emulated(start_c=25.0)
+    try:
+        controller = open_chamber(cfg, {"chamber": chamber.path})
+        assert chamber.registers.read(300) == 400
+        release_chamber(controller, cfg)
+        assert chamber.registers.read(300) == after
+    finally:
+        chamber.close()

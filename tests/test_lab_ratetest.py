@@ -1,5 +1,6 @@
-"""``hil ratetest scale-factor LAB.yaml``: the scale factor test on a running ``hil emulate`` (its own process,
-the harness attached late), commanding the emulated Acutrol table, and on the emulated Aerosmith rate table."""
+"""``hil ratetest scale-factor|frequency-response LAB.yaml``: the tests on a running ``hil emulate`` (its own
+process, the harness attached late), commanding the emulated Acutrol table, and the scale factor on the emulated
+Aerosmith rate table."""
 
 from __future__ import annotations
 
@@ -17,21 +18,28 @@ ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.xdist_group("lab")
 
 
-def _lab_scale_factor(tmp_path: Path, config: str, settings: dict, **imu: object) -> tuple[int, dict, dict]:
-    """The test on a running emulator of ``configs/CONFIG`` (a 200 Hz IMU): exit code, scale_factor.json and the
-    emulator's statistics."""
+def _lab_test(tmp_path: Path, config: str, test: str, settings: dict, **imu: object) -> tuple[int, dict, dict]:
+    """``test`` (scale-factor: a 200 Hz IMU without its low-pass; frequency-response: the config's IMU) on a running
+    emulator of ``configs/CONFIG``: exit code, the test's document and the emulator's statistics."""
     cfg = yaml.safe_load((ROOT / "configs" / config).read_text())
-    cfg["imu"].update(rate_hz=200, **imu)
-    cfg["imu"]["errors"].pop("bandwidth_hz", None)
-    cfg["scale_factor"] = settings
+    key = test.replace("-", "_")
+    cfg["imu"].update(**imu)
+    if key == "scale_factor":
+        cfg["imu"]["rate_hz"] = cfg["trial"]["rate_hz"] = 200
+        cfg["imu"]["errors"].pop("bandwidth_hz", None)
+    cfg[key] = settings
     with Emulator(tmp_path, cfg, duration=300.0) as emulator:
         lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
         time.sleep(1.0)
-        out = tmp_path / "sf"
-        code = main(["ratetest", "scale-factor", str(lab), "--out", str(out), "--quiet", "--no-figures"])
+        out = tmp_path / "out"
+        code = main(["ratetest", test, str(lab), "--out", str(out), "--quiet", "--no-figures"])
         emulator.stop()
         stats = json.loads(emulator.stats_file.read_text())
-    return code, json.loads((out / "scale_factor.json").read_text()), {**stats, "config": cfg}
+    return code, json.loads((out / f"{key}.json").read_text()), {**stats, "config": cfg}
+
+
+def _lab_scale_factor(tmp_path: Path, config: str, settings: dict, **imu: object) -> tuple[int, dict, dict]:
+    return _lab_test(tmp_path, config, "scale-factor", settings, **imu)
 
 
 def test_the_scale_factor_test_of_a_running_emulated_acutrol_table_finds_its_truth_within_3_sigma(tmp_path):
@@ -57,3 +65,16 @@ def test_the_scale_factor_test_of_a_running_emulated_aerosmith_table_finds_its_t
     assert abs(z["asymmetry_signed_ppm"] + 150.0) <= 3.0 * z["asymmetry_sigma_ppm"]
     assert abs(z["bias_dph"] - 0.8) <= 3.0 * z["bias_sigma_dph"]
     assert stats["table_modes"] == "Off"
+
+
+def test_the_frequency_response_of_a_running_emulated_acutrol_table_finds_its_bandwidth_and_delay(tmp_path):
+    code, doc, stats = _lab_test(tmp_path, "ratetest_acutrol.yaml", "frequency-response",
+                                 {"frequencies_hz": [5, 20, 60, 100, 150], "dwell_s": 0.2, "settle_s": 0.2,
+                                  "axes": ["z"]})
+    assert code == 0 and doc["ended"] == "completed"
+    z = doc["axes"]["z"]
+    assert z["bandwidth_hz"] == pytest.approx(100.0, rel=0.05) and z["damping"] == pytest.approx(0.7, abs=0.05)
+    # paired by their motion, the streams are a whole number of samples (the IMU's lag at low frequency) apart
+    assert abs((z["delay_ms"] - 2.0) - round(z["delay_ms"] - 2.0)) < 0.1
+    assert z["latch_check"].startswith("disagrees")  # the 2 ms the lab config does not state
+    assert stats["table_modes"] == "Off,Off,Off"

@@ -236,3 +236,29 @@ def test_simulating_a_config_that_reads_devices_is_refused_naming_the_key(tmp_pa
     assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(tmp_path / "out")]) == 2
     assert "imu.source: serial: hil ratetest --simulate emulates the devices" in capsys.readouterr().err
     assert not (tmp_path / "out" / "scale_factor.json").exists()
+
+
+@pytest.mark.parametrize("table_gate, runs", [(True, 3), (False, 1)])
+def test_without_the_gyro_table_gate_a_gyro_lagging_the_table_keeps_every_sample(table_gate, runs):
+    from hil.frames import Earth, TableGeometry
+    from hil.pipeline.judge import Judge
+    from hil.samples import AlignedBatch
+
+    judge = Judge(Earth.from_degrees(32.0), TableGeometry(), 200.0, 100.0, table_gate=table_gate)
+    t = np.arange(1, 21) / 200.0
+    angles = np.zeros((20, 3))
+    angles[:, 0] = np.radians(10.0) * t  # 10 deg/s about the outer axis
+    dtheta = np.zeros((20, 3))
+    dtheta[:, 2] = np.radians(10.0) / 200.0
+    dtheta[10, 2] *= 0.5  # one sample lagging the table by half its turn
+    first = judge.gated(AlignedBatch(t[:1], dtheta[:1], np.zeros((1, 3)), angles[:1], 0.0))
+    gated = judge.gated(AlignedBatch(t[1:], dtheta[1:], np.zeros((19, 3)), angles[1:], t[0]))
+    assert len(first) == 1 and len(gated) == runs  # gated: the runs before and after it, and its gap
+
+
+def test_a_frequency_the_tables_angle_reports_cannot_follow_exits_2_naming_the_key(tmp_path, capsys):
+    path = _config(tmp_path, trial={"rate_hz": 200}, frequency_response={"frequencies_hz": [10, 20, 50]})
+    assert main(["ratetest", "frequency-response", str(path), "--simulate", "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "hil: error: frequency_response.frequencies_hz: 50 Hz: the table reports its angles at trial.rate_hz (200 Hz), "
+        "fewer than 5 a cycle; nothing was sent")

@@ -20,11 +20,13 @@ from hil.units import DEG
 
 class Judge:
     """The health flags (``flags``, the IMU codec's), the plausibility check and the gyro/table gate of a trial at
-    ``rate_hz`` on a table whose fastest gimbal rate limit is ``max_rate_dps``."""
+    ``rate_hz`` on a table whose fastest gimbal rate limit is ``max_rate_dps``; without ``table_gate`` the gyro is
+    not held to the table's rotation (``estimator.gyro_table_gate``)."""
 
     def __init__(self, earth: Earth, geometry: TableGeometry, rate_hz: float, max_rate_dps: float,
-                 flags: tuple[HealthFlag, ...] = ()) -> None:
+                 flags: tuple[HealthFlag, ...] = (), table_gate: bool = True) -> None:
         self.rate_hz = rate_hz
+        self.table_gate = table_gate
         self.health = HealthCheck(flags)
         self.plausibility = ImuPlausibility(rate_hz, earth.g, RATE_MARGIN * max_rate_dps * DEG)
         self.gate = GyroTableGate(earth, geometry)
@@ -56,7 +58,7 @@ class Judge:
         t_start = np.concatenate(([first[0]], t_end[:-1]))
         starts = np.vstack((first[1], angles[:-1]))
         good = valid.copy()
-        if not (previous is None or np.isnan(previous[1]).any() or np.isnan(angles).any()):
+        if self.table_gate and not (previous is None or np.isnan(previous[1]).any() or np.isnan(angles).any()):
             good[valid] = self.gate.consistent(t_start[valid], t_end[valid], starts[valid], angles[valid],
                                                run.dtheta[valid])
         if good.any():

@@ -5,8 +5,9 @@ trial's table control, and the trial ends when the last window is complete. The 
 way out. An emulated trial runs for at most ``EMULATED_MARGIN`` times the steps' nominal length (+ 120 s).
 
 The pipeline's gyro/table gate takes out samples whose gyro disagrees with the table by more than 1 % of the
-rotation: at a constant rate the windows keep every sample, but a gyro whose response lags the table's motion
-(a sinusoid) is gated, so the frequency response runs in this form only where the gyro follows within that.
+rotation: at a constant rate it keeps every sample of a window and takes out a damaged frame, but a gyro whose
+response lags a sinusoid it would take out wholesale, so the frequency response runs without it
+(``table_gate`` False: ``estimator.gyro_table_gate``).
 """
 
 from __future__ import annotations
@@ -26,8 +27,11 @@ EMULATED_MARGIN = 4.0
 QUEUE_ITEMS = 4  # the emulated devices close behind the processing: commands act without lag
 
 
-def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quiet: bool = False):
-    """Run the steps ``plan(gimbals)`` makes as a live trial; the windows and how it ended."""
+def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quiet: bool = False,
+               table_gate: bool = True):
+    """Run the steps ``plan(gimbals)`` makes as a live trial (the gyro/table gate on or off); the windows and how
+    it ended."""
+    cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"gyro_table_gate": table_gate})})
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil ratetest commands the table; set its port "
                               "('emulator' for the emulated table)")

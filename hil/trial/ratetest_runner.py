@@ -34,6 +34,7 @@ from hil.units import DEG, DEG_PER_H, PPM
 
 # Runs the steps ``plan(gimbals)`` makes (the table's gimbals given) on a trial's devices: the windows and how it ended
 StepsRun = Callable[[Config, Callable[[tuple[str, ...]], list[RateStep]]], tuple[list[StepWindow], str]]
+TABLE_SAMPLES_PER_CYCLE = 5  # the encoder's readings a cycle needs at least to be the reference
 MIN_CYCLES = 10  # a frequency's window holds at least this many cycles
 MARGIN = 0.95  # of the table's rate and acceleration limits an oscillation may use
 ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
@@ -72,6 +73,10 @@ def frequency_steps(cfg: Config, settings: FrequencyResponseSettings, gimbals: t
             if not 0.0 < f < cfg.imu_rate_hz / 2.0:
                 raise TrialSetupError(f"frequency_response.frequencies_hz: {f:g} Hz is not below half the IMU's "
                                       f"rate imu.rate_hz ({cfg.imu_rate_hz:g} Hz); nothing was sent")
+            if f * TABLE_SAMPLES_PER_CYCLE > cfg.trial.rate_hz:
+                raise TrialSetupError(f"frequency_response.frequencies_hz: {f:g} Hz: the table reports its angles at "
+                                      f"trial.rate_hz ({cfg.trial.rate_hz:g} Hz), fewer than "
+                                      f"{TABLE_SAMPLES_PER_CYCLE} a cycle; nothing was sent")
             amplitude = min(settings.amplitude_deg, MARGIN * limits.rate_dps[axis] / w,
                             MARGIN * limits.accel_dps2[axis] / w**2)
             if amplitude * w < settings.min_rate_dps:
@@ -225,8 +230,9 @@ def latch_check(cfg: Config, axis: dict) -> str:
     delay, sigma = axis["delay_ms"], axis["delay_sigma_ms"]
     if abs(delay) <= 3.0 * sigma + LATCH_TOLERANCE * 1e3 / cfg.imu_rate_hz:
         return f"agrees with the latch delays stated ({stated})"
-    return (f"disagrees: the gyro lags the encoder by {delay:.3f} ms beyond the latch delays stated ({stated}): "
-            "the IMU's output delay, or latch delays that are off")
+    return (f"disagrees: the gyro {'lags' if delay > 0 else 'leads'} the encoder by {abs(delay):.3f} ms beyond the "
+            f"latch delays stated ({stated}): the IMU's output delay, latch delays that are off, or streams paired a "
+            "whole number of samples apart")
 
 
 def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitudes: list[float]) -> dict:
