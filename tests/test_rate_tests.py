@@ -192,6 +192,18 @@ def test_ratetest_command_fails_a_scale_factor_beyond_its_limit_in_report_and_ju
     assert "FAIL" in (out / "report.html").read_text() and (out / "scale_factor.png").exists()
 
 
+def test_ratetest_files_the_test_in_the_history_with_each_gyros_figures(tmp_path):
+    from hil.history.store import History
+
+    path = _config(tmp_path, scale_factor={"rates_dps": [90, 180], "dwell_s": 1, "settle_s": 0.2, "axes": ["z"]})
+    history = tmp_path / "history.sqlite"
+    assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(tmp_path / "out"), "--no-figures",
+                 "--dut", "SN-7", "--history", str(history)]) == 0
+    [row] = History(str(history)).trials("SN-7")
+    assert row["kind"] == "scale_factor" and row["verdict"] == "PASS"
+    assert abs(row["figures"]["z.scale_factor_ppm"] - 150.0) < 3.0 * row["figures"]["z.scale_factor_sigma_ppm"]
+
+
 def test_emulated_gyro_range_clips_its_output():
     dtheta = np.array([[3.0, -3.0, 1.0]]) * T  # rad/s
     out = _gyro({"gyro_range_dps": math.degrees(2.0)}, dtheta, chunks=1)
