@@ -38,7 +38,7 @@ class KvhFrame:
     accel: Vec3
     status: int
     sequence: int  # 0..127
-    temperature: int  # deg C
+    temperature: int  # deg C, or deg F as the IMU's TEMPUNITS says
 
 
 class Kvh1750Options(Model):
@@ -47,6 +47,7 @@ class Kvh1750Options(Model):
     gyro_unit: Literal["rad", "deg"] = "rad"
     gyro_output: Literal["delta", "rate"] = "delta"
     accel_unit: Literal["g", "m/s^2"] = "g"
+    temperature_unit: Literal["C", "F"] = "C"  # its TEMPUNITS
 
 
 class Kvh1750Codec(ByteCodec[KvhFrame]):
@@ -103,21 +104,30 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
     def samples(self, frames: FrameBatch) -> ImuSamples:
         dtheta, dv = self.increments(frames.rows["gyro"], frames.rows["accel"])
         return ImuSamples(frames.sync_index, dtheta, dv, np.full(len(frames), frames.host_time),
-                          frames.rows["status"].astype(np.int64), frames.rows["temperature"].astype(float))
+                          frames.rows["status"].astype(np.int64), self.celsius(frames.rows["temperature"]))
+
+    def celsius(self, temperature: np.ndarray) -> np.ndarray:
+        """The frames' temperatures in deg C, from the unit the IMU sends."""
+        t = np.asarray(temperature, dtype=float)
+        return (t - 32.0) * (5.0 / 9.0) if self.options.temperature_unit == "F" else t
 
     def from_sample(self, sample: ImuSample) -> KvhFrame:
         """The frame for an SI sample; its status byte is ``sample.status`` (None: STATUS_ALL_VALID), its temperature
-        ``sample.temperature_c`` to the nearest deg C (25 when it has none)."""
+        ``sample.temperature_c`` to the nearest degree of the IMU's unit (25 deg C when it has none)."""
         g, a = self._gyro_scale, self._accel_scale
+        celsius = 25.0 if math.isnan(sample.temperature_c) else sample.temperature_c
         return KvhFrame(tuple(x / g for x in sample.dtheta), tuple(x / a for x in sample.dv),
-                        self.sent_status(sample), sample.sync_index % 128,
-                        25 if math.isnan(sample.temperature_c) else round(sample.temperature_c))
+                        self.sent_status(sample), sample.sync_index % 128, round(self.device_temperature(celsius)))
+
+    def device_temperature(self, celsius: float) -> float:
+        """A temperature (deg C) in the unit the IMU sends."""
+        return celsius * 9.0 / 5.0 + 32.0 if self.options.temperature_unit == "F" else celsius
 
     def csv_header(self) -> list[str]:
         gyro = self.gyro_unit + ("_s" if self.gyro_output == "rate" else "")
         accel = "g" if self.accel_unit == "g" else "mps2"
         return ([f"gyro_{c}_{gyro}" for c in "xyz"] + [f"accel_{c}_{accel}" for c in "xyz"]
-                + ["status", "sequence", "temperature_c"])
+                + ["status", "sequence", f"temperature_{self.options.temperature_unit.lower()}"])
 
     def csv_row(self, record: KvhFrame) -> list[Any]:
         return [*record.gyro, *record.accel, f"0x{record.status:02X}", record.sequence, record.temperature]

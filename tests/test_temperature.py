@@ -50,6 +50,14 @@ def test_each_protocol_decodes_the_temperature_its_frames_carry():
     assert _temperatures(xsens, XSENS_TEMPERATURE) == [41.25]
 
 
+def test_a_kvh_set_to_fahrenheit_is_read_in_celsius_and_its_csv_column_says_which():
+    fahrenheit = Kvh1750Codec(1000, temperature_unit="F")
+    assert _temperatures(fahrenheit, KVH_POWER_UP) == [pytest.approx((29 - 32) * 5 / 9, abs=1e-12)]
+    assert fahrenheit.decode(fahrenheit.encode(fahrenheit.from_sample(
+        ImuSample(3, (0.0,) * 3, (0.0, 0.0, 0.01), temperature_c=40.0)))).temperature == 104
+    assert fahrenheit.csv_header()[-1] == "temperature_f" and Kvh1750Codec(1000).csv_header()[-1] == "temperature_c"
+
+
 def test_frames_without_a_temperature_give_nan():
     stim = Stim300Codec(500, datagram=0x91)
     frame = stim.encode(stim.from_sample(ImuSample(4, (0.0,) * 3, (0.0, 0.0, 0.02), temperature_c=30.0)))
