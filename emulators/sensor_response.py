@@ -5,9 +5,11 @@ The continuous truth is H(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-s tau}, wn 
 increments are interval means of the rate, and so are the encoder's turns it is compared with; the filter
 acts on that sequence. Its poles are the continuous ones mapped exactly (z = e^{sT}); its
 ``NUMERATOR_TAPS`` numerator taps are the least-squares fit of H(jw) A(e^{jwT}) from DC to a quarter of the
-output rate (with the delay's fraction of a period in H), scaled to unit gain at DC; the delay's whole
-periods are a delay line. The discrete response is then within 0.2 % in gain and 0.15 deg in phase of
-H(jw) up to twice a bandwidth of a tenth of the rate (tests/test_rate_tests.py). Stateful, starting at rest
+output rate (with the delay's fraction of a period and up to ``FOLDED_MAX`` of its whole periods in H, so that
+the taps centre on it), scaled to unit gain at DC; the delay's other whole periods are a delay line. The
+discrete response is then within 0.1 % in gain and 0.05 deg in phase of H(jw) up to twice a bandwidth of a
+tenth of the rate, and a pure fractional delay of at least a period within 0.05 % and 0.02 deg up to a fifth
+of the rate (tests/test_rate_tests.py). Stateful, starting at rest
 on the first sample (the first output repeats it), so chunks give the output of one call on the whole series.
 """
 
@@ -17,7 +19,8 @@ import math
 
 import numpy as np
 
-NUMERATOR_TAPS = 5
+NUMERATOR_TAPS = 12
+FOLDED_MAX = 4  # whole periods of the delay the numerator takes on (its taps centred on them), the rest a line
 FIT_BAND = 0.25  # of the output rate: the band the numerator is fitted over
 FIT_POINTS = 400
 
@@ -40,7 +43,7 @@ def continuous_response(f: np.ndarray, bandwidth_hz: float | None, damping: floa
 
 def discrete_filter(rate_hz: float, bandwidth_hz: float | None, damping: float, fraction: float
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(b, a) of the discrete low-pass and the ``fraction`` of a period of delay (module docstring)."""
+    """(b, a) of the discrete low-pass and ``fraction`` periods of delay (module docstring)."""
     period = 1.0 / rate_hz
     if bandwidth_hz is None and fraction == 0.0:
         return np.array([1.0]), np.array([1.0])
@@ -61,7 +64,10 @@ class SensorResponse:
 
     def __init__(self, rate_hz: float, bandwidth_hz: float | None, damping: float, delay_s: float) -> None:
         whole = math.floor(delay_s * rate_hz + 1e-9)
-        self._b, self._a = discrete_filter(rate_hz, bandwidth_hz, damping, delay_s * rate_hz - whole)
+        fraction = delay_s * rate_hz - whole
+        folded = min(whole, FOLDED_MAX) if bandwidth_hz is not None or fraction > 1e-9 else 0
+        self._b, self._a = discrete_filter(rate_hz, bandwidth_hz, damping, fraction + folded)
+        whole -= folded
         self._lfilter = self._lfilter_zi = None
         if len(self._b) > 1:  # scipy.signal here, not with the module nor at the first sample: ~1 s to import
             from scipy.signal import lfilter, lfilter_zi

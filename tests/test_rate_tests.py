@@ -41,13 +41,14 @@ def _phasor(x: np.ndarray, f: float) -> complex:
 
 
 @pytest.mark.parametrize("f", [20.0, 100.0, 200.0])
-def test_emulated_low_pass_and_delay_follow_the_continuous_transfer_function(f):
+@pytest.mark.parametrize("bandwidth, delay_ms", [(100.0, 2.5), (100.0, 0.0), (None, 1.3)])
+def test_emulated_low_pass_and_delay_follow_the_continuous_transfer_function(f, bandwidth, delay_ms):
     rate = 0.5 * np.sin(2.0 * math.pi * f * np.arange(1, 6001) * T)  # rad/s, interval means
-    out = _gyro({"bandwidth_hz": 100.0, "damping": 0.7, "delay_ms": 2.5}, np.outer(rate * T, np.ones(3)))
+    out = _gyro({"bandwidth_hz": bandwidth, "damping": 0.7, "delay_ms": delay_ms}, np.outer(rate * T, np.ones(3)))
     ratio = _phasor(out[3000:, 1] / T, f) / _phasor(rate[3000:], f)
-    truth = continuous_response(np.array([f]), 100.0, 0.7, 2.5e-3)[0]
-    assert abs(abs(ratio) / abs(truth) - 1.0) < 2e-3
-    assert abs(math.degrees(np.angle(ratio / truth))) < 0.15
+    truth = continuous_response(np.array([f]), bandwidth, 0.7, delay_ms * 1e-3)[0]
+    assert abs(abs(ratio) / abs(truth) - 1.0) < 1e-3
+    assert abs(math.degrees(np.angle(ratio / truth))) < 0.05
 
 
 def test_emulated_low_pass_is_minus_3_db_at_its_bandwidth():
@@ -138,7 +139,7 @@ def test_frequency_response_finds_the_emulated_bandwidth_damping_and_delay(tmp_p
     assert y["delay_ms"] == pytest.approx(2.0, abs=0.1)
     assert y["damping"] == pytest.approx(0.7, abs=0.05)
     assert y["gain_db"][4] == pytest.approx(-3.01, abs=0.1)  # at the bandwidth
-    assert y["latch_check"].startswith("disagrees: the gyro lags the encoder by 1.99")  # 2 ms the config does not state
+    assert y["latch_check"].startswith("disagrees: the gyro lags the encoder by 2.000 ms")  # 2 ms the config does not state
 
 
 def test_frequency_response_of_an_imu_without_output_delay_agrees_with_the_stated_latch_delays(tmp_path):
