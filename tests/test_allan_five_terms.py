@@ -42,7 +42,8 @@ def errors() -> ImuErrors:
     root_rate = 1.0 / math.sqrt(T)
     return ImuErrors(
         dtheta_quantum_rad=qg * math.sqrt(12.0), gyro_noise_dph=(ng * root_rate / DEG_PER_H,) * 3,
-        gyro_bias_instability_dph=(bg / DEG_PER_H,) * 3, gyro_random_walk_dph_per_sqrt_h=(kg * SQRT_HOUR / DEG_PER_H,) * 3,
+        gyro_bias_instability_dph=(bg / DEG_PER_H,) * 3,
+        gyro_random_walk_dph_per_sqrt_h=(kg * SQRT_HOUR / DEG_PER_H,) * 3,
         gyro_drift_dph_per_h=(rg * HOUR / DEG_PER_H,) * 3,
         dv_quantum_mps=qa * math.sqrt(12.0), accel_noise_ug=(na * root_rate / UG,) * 3,
         accel_bias_instability_ug=(ba / UG,) * 3, accel_random_walk_ug_per_sqrt_h=(ka * SQRT_HOUR / UG,) * 3,
@@ -62,7 +63,8 @@ def read_back(seeds: int) -> dict[str, dict[str, float]]:
     out = {}
     for name, keys in zip(TERM_NAMES, zip(*(keys for _, _, keys in SENSORS))):
         fitted = [(t, truth[sensor][key][0] * getattr(units, name))
-                  for (sensor, units, _), key, analysis in zip(SENSORS, keys, analyses) for t in getattr(analysis, name)]
+                  for (sensor, units, _), key, analysis in zip(SENSORS, keys, analyses)
+                  for t in getattr(analysis, name)]
         values = [t.value / true for t, true in fitted if t.value is not None]
         out[name] = {"intervals": len(fitted), "resolved": len(values), "ratio": float(np.mean(values)),
                      "coverage": float(np.mean([t.lower <= true <= t.upper for t, true in fitted]))}

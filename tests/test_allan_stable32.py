@@ -84,6 +84,7 @@ if __name__ == "__main__":
             continue
         table = stable32_table(name)
         result, bounds = _agreement(rates(), table)
-        print(f"{name}: tau (s), alpha ours / Stable32's, our lower and upper bound less Stable32's in % of the deviation")
+        print(f"{name}: tau (s), alpha ours / Stable32's, our lower and upper bound less Stable32's "
+              "in % of the deviation")
         for m, ours, theirs, (low, high) in zip(table["m"], result.alpha[:, 0], table["alpha"], bounds):
             print(f"  {m:6d}  {ours:+d} / {theirs:+d}  {100 * low:+.3f} %  {100 * high:+.3f} %")

@@ -1,7 +1,8 @@
 """The noise characterisation's files: ``noise.json`` (docs/contracts.md, "noise.json") and ``allan.png``.
 
 Terms and deviations in datasheet units (``hil.estimation.allan.GYRO_UNITS``, ``ACCEL_UNITS``); a term
-the record cannot resolve is null, with its reason under ``unresolved``. matplotlib is imported when the figure is drawn, not with this module.
+the record cannot resolve is null, with its reason under ``unresolved``. matplotlib is imported when the
+figure is drawn, not with this module.
 """
 
 from __future__ import annotations

@@ -205,7 +205,8 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
               duration: float | None = None, quiet: bool = False,
               record: Callable[[Config | None], dict] | None = None, detrend: str = "none") -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
-    separated), with ``detrend`` (``none`` or ``linear``, see :func:`analyse_record`), and write OUT/noise.json, allan.png, report.html and (``rerun``) noise.rrd; returns the noise
+    separated), with ``detrend`` (``none`` or ``linear``, see :func:`analyse_record`), and write OUT/noise.json,
+    allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
     :mod:`hil.trial.noise_acquisition`). ``record(source_config)`` gives noise.json's ``record`` once the analysis
     is done (``source_config``: :attr:`NoiseRecord.source_config`)."""
