@@ -70,7 +70,10 @@ def summary(doc: dict, out: Path) -> str:
         shown = []
         for name, sigma_name, label, unit in SUMMARY[doc["test"]]:
             value, sigma = a.get(name), a.get(sigma_name)
-            text = a.get("bandwidth_note") if value is None else f"{format_value(value, sigma)} ± {format_value(sigma)}"
+            if value is None:
+                text = a.get("bandwidth_note") if name == "bandwidth_hz" else "not determined"
+            else:
+                text = f"{format_value(value, sigma)} ± {format_value(sigma)}"
             shown.append(f"{label} {text} {unit}".rstrip())
         lines.append(f"  gyro {axis}: " + ", ".join(shown))
     return "\n".join(lines)

@@ -158,6 +158,7 @@ def test_frequency_response_below_the_bandwidth_says_it_lies_beyond_the_highest_
                                                                 settle_s=0.1, axes=["x"]))
     x = doc["axes"]["x"]
     assert x["bandwidth_hz"] is None and x["bandwidth_note"] == "beyond the highest frequency tested (30 Hz)"
+    assert x["damping"] is None and x["damping_sigma"] is None
 
 
 def test_a_rate_beyond_the_tables_limit_exits_2_naming_the_key_and_limit_before_the_table_moves(tmp_path, capsys,

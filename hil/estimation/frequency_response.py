@@ -10,7 +10,8 @@ The model H(f) = fn^2 / (fn^2 - f^2 + 2 j zeta fn f) e^{-j 2 pi f tau} is fitted
 weighted by its sigma (so no phase needs unwrapping), over (ln fn, zeta, tau) by nonlinear least squares from
 a start read off the data (fn where the gain crosses -3 dB, tau from the phase below it); the covariance is
 the inverse of J^T J. The -3 dB bandwidth is fn sqrt(1 - 2 zeta^2 + sqrt((1 - 2 zeta^2)^2 + 1)), its sigma
-through its gradient; a bandwidth above the highest frequency tested is reported as beyond it (None).
+through its gradient; a bandwidth above the highest frequency tested is reported as beyond it (None): the band
+then shows the low-pass's onset alone, which neither fixes its damping nor keeps it apart from the delay.
 """
 
 from __future__ import annotations

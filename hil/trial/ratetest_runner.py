@@ -238,6 +238,7 @@ def latch_check(cfg: Config, axis: dict) -> str:
 def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitudes: list[float]) -> dict:
     fit = fit_response(f, ratio, sigma)
     fitted = model(f, fit.natural, fit.damping, fit.delay)
+    beyond = fit.bandwidth is None  # the band fixes neither the damping nor the bandwidth
     phase = np.degrees(np.unwrap(np.angle(ratio)))
     return {"frequencies_hz": f.tolist(), "amplitude_deg": amplitudes,
             "gain_db": (DB * np.log(np.abs(ratio))).tolist(), "gain_sigma_db": (DB * sigma).tolist(),
@@ -247,7 +248,7 @@ def _response_axis(f: np.ndarray, ratio: np.ndarray, sigma: np.ndarray, amplitud
             "bandwidth_hz": fit.bandwidth, "bandwidth_sigma_hz": fit.bandwidth_sigma,
             "bandwidth_note": None if fit.bandwidth is not None else
             f"beyond the highest frequency tested ({fit.f_max:g} Hz)",
-            "damping": fit.damping, "damping_sigma": fit.damping_sigma,
+            "damping": None if beyond else fit.damping, "damping_sigma": None if beyond else fit.damping_sigma,
             "delay_ms": fit.delay * 1e3, "delay_sigma_ms": fit.delay_sigma * 1e3}
 
 
