@@ -238,6 +238,11 @@ class SensorErrorModel:
         self._chamber: Callable[[float], float] = lambda _t: held_c
         self._thermal = None if e.thermal is None else ThermalModel(e.thermal, self._chamber, e.temperature_c, period)
 
+    @property
+    def thermal(self) -> bool:
+        """Whether the sensor's temperature moves (``imu.errors.thermal``), rather than being the configured one."""
+        return self._thermal is not None
+
     def follow_chamber(self, air: Callable[[float], float]) -> None:
         """Take the chamber's air (deg C) at trial time t from ``air(t)``, called once a batch (an emulated
         chamber's time runs with the samples')."""

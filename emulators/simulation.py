@@ -53,7 +53,8 @@ class Simulation:
             t0 = start / self.rate_hz
             dtheta, dv = self.truth.increments(t0, t)
             dtheta, dv = self.errors.apply(t, dtheta, dv)
-            yield AlignedBatch(t, dtheta, dv, self.truth.angles(t) - self.zero_offset, t0)
+            yield AlignedBatch(t, dtheta, dv, self.truth.angles(t) - self.zero_offset, t0,
+                               temperature_c=self.errors.temperature_c(t) if self.errors.thermal else None)
 
 
 def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:

@@ -28,7 +28,7 @@ from hil.samples import AlignedBatch
 if TYPE_CHECKING:  # imported by the child: this process starts it before it imports pydantic
     from hil.config import Config
 
-HEADER = struct.Struct("<qd?")  # samples (0: no more batches), t0 (s), angles present
+HEADER = struct.Struct("<qd??")  # samples (0: no more batches), t0 (s), angles present, temperatures present
 AHEAD = 2  # batches the output pipe holds
 INPUT_ERROR = 2  # the child's exit code for bad input (hil.config.InputError), as the command line's
 
@@ -93,12 +93,13 @@ class SimulationProcess:
 
 def _read_batch(stream: BinaryIO) -> AlignedBatch | None:
     """The next batch on ``stream``, None after the last; EOFError if the stream ends before."""
-    n, t0, angles = HEADER.unpack(_filled(stream, bytearray(HEADER.size)))
+    n, t0, angles, temperatures = HEADER.unpack(_filled(stream, bytearray(HEADER.size)))
     if n == 0:
         return None
-    shapes = [(n,), (n, 3), (n, 3), (n, 3)][: 4 if angles else 3]
-    t, dtheta, dv, *rest = (_filled(stream, np.empty(shape, "<f8")) for shape in shapes)
-    return AlignedBatch(t, dtheta, dv, rest[0] if rest else None, t0)
+    t, dtheta, dv = (_filled(stream, np.empty(shape, "<f8")) for shape in ((n,), (n, 3), (n, 3)))
+    angles = _filled(stream, np.empty((n, 3), "<f8")) if angles else None
+    temperature = _filled(stream, np.empty(n, "<f8")) if temperatures else None
+    return AlignedBatch(t, dtheta, dv, angles, t0, temperature_c=temperature)
 
 
 def _filled(stream: BinaryIO, buffer: bytearray | np.ndarray) -> bytearray | np.ndarray:
@@ -109,8 +110,8 @@ def _filled(stream: BinaryIO, buffer: bytearray | np.ndarray) -> bytearray | np.
 
 
 def _write_batch(out: BinaryIO, batch: AlignedBatch) -> None:
-    out.write(HEADER.pack(len(batch), batch.t0, batch.angles is not None))
-    for array in (batch.t, batch.dtheta, batch.dv, batch.angles):
+    out.write(HEADER.pack(len(batch), batch.t0, batch.angles is not None, batch.temperature_c is not None))
+    for array in (batch.t, batch.dtheta, batch.dv, batch.angles, batch.temperature_c):
         if array is not None:
             out.write(np.ascontiguousarray(array, dtype="<f8"))
 
@@ -133,7 +134,7 @@ def _serve() -> None:
         text = " ".join(str(exc).split())
         print(text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}", file=sys.stderr, flush=True)
         os._exit(INPUT_ERROR if isinstance(exc, InputError) else 1)
-    out.write(HEADER.pack(0, 0.0, False))
+    out.write(HEADER.pack(0, 0.0, False, False))
     out.flush()
     os._exit(0)  # the batches are flushed: no interpreter teardown for the parent to wait for
 

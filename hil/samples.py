@@ -155,7 +155,7 @@ class AlignedBatch:
     (outer, middle, inner) at ``t``, NaN rows for the samples without angles, or None from a source that has
     no turntable reference at all (a simulation or a CSV without angles: the pipeline takes it as NaN rows,
     :meth:`angle_rows`). ``valid`` (N,) bool marks the samples the device flagged invalid (False), which the
-    estimator never takes; None: every sample valid.
+    estimator never takes; None: every sample valid. ``temperature_c`` (N,): a simulated IMU's temperature.
     """
 
     t: np.ndarray
@@ -164,6 +164,7 @@ class AlignedBatch:
     angles: np.ndarray | None = None
     t0: float = field(default=0.0)  # start of the first interval
     valid: np.ndarray | None = None
+    temperature_c: np.ndarray | None = None  # (N,) the IMU's temperature (deg C) where the source has one
 
     def __post_init__(self) -> None:
         n = len(self.t)

@@ -39,16 +39,21 @@ def test_the_childs_batches_are_the_batches_computed_in_line(cfg):
     _assert_same(got, list(Simulation.from_config(cfg).batches()))
 
 
-def test_a_batch_crosses_the_pipe_as_it_is_with_or_without_angles():
+def test_a_batch_crosses_the_pipe_as_it_is_with_or_without_angles_and_temperatures():
     rng = np.random.default_rng(4)
-    batches = [AlignedBatch(np.arange(1.0, 4.0), rng.normal(size=(3, 3)), rng.normal(size=(3, 3)), angles, t0)
-               for angles, t0 in ((rng.normal(size=(3, 3)), 0.0), (None, 0.1))]
+    batches = [AlignedBatch(np.arange(1.0, 4.0), rng.normal(size=(3, 3)), rng.normal(size=(3, 3)), angles, t0,
+                            temperature_c=temperature)
+               for angles, t0, temperature in ((rng.normal(size=(3, 3)), 0.0, None), (None, 0.1, None),
+                                               (None, 0.2, np.array([20.5, 21.0, 21.5])))]
     stream = io.BytesIO()
     for batch in batches:
         _write_batch(stream, batch)
-    stream.write(HEADER.pack(0, 0.0, False))
+    stream.write(HEADER.pack(0, 0.0, False, False))
     stream.seek(0)
-    _assert_same(list(iter(lambda: _read_batch(stream), None)), batches)
+    received = list(iter(lambda: _read_batch(stream), None))
+    _assert_same(received, batches)
+    assert received[1].temperature_c is None
+    assert received[2].temperature_c.tolist() == [20.5, 21.0, 21.5]
 
 
 @pytest.mark.parametrize("name", TRIAL_CONFIGS)

@@ -4,6 +4,7 @@ world's chamber at environment.chamber.set_point_c."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -86,3 +87,18 @@ def test_the_sensor_follows_the_emulated_chamber_after_a_set_point_written_over_
     expected = 35.0 - 10.0 * (600.0 * math.exp(-0.5) - 100.0 * math.exp(-3.0)) / 500.0
     assert seen[-1] == pytest.approx(expected, abs=0.02)
     assert np.all(np.diff(seen) > 0)
+
+
+def test_hil_simulate_reports_the_thermal_model_temperature_in_result_json(tmp_path):
+    from hil.cli import main
+
+    data = yaml.safe_load(open("configs/emulated_swing.yaml"))
+    data["trial"]["duration_s"] = 10
+    data["imu"]["errors"].update({"temperature_c": 22.0, "thermal": {**THERMAL, "case_tau_s": 20.0}})
+    data["environment"] = {"chamber": {"source": "emulator", "set_point_c": 40.0}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(data))
+    main(["simulate", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "out"), "--no-history"])
+    seen = json.loads((tmp_path / "out" / "result.json").read_text())["streams"]["imu_temperature_c"]
+    rate = 200.0  # the IMU samples at trial.rate_hz
+    assert seen["min"] == pytest.approx(40.0 - 18.0 * math.exp(-1.0 / rate / 20.0), abs=1e-9)
+    assert seen["max"] == pytest.approx(40.0 - 18.0 * math.exp(-10.0 / 20.0), abs=1e-9)

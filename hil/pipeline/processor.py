@@ -26,6 +26,7 @@ from hil.pipeline.judge import Judge
 from hil.pipeline.motion_match import TableRotations
 from hil.pipeline.progress import Finished, Health, Listener, Progress, Taken, read_only
 from hil.pipeline.sync_pairing import SyncPairing
+from hil.pipeline.temperature import TemperatureTrack
 from hil.samples import AlignedBatch, ImuGap, ImuSamples, StreamCounts, TableSamples
 from hil.units import DEG_PER_H
 
@@ -98,6 +99,7 @@ class TrialProcessor:
     def feed_batch(self, batch: AlignedBatch) -> Progress:
         """Samples that need no alignment (a simulation's, a CSV's) straight to the estimate stage."""
         self._begin()
+        self._decoding.temperature.add(batch.temperature_c)
         if self._compensation is not None:
             batch = self._compensation.batch(batch)
         if self._estimation.estimator is None:
@@ -207,7 +209,7 @@ class TrialProcessor:
     def _counts(self) -> StreamCounts:
         """The stream counters so far (those of result.json but the sync offset)."""
         if self._batched[0]:
-            return StreamCounts(self._batched[0], self._batched[1], self._batched[0])
+            return StreamCounts(*self._batched, self._batched[0], extra=_temperature(self._decoding.temperature))
         imu, table = (self._decoding.counters(s) for s in (IMU, TABLE))
         estimator = self._estimation.estimator
         extra = {
@@ -254,3 +256,9 @@ def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, eart
         return TableRotations(geometry, earth, rate, cfg.table_counts_per_frame, counts, angles)
 
     return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
+
+
+def _temperature(track: TemperatureTrack) -> MappingProxyType:
+    """A batched trial's detailed counts: the temperature a simulated IMU with a thermal model reports."""
+    seen = track.summary()
+    return MappingProxyType({} if seen is None else {"imu_temperature_c": seen})

@@ -22,8 +22,10 @@ class TemperatureTrack:
         self._last = math.nan  # the last solution's
         self._at: dict[float, float] = {}  # solution time (s) -> deg C
 
-    def add(self, temperature_c: np.ndarray) -> None:
-        """One read's samples' temperatures (deg C, NaN: none)."""
+    def add(self, temperature_c: np.ndarray | None) -> None:
+        """One read's samples' temperatures (deg C, NaN or None: none)."""
+        if temperature_c is None:
+            return
         known = temperature_c[np.isfinite(temperature_c)]
         if not len(known):
             return
