@@ -147,9 +147,9 @@ def test_the_covariance_of_estimates_at_two_tau_is_the_quadratic_forms():
              (1, np.eye(n), 0, 1.0))
     for q, cov, first, ramped in cases:
         mu = ramped * ramp
-        exact = np.array([[2.0 * np.sum((a @ cov @ b.T) ** 2) / (len(a) * len(b))
-                           + 4.0 * (a @ mu) @ (a @ cov @ b.T) @ (b @ mu) / (len(a) * len(b)) for b in operators]
-                          for a in operators])
+        shared = [[x @ b.T for b in operators] for x in (a @ cov for a in operators)]  # the differences' covariances
+        exact = np.array([[(2.0 * np.sum(c * c) + 4.0 * (a @ mu) @ c @ (b @ mu)) / (len(a) * len(b))
+                           for b, c in zip(operators, row)] for a, row in zip(operators, shared)])
         parts = np.zeros((len(factors), len(MODEL_ALPHAS) + 1))
         parts[:, q] = [np.trace(a @ cov @ a.T) / len(a) for a in operators]
         parts[:, -1] = [np.mean((a @ mu) ** 2) for a in operators]
