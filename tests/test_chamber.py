@@ -202,3 +202,28 @@ def test_the_chamber_goes_to_its_on_exit_set_point_when_released(on_exit, after)
         assert chamber.registers.read(300) == after
     finally:
         chamber.close()
+
+
+def test_an_exception_reply_is_an_error_naming_the_register():
+    device = ScriptedDevice([(READ_DECIMALS, ILLEGAL_ADDRESS_REPLY)])
+    with pytest.raises(ChamberError, match=f"chamber at {device.path}: read register 606: refused"):
+        WatlowF4(device.path, WatlowF4Options(timeout_s=0.5)).open()
+    device.close()
+
+
+@pytest.mark.parametrize("chamber, message", [
+    ({"controller": "nope", "port": "/dev/ttyUSB1"},
+     "environment.chamber.controller: 'nope': unknown; chamber controllers: watlow-f4"),
+    ({"controller": "watlow-f4", "port": "/dev/ttyUSB1", "options": {"baudrate": 4800}},
+     "environment.chamber.options: baudrate: Input should be 9600 or 19200 (the watlow-f4 options)"),
+    ({"controller": "watlow-f4"}, "environment.chamber: port: the controller's serial port is needed"),
+    ({"source": "emulator", "on_exit": -100}, "environment.chamber: on_exit: -100 deg C is outside limits_c [-70, 180]"),
+])
+def test_a_bad_chamber_block_is_refused_naming_its_key(chamber, message):
+    from hil.config import ConfigError, parse_config
+
+    data = yaml.safe_load(open("configs/emulated_swing.yaml"))
+    data["environment"] = {"chamber": chamber}
+    with pytest.raises(ConfigError) as caught:
+        parse_config(data)
+    assert message in str(caught.value)
