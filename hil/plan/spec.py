@@ -15,7 +15,8 @@ import yaml
 from hil.config import Config, ConfigError, load_config, parse_config
 from hil.inputs import InputError, resolve_path
 
-TRIAL_KINDS = ("swing", "calibrate", "noise")
+RATE_TESTS = ("scale_factor", "frequency_response")  # hil ratetest, their settings the config's block of that name
+TRIAL_KINDS = ("swing", "calibrate", "noise", *RATE_TESTS)
 KINDS = ("power", "soak", "wait", "repeat", *TRIAL_KINDS)
 POWER_ACTIONS = ("on", "off", "cycle")
 ON_FAILURE = ("stop", "continue")
@@ -53,6 +54,10 @@ class Step:
             return schedule_duration(schedule_from_config(self.config.calibration), self.config.turntable.limits)
         if self.kind == "noise":
             return float(self.params["duration_s"])
+        if self.kind in RATE_TESTS:
+            settings = getattr(self.config, self.kind)
+            points = len(settings.rates_dps) * 2 if self.kind == "scale_factor" else len(settings.frequencies_hz)
+            return float(points * len(settings.axes) * (settings.dwell_s + settings.settle_s))
         if self.kind == "wait":
             return float(self.params["s"])
         return float(self.off_s or 0.0)
@@ -165,6 +170,8 @@ def _step(plan: Path, index: int, kind: str, params: Any, extras: dict, base: di
     overrides = params if params is not None else {}
     if not isinstance(overrides, dict):
         raise InputError(f"{where}: expected a mapping of config overrides")
+    if kind in RATE_TESTS:  # the settings of the config's block of that name
+        overrides = {kind: overrides}
     data = merged(base, overrides, where)
     return Step(params=overrides, config=_config(where, data, overrides), data=data, **common)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.inputs import InputError
-from hil.plan.spec import Plan, Step
+from hil.plan.spec import TRIAL_KINDS, Plan, Step
 
 STATE_NAME = "plan.json"
 
@@ -85,4 +85,4 @@ class PlanState:
 def _entry(step: Step) -> dict[str, Any]:
     return {"index": step.index, "kind": step.kind, "repeat_of": step.block, "pass": step.repeat,
             "started_utc": None, "ended_utc": None, "ended": None, "verdict": None,
-            "out_dir": step.out_name if step.kind in ("swing", "calibrate", "noise") else None}
+            "out_dir": step.out_name if step.kind in TRIAL_KINDS else None}

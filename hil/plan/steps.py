@@ -18,7 +18,8 @@ from hil.arguments import build_parser
 from hil.inputs import InputError
 from hil.plan.spec import Step, merged
 
-COMMAND_OF = {"swing": "run", "calibrate": "calibrate", "noise": "noise"}
+COMMAND_OF = {"swing": ["run"], "calibrate": ["calibrate"], "noise": ["noise"],
+              "scale_factor": ["ratetest", "scale-factor"], "frequency_response": ["ratetest", "frequency-response"]}
 INTERRUPTED, ENDED_EARLY = "INTERRUPTED", "ENDED EARLY"
 
 
@@ -71,11 +72,11 @@ def _write_config(step: Step, ctx: StepContext, overrides: dict) -> Path:
 def _argv(step: Step, config: Path, out: Path, args: argparse.Namespace) -> list[str]:
     """The command line of ``step``'s own command."""
     command = COMMAND_OF[step.kind]
-    argv = [command, str(config), "--out", str(out), "--overwrite", "--quiet"]  # --overwrite: a re-run step
-    if command == "noise":
+    argv = [*command, str(config), "--out", str(out), "--overwrite", "--quiet"]  # --overwrite: a re-run step
+    if step.kind == "noise":
         argv += ["--duration", str(step.params["duration_s"])]
     else:
-        argv += ["--viewer", "none", "--speed", args.speed]
+        argv += ["--speed", args.speed] + (["--viewer", "none"] if step.kind in ("swing", "calibrate") else [])
     argv += ["--no-history"] if args.no_history else ["--history", args.history] if args.history else []
     for option in ("dut", "operator", "station"):
         if getattr(args, option) is not None:
@@ -84,14 +85,16 @@ def _argv(step: Step, config: Path, out: Path, args: argparse.Namespace) -> list
 
 
 def _outcome(step: Step, out: Path, code: int) -> tuple[str, str | None]:
-    """How the step at ``out`` ended and its verdict, from its result.json (a noise step: noise.json)."""
-    result = out / ("noise.json" if step.kind == "noise" else "result.json")
+    """How the step at ``out`` ended and its verdict, from its result.json (a noise step: noise.json; a rate
+    test: scale_factor.json or frequency_response.json, judged as its exit code says)."""
+    name = {"swing": "result", "calibrate": "result", "noise": "noise"}.get(step.kind, step.kind)
+    result = out / f"{name}.json"
     if not result.is_file():
         return ("completed", None) if code == 0 else ("ended early: no result written", ENDED_EARLY)
     doc = json.loads(result.read_text(encoding="utf-8"))
     if step.kind == "noise":
         return ("completed", None) if code == 0 else ("ended early", ENDED_EARLY)
     ended = doc.get("ended") or "ended early"
-    if ended == "completed":
-        return ended, doc.get("verdict")
-    return ended, INTERRUPTED if ended.startswith("interrupted") else ENDED_EARLY
+    if ended != "completed":
+        return ended, INTERRUPTED if ended.startswith("interrupted") else ENDED_EARLY
+    return ended, doc["verdict"] if "verdict" in doc else {0: "PASS", 3: "FAIL"}.get(code)
