@@ -217,7 +217,8 @@ def test_an_exception_reply_is_an_error_naming_the_register():
     ({"controller": "watlow-f4", "port": "/dev/ttyUSB1", "options": {"baudrate": 4800}},
      "environment.chamber.options: baudrate: Input should be 9600 or 19200 (the watlow-f4 options)"),
     ({"controller": "watlow-f4"}, "environment.chamber: port: the controller's serial port is needed"),
-    ({"source": "emulator", "on_exit": -100}, "environment.chamber: on_exit: -100 deg C is outside limits_c [-70, 180]"),
+    ({"source": "emulator", "on_exit": -100},
+     "environment.chamber: on_exit: -100 deg C is outside limits_c [-70, 180]"),
 ])
 def test_a_bad_chamber_block_is_refused_naming_its_key(chamber, message):
     from hil.config import ConfigError, parse_config
