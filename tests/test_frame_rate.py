@@ -59,6 +59,16 @@ def test_a_stream_losing_frames_is_not_judged_on_them():
     assert host == pytest.approx(3.5) and "1000 frames/s" in why  # 2 s after the read with the last gap
 
 
+def test_a_stream_without_frames_is_left_to_the_stream_watch():
+    rate = FrameRate(200.0, 1.0)
+    for read in range(31):
+        rate.fed(read / 10, 0, 0)
+    assert not rate.judged and rate.mismatch is None
+    for read in range(31, 62):  # frames from 3.1 s: judged 2 s later
+        rate.fed(read / 10, (read - 30) * 20, 0)
+    assert rate.judged and rate.mismatch is None
+
+
 def test_at_speed_max_the_rate_is_not_judged():
     rate = FrameRate(200.0, None)
     rate.fed(0.0, 0, 0)

@@ -26,7 +26,8 @@ def stream_codecs(cfg: Config) -> dict[str, Codec]:
 
 
 class FrameRate:
-    """The IMU's frame rate on the receive times: the frames decoded from the end of the first read over the next
+    """The IMU's frame rate on the receive times: the frames decoded from the end of the first read that had some
+    (a port whose bytes decode to nothing is the stream watch's: :mod:`hil.pipeline.stream_watch`) over the next
     ``RATE_WINDOW_S`` of the devices' time (the host's times the devices' speed ``time_scale``, and ``RATE_HOST_S``
     of the host's), judged once against ``rate_hz``. A gap of the IMU's counter (frames lost, a power cycle's
     silence) or an outage starts the window again at the read: only a stream that lost nothing is judged. At
@@ -40,7 +41,7 @@ class FrameRate:
 
     def fed(self, host_time: float, frames: int, gaps: int) -> None:
         """A read of the IMU's stream at ``host_time``: the frames decoded and the counter's gaps so far."""
-        if self.judged:
+        if self.judged or not frames:
             return
         if self._start is None or gaps != self._start[2]:
             self._start = (host_time, frames, gaps)
