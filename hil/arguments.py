@@ -147,8 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
                                                     "10^k s), all (every multiple of the period: n^2/2 operations), "
                                                     "or taus in s such as 1,10,100,3600")
-    p.add_argument("--detrend", choices=("none", "linear"), default="none",  # hil.estimation.allan_detrend.DETRENDS
-                   help="taken out before the variance: none (default), or linear (each rate's linear trend, the ramp)")
+    p.add_argument("--detrend", choices=("none", "linear", "temperature"), default="none",  # allan_detrend.DETRENDS
+                   help="taken out before the variance: none (default), linear (each rate's linear trend, the ramp) "
+                        "or temperature (the part a polynomial of the IMU's reported temperature explains)")
     _record_options(p)
     _history_options(p)
 

@@ -136,3 +136,31 @@ def test_detrend_linear_takes_the_ramp_out_and_says_so(tmp_path):
     assert taken["gyro"]["ramp_dph_per_h"] == [None] * 3
     assert taken["unresolved"]["gyro.ramp_dph_per_h.0"].startswith("removed from the record before the analysis")
     assert taken["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx(kept["gyro"]["arw_deg_per_sqrt_h"], rel=0.05)
+
+
+def test_detrend_temperature_takes_out_what_the_imus_temperature_explains(tmp_path, capsys):
+    """A thermal IMU warming by 6 deg C after power-on, its gyro biases 2, -1 and 0.5 deg/h per deg C: without a
+    detrend the warm-up reads as a ramp; --detrend temperature gives the coefficients back and leaves none. A
+    record without the IMU's temperature is refused in one line."""
+    config = _static(tmp_path, duration=2000.0, rate=50.0)
+    data = yaml.safe_load(config.read_text())
+    data["imu"]["errors"] = {"gyro_noise_dph": [0.5] * 3, "accel_noise_ug": [40.0] * 3,
+                             "thermal": {"gyro_bias_dph_per_c": [2.0, -1.0, 0.5], "accel_bias_ug_per_c": [50.0, 0, 0],
+                                         "self_heating_c": 6.0, "warmup_tau_s": 300.0}}
+    config.write_text(yaml.safe_dump(data))
+    docs = {}
+    for detrend in ("none", "temperature"):
+        assert main(["noise", str(config), "--out", str(tmp_path / detrend), "--no-figures", "--no-history",
+                     "--detrend", detrend, "--export", str(tmp_path / "increments.csv")]) == 0
+        docs[detrend] = json.loads((tmp_path / detrend / "noise.json").read_text())
+    assert docs["none"]["gyro"]["ramp_dph_per_h"][0] > 10.0
+    taken = docs["temperature"]["detrend"]
+    assert taken["kind"] == "temperature" and taken["degree"] == 2 and 25.0 < taken["about_c"] < 31.0
+    assert taken["gyro"]["bias_dph_per_c"] == pytest.approx([2.0, -1.0, 0.5], abs=0.02)
+    assert taken["accel"]["bias_ug_per_c"] == pytest.approx([50.0, 0.0, 0.0], abs=0.5)
+    assert docs["temperature"]["gyro"]["ramp_dph_per_h"] == [None] * 3
+    capsys.readouterr()
+    assert main(["noise", str(tmp_path / "increments.csv"), "--out", str(tmp_path / "csv"), "--no-history",
+                 "--detrend", "temperature"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "increments.csv" in err and "carries no IMU temperature" in err

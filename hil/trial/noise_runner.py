@@ -18,7 +18,7 @@ import numpy as np
 from emulators.simulation import Simulation
 from hil.config import Config, ImuErrors, load_config
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
-from hil.estimation.allan_detrend import linear_trend
+from hil.estimation.allan_detrend import TEMPERATURE_DEGREE, linear_trend, temperature_trend
 from hil.estimation.allan_fit import TERM_NAMES
 from hil.estimation.allan_taus import parse_taus
 from hil.frames import Earth, TableGeometry
@@ -97,8 +97,10 @@ def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
 
 def _concatenated(batches: list[AlignedBatch]) -> AlignedBatch:
     angles = None if any(b.angles is None for b in batches) else np.vstack([b.angles for b in batches])
+    temperature = (None if any(b.temperature_c is None for b in batches)
+                   else np.concatenate([b.temperature_c for b in batches]))
     return AlignedBatch(np.concatenate([b.t for b in batches]), np.vstack([b.dtheta for b in batches]),
-                        np.vstack([b.dv for b in batches]), angles, batches[0].t0)
+                        np.vstack([b.dv for b in batches]), angles, batches[0].t0, temperature_c=temperature)
 
 
 def noise_truth(errors: ImuErrors, rate_hz: float) -> dict:
@@ -169,8 +171,9 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
                    taus: str | tuple[float, ...] = "octave", detrend: str = "none") -> NoiseAnalysis:
     """The Allan deviation on the ``taus`` grid and the noise terms of a record (the table's motion taken out
     first if it moved; samples missing in gaps left out, ``missing`` in the document; with ``detrend``
-    ``linear`` each rate's linear trend, the ramp, removed, ``detrend`` in the document); ``label`` names the
-    source in errors. Nothing is written."""
+    ``linear`` each rate's linear trend, the ramp, removed, with ``temperature`` the part a polynomial of the
+    IMU's reported temperature explains, ``detrend`` in the document); ``label`` names the source in errors.
+    Nothing is written."""
     batch = record.batch
     period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
     is_moving = moving(batch, period)
@@ -184,13 +187,19 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
             raise TrialSetupError(f"{label}: a moving trial's CSV needs --config for the site and the table geometry")
         earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
         dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
-    missing, (dtheta, dv) = with_gaps(batch.t, period, dtheta, dv)
+    temperature = np.full(len(batch), np.nan) if batch.temperature_c is None else batch.temperature_c
+    missing, (dtheta, dv, temperature) = with_gaps(batch.t, period, dtheta, dv, temperature)
     removed, taken = (), {"kind": detrend}
     if detrend == "linear":
         (dtheta, gyro_slope), (dv, accel_slope) = linear_trend(dtheta, period), linear_trend(dv, period)
         removed = ("ramp",)
         taken.update({sensor: {keys[TERM_NAMES.index("ramp")]: [float(v) for v in slope / units.ramp]}
                       for (sensor, units, keys), slope in zip(SENSORS, (gyro_slope, accel_slope))})
+    elif detrend == "temperature":
+        if not np.isfinite(temperature).any():
+            raise DataError(f"{label}: --detrend temperature: the record carries no IMU temperature")
+        (dtheta, gyro_fit), (dv, accel_fit) = (temperature_trend(x, period, temperature) for x in (dtheta, dv))
+        taken.update(_temperature_coefficients(gyro_fit, accel_fit, float(np.nanmean(temperature))))
     try:
         gyro, accel = analyse(dtheta, period, level, taus, removed), analyse(dv, period, level, taus, removed)
     except ValueError as exc:
@@ -200,12 +209,25 @@ def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL
     return NoiseAnalysis(gyro, accel, {**noise_document(gyro, accel), **extra})
 
 
+def _temperature_coefficients(gyro: np.ndarray, accel: np.ndarray, about_c: float) -> dict:
+    """noise.json's account of a temperature detrend: the polynomial's coefficients (degree, 3) per sensor in
+    deg/h and ug per deg C^j, about the mean temperature."""
+    units = {"gyro": (DEG_PER_H, "bias_dph_per_c"), "accel": (UG, "bias_ug_per_c")}
+    out: dict = {"about_c": about_c, "degree": TEMPERATURE_DEGREE}
+    for sensor, fit in (("gyro", gyro), ("accel", accel)):
+        unit, key = units[sensor]
+        out[sensor] = {key + ("" if j == 1 else str(j)): [float(v) for v in row / unit]
+                       for j, row in enumerate(fit, start=1)}
+    return out
+
+
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
               figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
               duration: float | None = None, quiet: bool = False,
               record: Callable[[Config | None], dict] | None = None, detrend: str = "none") -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
-    separated), with ``detrend`` (``none`` or ``linear``, see :func:`analyse_record`), and write OUT/noise.json,
+    separated), with ``detrend`` (``none``, ``linear`` or ``temperature``, see :func:`analyse_record`), and write
+    OUT/noise.json,
     allan.png, report.html and (``rerun``) noise.rrd; returns the noise
     document. A config that reads devices is acquired first (``duration`` s, see
     :mod:`hil.trial.noise_acquisition`). ``record(source_config)`` gives noise.json's ``record`` once the analysis
