@@ -109,3 +109,19 @@ def test_an_out_holding_a_plan_is_refused_without_resume(tmp_path, capsys):
     assert main(["plan", str(plan), "--out", str(tmp_path / "out"), "--speed", "max"]) == 0
     assert main(["plan", str(plan), "--out", str(tmp_path / "out"), "--speed", "max"]) == 2
     assert "holds a plan's outputs" in capsys.readouterr().err
+
+
+def test_a_resumed_plan_runs_a_step_that_ended_early_again_and_keeps_the_completed_ones(tmp_path):
+    plan = write_plan(tmp_path, [{"wait": {"s": 1}}, {"swing": {"trial": {"duration_s": 10}}}])
+    out = tmp_path / "out"
+    argv = ["plan", str(plan), "--out", str(out), "--speed", "max", "--no-history", "--no-figures"]
+    main(argv)
+    doc = json.loads((out / "plan.json").read_text())
+    first = doc["steps"][0]
+    doc["steps"][1].update(ended="ended early: the table did not follow", verdict="ENDED EARLY")
+    doc.update(ended="ended early at step 2 (swing)", verdict="ENDED EARLY")
+    (out / "plan.json").write_text(json.dumps(doc))
+    code = main([*argv, "--resume"])
+    after = json.loads((out / "plan.json").read_text())
+    assert after["steps"][0] == first and after["steps"][1]["ended"] == "completed"
+    assert code == {"PASS": 0, "FAIL": 3}[after["verdict"]]

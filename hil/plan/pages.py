@@ -13,7 +13,7 @@ from hil.plan.state import PlanState, write_atomically
 
 AXES = "xyz"
 STYLE = ("body{font-family:sans-serif;margin:1.5em;max-width:1100px}table{border-collapse:collapse}"
-         "td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}.PASS{color:#070}.FAIL{color:#b00}"
+         "td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left;white-space:nowrap}.PASS{color:#070}.FAIL{color:#b00}"
          ".INTERRUPTED,.ENDED.EARLY{color:#b60}")
 
 

@@ -64,9 +64,8 @@ class PlanState:
         return self.doc["steps"][step.index - 1]
 
     def done(self, step: Step) -> bool:
-        """Whether ``step`` ran to its end in an earlier run of the plan (one interrupted runs again)."""
-        ended = self.entry(step)["ended"]
-        return ended is not None and not ended.startswith("interrupted")
+        """Whether ``step`` completed in an earlier run of the plan (one interrupted, or ended early, runs again)."""
+        return self.entry(step)["ended"] == "completed"
 
     def start(self, step: Step) -> None:
         self.entry(step).update(started_utc=utc_now(), ended_utc=None, ended=None, verdict=None)
