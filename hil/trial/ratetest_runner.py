@@ -6,9 +6,10 @@ limits before anything is sent, command the steps (:mod:`hil.trial.rate_steps`) 
 return the test's document (scale_factor.json, frequency_response.json), which
 :func:`hil.outputs.ratetest.write_ratetest` writes with its figure, report and junit.xml.
 
-``--simulate`` runs the emulated table's servo and the emulated IMU in this process (as ``hil calibrate
---simulate``, :mod:`emulators.servo_simulation`): every command goes through the controller's own
-formatting and parsing, simulated time advances in blocks and the sequence follows the encoder's readings.
+The steps run by default in simulation (:func:`simulate_steps`, ``--simulate``): the emulated table's servo and
+the emulated IMU in this process (as ``hil calibrate --simulate``, :mod:`emulators.servo_simulation`), every
+command going through the controller's own formatting and parsing, simulated time advancing in blocks and the
+sequence following the encoder's readings; or as a live trial (:func:`hil.trial.ratetest_live.live_steps`).
 """
 
 from __future__ import annotations
