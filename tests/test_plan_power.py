@@ -18,6 +18,7 @@ import yaml
 from drivers.scpi_supply import ScpiSupply, SupplyError, SupplySettings
 from emulators.scpi_supply import EmulatedSupply, SupplyState
 from hil.cli import main
+from pages import clipped_columns, layout_width, needs_chromium
 
 ROOT = Path(__file__).resolve().parent.parent
 POWER_CONFIG = str(ROOT / "configs" / "emulated_power.yaml")
@@ -58,6 +59,7 @@ def test_a_setting_the_supply_does_not_confirm_is_refused_naming_the_command(sup
     driver.close()
 
 
+@needs_chromium
 def test_power_cycled_swings_give_a_turn_on_repeatability_whose_interval_holds_the_truth(tmp_path, capsys):
     steps = [{"repeat": {"times": 3, "steps": [{"power": "cycle", "off_s": 2},
                                                {"swing": {"trial": {"duration_s": 40}}}]}}]
@@ -75,7 +77,9 @@ def test_power_cycled_swings_give_a_turn_on_repeatability_whose_interval_holds_t
         assert figures["in_run_sigma_ug"][axis] < figures["turn_on_repeatability_ug"][axis]
     assert doc["steps"][1]["power"] == {"output_on": True, "voltage_v": 5.0, "current_a": 0.35}
     assert "power supply: output off (read back)" in capsys.readouterr().out
-    assert "turn-on-to-turn-on" in (tmp_path / "out" / "plan.html").read_text()
+    page = tmp_path / "out" / "plan.html"
+    assert "turn-on-to-turn-on" in page.read_text()
+    assert layout_width(page, tmp_path) <= 1400 and clipped_columns(page, tmp_path) == []
 
 
 def test_a_trial_step_with_the_power_off_ends_early_and_stops_the_plan_with_the_supply_off(tmp_path, capsys):
