@@ -112,3 +112,18 @@ def test_a_plan_ended_by_sigterm_turns_the_supply_off_and_reads_it_back(tmp_path
     assert process.returncode == 1 and doc["verdict"] == "INTERRUPTED"
     assert doc["steps"][2]["ended"] is None
     assert "power supply: output off (read back), 0 V, 0 A" in stdout
+
+
+def test_a_supply_that_stops_answering_ends_the_step_early_naming_it_without_a_traceback(tmp_path, capsys,
+                                                                                         monkeypatch):
+    def lost(self):
+        raise SupplyError(f"power supply {self.resource}: MEAS:CURR?: timeout")
+
+    monkeypatch.setattr(ScpiSupply, "read", lost)
+    steps = [{"power": "on"}, {"swing": {"trial": {"duration_s": 10}}}]
+    code = main(["plan", str(write_plan(tmp_path, steps)), "--out", str(tmp_path / "out"), "--speed", "max",
+                 "--no-history"])
+    doc = json.loads((tmp_path / "out" / "plan.json").read_text())
+    assert code == 1 and doc["steps"][1]["ended"].endswith("MEAS:CURR?: timeout")
+    captured = capsys.readouterr()
+    assert "power supply: not confirmed" in captured.out and "Traceback" not in captured.err

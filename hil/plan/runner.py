@@ -9,6 +9,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from drivers.scpi_supply import SupplyError
 from hil.plan.power import PlanPower
 from hil.plan.spec import TRIAL_KINDS, Plan, Step, load_plan
 from hil.plan.state import PlanState
@@ -63,8 +64,11 @@ def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals)
     """Run one step: how it ended, its verdict and what else its entry in plan.json holds (the supply's reading
     before a trial step)."""
     if step.kind in TRIAL_KINDS:
-        more = {"power": power.reading()} if power.supply is not None else {}
-        unpowered = power.unpowered()
+        try:
+            more = {"power": power.reading()} if power.supply is not None else {}
+            unpowered = power.unpowered()
+        except SupplyError as exc:
+            return f"ended early: {exc}", ENDED_EARLY, {}
         if unpowered:
             return f"ended early: {unpowered}", ENDED_EARLY, more
         ended, verdict, _ = run_trial_step(step, ctx, power.overrides())
