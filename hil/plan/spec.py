@@ -160,8 +160,8 @@ def _step(plan: Path, index: int, kind: str, params: Any, extras: dict, base: di
     if kind == "power":
         return Step(params=_power(where, params, extras), off_s=extras.get("off_s"), **common)
     if kind == "soak":
-        raise InputError(f"{where}: no chamber: this harness controls no temperature chamber yet "
-                         "(environment.chamber); a soak step cannot run")
+        raise InputError(f"{where}: a plan does not soak yet; a trial step sets the chamber itself (a config with "
+                         "environment.chamber), e.g. swing: {environment: {chamber: {set_point_c: 60}}}")
     if kind in ("wait", "noise"):
         key = "s" if kind == "wait" else "duration_s"
         if not isinstance(params, dict) or set(params) != {key} or not _seconds(params[key]):
