@@ -54,7 +54,9 @@ def test_a_plan_runs_each_step_through_its_command_and_lists_it_once(tmp_path, c
     ([{"wait": {"s": 1}}, {"swing": {"trial": {"durations_s": 3}}}], "step 2: swing: trial.durations_s"),
     ([{"repeat": {"times": 2, "steps": [{"wait": {"s": 1}}, {"spin": {}}]}}], "step 2: spin: unknown step kind"),
     ([{"swing": {"imu": {"errors": {"accel_bias_ug": "big"}}}}], "step 1: swing"),
-    ([{"soak": {"temperature_c": 60}}], "step 1: soak: a plan does not soak yet"),
+    ([{"soak": {"temperature_c": 60}}], "step 1: soak: expected {temperature_c, stable_within_c"),
+    ([{"soak": {"temperature_c": 60, "stable_within_c": 1, "for_s": 60, "timeout_s": 600}}],
+     "step 1: soak: the config"),
     ([{"power": "cycle", "off_s": 2}], "step 1: power: the config"),
 ])
 def test_a_bad_step_is_refused_naming_its_index_and_key_before_anything_runs(tmp_path, capsys, steps, named):

@@ -8,9 +8,11 @@ import argparse
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 from drivers.scpi_supply import SupplyError
 from hil.plan.power import PlanPower
+from hil.plan.soak import PlanChamber
 from hil.plan.spec import TRIAL_KINDS, Plan, Step, load_plan
 from hil.plan.state import PlanState
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED, StepContext, run_trial_step
@@ -25,8 +27,9 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
 
     plan = load_plan(args.plan)
     speed = parse_speed(args.speed)
-    power = PlanPower(plan.config, speed)
+    power, chamber = PlanPower(plan.config, speed), PlanChamber(plan.config, speed)
     power.check(plan)
+    chamber.check(plan)
     if args.dry_run:
         print(schedule_text(plan, speed))
         return 0
@@ -36,22 +39,30 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
     with claimed(out, ()):
         state = PlanState.open(out, plan, args.resume)
         ctx = StepContext(out, plan.name, state.doc["run"], args, commands)
-        with StopSignals() as stop, power:
+        with StopSignals() as stop, power, chamber:
             power.restore(plan, state)
-            ended = _steps(plan, state, ctx, power, stop)
+            chamber.restore(plan, state)
+            ended = _steps(plan, state, ctx, Devices(power, chamber), stop)
         return _close(plan, state, ended, power)
 
 
-def _steps(plan: Plan, state: PlanState, ctx: StepContext, power: PlanPower, stop: StopSignals) -> str:
+class Devices(NamedTuple):
+    """What a plan's steps drive besides the trials: the power supply and the chamber."""
+
+    power: PlanPower
+    chamber: PlanChamber
+
+
+def _steps(plan: Plan, state: PlanState, ctx: StepContext, devices: Devices, stop: StopSignals) -> str:
     """Run the steps not done yet; how the plan ended."""
     for step in plan.steps:
         if state.done(step):
             continue
         if stop.received:
             return f"interrupted ({stop.received})"
-        _progress(plan, step, power.speed)
+        _progress(plan, step, devices.power.speed)
         state.start(step)
-        ended, verdict, more = _run_step(step, ctx, power, stop)
+        ended, verdict, more = _run_step(step, ctx, devices, stop)
         state.finish(step, ended, verdict, **more)
         if verdict == INTERRUPTED or stop.received:
             return f"interrupted ({stop.received or 'during step ' + str(step.index)})"
@@ -60,9 +71,10 @@ def _steps(plan: Plan, state: PlanState, ctx: StepContext, power: PlanPower, sto
     return "completed"
 
 
-def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals) -> tuple[str, str | None, dict]:
+def _run_step(step: Step, ctx: StepContext, devices: Devices, stop: StopSignals) -> tuple[str, str | None, dict]:
     """Run one step: how it ended, its verdict and what else its entry in plan.json holds (the supply's reading
-    before a trial step)."""
+    before a trial step, a soak's end)."""
+    power = devices.power
     if step.kind in TRIAL_KINDS:
         try:
             more = {"power": power.reading()} if power.supply is not None else {}
@@ -71,8 +83,10 @@ def _run_step(step: Step, ctx: StepContext, power: PlanPower, stop: StopSignals)
             return f"ended early: {exc}", ENDED_EARLY, {}
         if unpowered:
             return f"ended early: {unpowered}", ENDED_EARLY, more
-        ended, verdict, _ = run_trial_step(step, ctx, power.overrides())
+        ended, verdict, _ = run_trial_step(step, ctx, {**power.overrides(), **devices.chamber.overrides()})
         return ended, verdict, more
+    if step.kind == "soak":
+        return devices.chamber.soak(step, stop)
     if step.kind == "wait":
         done = power.sleep(float(step.params["s"]), stop)
         return ("completed", None, {}) if done else ("interrupted", INTERRUPTED, {})

@@ -60,6 +60,8 @@ class Step:
             return float(points * len(settings.axes) * (settings.dwell_s + settings.settle_s))
         if self.kind == "wait":
             return float(self.params["s"])
+        if self.kind == "soak":  # at least: the chamber's way there comes first
+            return float(self.params["for_s"])
         return float(self.off_s or 0.0)
 
 
@@ -160,8 +162,12 @@ def _step(plan: Path, index: int, kind: str, params: Any, extras: dict, base: di
     if kind == "power":
         return Step(params=_power(where, params, extras), off_s=extras.get("off_s"), **common)
     if kind == "soak":
-        raise InputError(f"{where}: a plan does not soak yet; a trial step sets the chamber itself (a config with "
-                         "environment.chamber), e.g. swing: {environment: {chamber: {set_point_c: 60}}}")
+        keys = ("temperature_c", "stable_within_c", "for_s", "timeout_s")
+        if not isinstance(params, dict) or set(params) != set(keys) or not all(_number(params[k]) for k in keys):
+            raise InputError(f"{where}: expected {{{', '.join(keys)}}}, numbers")
+        if params["stable_within_c"] <= 0 or params["for_s"] < 0 or params["timeout_s"] <= 0:
+            raise InputError(f"{where}: stable_within_c and timeout_s above 0, for_s 0 or more")
+        return Step(params=params, **common)
     if kind in ("wait", "noise"):
         key = "s" if kind == "wait" else "duration_s"
         if not isinstance(params, dict) or set(params) != {key} or not _seconds(params[key]):
@@ -188,6 +194,10 @@ def _power(where: str, action: Any, extras: dict) -> str:
     if action == "cycle" and not _seconds(extras["off_s"]):
         raise InputError(f"{where}: off_s: {extras['off_s']}: expected seconds, 0 or more")
     return action
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _seconds(value: Any) -> bool:
