@@ -74,3 +74,23 @@ def test_at_speed_max_the_rate_is_not_judged():
     rate.fed(0.0, 0, 0)
     rate.fed(10.0, 100_000, 0)
     assert rate.judged and rate.mismatch is None
+
+
+def test_a_stall_of_the_host_is_not_taken_for_another_rate():
+    rate = FrameRate(200.0, 1.0)
+    frames = 0
+    for read in range(1, 63):  # reads 20 and 21 find nothing (the host stalled), read 22 the backlog
+        frames += {20: 0, 21: 0, 22: 60}.get(read, 20)
+        rate.fed(read / 10, frames, 0)
+        if read == 21:  # 2 s after the first read: 360 frames, 10 % short, not judged on them
+            assert not rate.judged
+    assert rate.judged and rate.mismatch is None
+
+
+def test_a_rate_a_tenth_off_is_named_once_measured_on_six_seconds_of_the_host():
+    rate = FrameRate(200.0, 1.0)
+    for read in range(1, 100):
+        rate.fed(read / 10, read * 22, 0)  # 220 frames/s
+        if rate.judged:
+            break
+    assert read == 61 and "220 frames/s" in rate.mismatch
