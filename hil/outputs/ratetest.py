@@ -43,8 +43,11 @@ def write_ratetest(out: Path, doc: dict, limits: ReportLimits, figures: bool = T
 
 
 def _png(fig) -> bytes:
+    """The figure laid out as a PNG; the figure closed."""
+    fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
+    pyplot().close(fig)
     return buf.getvalue()
 
 
@@ -61,10 +64,7 @@ def residual_figure(doc: dict) -> bytes:
     ax.axhline(0.0, color="0.6", lw=0.8)
     ax.set(xlabel="input rate (deg/s)", ylabel="residual (ppm of full scale)", title="Scale factor: residuals")
     ax.legend()
-    fig.tight_layout()
-    image = _png(fig)
-    plt.close(fig)
-    return image
+    return _png(fig)
 
 
 def bode_figure(doc: dict) -> bytes:
@@ -84,7 +84,4 @@ def bode_figure(doc: dict) -> bytes:
     gain.set(xscale="log", ylabel="gain (dB)", title="Frequency response: gyro against the encoder's rate")
     phase.set(xscale="log", xlabel="frequency (Hz)", ylabel="phase (deg)")
     gain.legend()
-    fig.tight_layout()
-    image = _png(fig)
-    plt.close(fig)
-    return image
+    return _png(fig)
