@@ -183,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("plan", help="a test plan: trials, power steps and waits in order, resumable; OUT/plan.json, "
                                     "plan.html, junit.xml and each step's outputs in OUT/NN-<kind>/ (docs/plans.md)")
-    p.add_argument("plan", help="plan YAML: {name, config, steps}")
+    p.add_argument("plan", type=_config_path, help="plan YAML: {name, config, steps}, a path or a shipped plan's name")
     p.add_argument("--out", help="output directory (default: runs/plan-NAME)")
     p.add_argument("--resume", action="store_true", help="go on with OUT/plan.json: completed steps kept, the "
                                                          "interrupted one run again")

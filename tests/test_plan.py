@@ -79,6 +79,13 @@ def test_the_dry_run_prints_the_schedule_with_its_duration(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_shipped_plan_is_found_by_name_from_any_directory(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["plan", "configs/plan_acceptance.yaml", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("plan acceptance: 16 steps") and "emulated_power.yaml" in out and not list(tmp_path.iterdir())
+
+
 def test_a_plan_killed_in_its_third_step_resumes_without_running_the_first_two_again(tmp_path):
     plan = write_plan(tmp_path, [{"swing": {"trial": {"duration_s": 5}}}, {"wait": {"s": 1}},
                                  {"swing": {"trial": {"duration_s": 600}}}, {"wait": {"s": 1}}])
