@@ -181,6 +181,13 @@ def test_a_frequency_the_tables_acceleration_limit_cannot_serve_exits_2_naming_t
     assert "frequency_response.frequencies_hz: 100 Hz: turntable.limits.accel_dps2 of the outer axis (500" in err
 
 
+def test_the_shipped_aerosmith_config_runs_its_scale_factor_test_within_its_tables_limits(tmp_path):
+    out = tmp_path / "out"
+    assert main(["ratetest", "scale-factor", "rate_table_aerosmith.yaml", "--simulate", "--out", str(out)]) == 0
+    z = json.loads((out / "scale_factor.json").read_text())["axes"]["z"]
+    assert abs(z["bias_dph"] - 0.8) < 3.0 * z["bias_sigma_dph"]
+
+
 def test_ratetest_command_fails_a_scale_factor_beyond_its_limit_in_report_and_junit(tmp_path):
     path = _config(tmp_path, scale_factor={"rates_dps": [90, 180], "dwell_s": 1, "settle_s": 0.2, "axes": ["x"]},
                    output={"limits": {"scale_factor_ppm_max": 250, "asymmetry_ppm_max": 200}})
