@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import itertools
 import math
+import queue
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,7 +19,7 @@ from hil.cli import main
 from hil.estimation.calibration_schedule import Dwell, default_schedule
 from hil.frames import Earth, TableGeometry
 from hil.units import ARCSEC, DEG, G0, PPM, UG
-from hil.viewer import calibration_view
+from hil.viewer import calibration_view, trial_viewer
 from hil.viewer.trial_viewer import TrialViewer
 
 MARKERS = "/" + calibration_view.MARKERS
@@ -97,6 +99,29 @@ def _true_force_residual(angles, zero):
     true = body_from_n(angles + zero) @ [0.0, 0.0, g]
     v = np.diag(1.0 + errors["scale"]) @ paper_c_pa(*errors["mis"]) @ true
     return v + errors["knl"] * v**2 + errors["bias"] - body_from_n(angles) @ [0.0, 0.0, g]
+
+
+class _FullForLiveCalls(queue.Queue):
+    """A logging queue that a live (non-blocking) call always finds full, as a viewer fallen behind does."""
+
+    def put(self, item, block=True, timeout=None):
+        if not block:
+            raise queue.Full
+        super().put(item, block, timeout)
+
+
+def test_a_live_viewer_fallen_behind_still_logs_every_calibration_step_and_window(tmp_path, monkeypatch):
+    steps = list(default_schedule().dwells)
+    monkeypatch.setattr(trial_viewer, "queue", SimpleNamespace(Queue=_FullForLiveCalls, Full=queue.Full))
+    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), layout="calibration")  # live: never blocks
+    viewer.log_table(np.array([0.0]), np.zeros((1, 3)))  # a live call: dropped and counted
+    viewer.log_calibration_step(0.0, 0, steps)
+    viewer.log_calibration_window(30.0, [100.0, -20.0, 5.0], [0.01, 0.02, -0.03])
+    viewer.close()
+    path = tmp_path / "recording.rrd"
+    assert viewer.dropped == 1
+    assert _rows(path, "/calibration/step", "Scalars:scalars") == [(0.0, [1.0, 18.0])]
+    assert _rows(path, "/calibration/residual/gyro_dph", "Scalars:scalars") == [(30.0, [0.01, 0.02, -0.03])]
 
 
 @pytest.mark.slow

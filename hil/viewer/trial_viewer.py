@@ -9,7 +9,8 @@ limits drawn and ``/verdict`` (:mod:`hil.viewer.judged_view`), at the end result
 Logging never blocks the caller: each call hands its data to one background thread that converts it
 and passes it to the Rerun SDK (which writes from its own threads). When that thread falls behind, live
 calls are dropped and counted (:attr:`TrialViewer.dropped`) rather than waited for; offline producers
-(simulate, replay) pass ``blocking=True`` so nothing is lost. The time series and the gimbal poses reach
+(simulate, replay) pass ``blocking=True`` so nothing is lost, and a calibration's steps and windows (a few a
+minute, each one a lab reads) are always waited for. The time series and the gimbal poses reach
 the .rrd as one chunk per entity every ``FILE_FLUSH_S`` of trial time and a live view at once
 (:mod:`hil.viewer.chunks`); the poses at ``TABLE_RATE_HZ``, the rest at the estimator's rate (1 Hz).
 
@@ -187,14 +188,15 @@ class TrialViewer:
         """Calibration step ``index`` (0-based) of ``steps`` (dwells and plateaus) commanded at trial time t
         (:mod:`hil.viewer.calibration_view`)."""
         steps = list(steps)
-        self._submit(lambda: self._write_calibration(steps).step(float(t), index))
+        self._submit(lambda: self._write_calibration(steps).step(float(t), index), block=True)
 
     def log_calibration_window(self, t: float, accel_ug: np.ndarray | None, gyro_dph: np.ndarray) -> None:
         """A calibration window's residuals before calibration at its end t: the accelerometers' (µg, a dwell;
         None for a plateau) and the gyros' (°/h)."""
         accel = None if accel_ug is None else np.array(accel_ug, dtype=float)
         gyro = np.array(gyro_dph, dtype=float)
-        self._submit(lambda: self._calibration is not None and self._calibration.window(float(t), accel, gyro))
+        self._submit(lambda: self._calibration is not None and self._calibration.window(float(t), accel, gyro),
+                     block=True)
 
     def close(self) -> None:
         """Log what is queued, flush and finish the .rrd (with ``verdict_at_end``, it waits for :meth:`end`, or
