@@ -28,6 +28,7 @@ from emulators.simulation import Simulation
 from emulators.sources import DeviceStream, ImuSource, TableSource
 from emulators.table_server import TableServer, emulated_table
 from emulators.paced_writer import DeviceWriter
+from emulators.scpi_supply import EmulatedSupply, powering
 from hil.config import Config
 from hil.units import ARCSEC
 
@@ -93,7 +94,8 @@ def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, Devic
     imu_cfg = cfg.imu
     imu_clock, table_clock = device_clocks(cfg)
     seed = cfg.trial.seed
-    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors, imu_cfg.faults)
+    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors, imu_cfg.faults,
+                           imu_cfg.errors.turn_on_bias_ug)
     table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
     streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
                                   max(1, round(CHUNK_S / source.clock.period)))
@@ -118,6 +120,7 @@ class Bench:
         self.writers: dict[str, DeviceWriter] = {}
         self.server: TableServer | None = None
         self.chamber: EmulatedChamber | None = None
+        self.supply: EmulatedSupply | None = None
         unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
         private = any(unplugging) and link_dir is None
         self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
@@ -143,6 +146,9 @@ class Bench:
             if chamber is not None and chamber.source == "emulator":
                 self.chamber = emulated_chamber(chamber)
                 self.streams["imu"].source.state["errors"].follow_chamber(self.chamber.air_at)
+            line = self.streams["imu"].source.clock.supply
+            if line is not None:  # environment.power.source: emulator
+                self.supply = powering(cfg.environment.power, line, self.servo.lock)
             for k, (name, damage, baud, faults) in enumerate((
                     ("imu", imu_damage, imu_baud, imu_cfg.faults),
                     ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
@@ -155,14 +161,17 @@ class Bench:
     def names(self) -> dict:
         """The ports JSON."""
         chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
+        power = {} if self.supply is None else {"power": self.supply.resource}
         return {"imu": self.ports["imu"].path, "turntable_data": self.ports["turntable_data"].path,
-                "turntable_cmd": self.server.url, **chamber}
+                "turntable_cmd": self.server.url, **chamber, **power}
 
     def close(self) -> None:
         if self.server is not None:
             self.server.close()
         if self.chamber is not None:
             self.chamber.close()
+        if self.supply is not None:
+            self.supply.close()
         for port in self.ports.values():
             port.close()
         if self._links is not None:

@@ -5,7 +5,8 @@ Run it in its own process (``python -m emulators CONFIG [--ports-file PATH] [--l
 ports with :func:`wait_for_ports`); clients find the ports in the JSON ports file or on stdout::
 
     {"imu": "/dev/pts/N" | {"interface": "udp_multicast", "channel": "239.0.0.1"},
-     "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT"}
+     "turntable_data": "/dev/pts/M", "turntable_cmd": "socket://127.0.0.1:PORT",
+     "chamber": "/dev/pts/K", "power": "TCPIP::127.0.0.1::PORT::SOCKET"}   # the last two with environment
 
 With ``--link-dir DIR`` the serial ports are published as stable symbolic links to their ptys,
 ``DIR/imu`` and ``DIR/turntable_data`` (as udev's by-id names), and named so; a later emulator on the

@@ -1,14 +1,21 @@
 """The emulated bench power supply: a SCPI instrument on a TCP socket of 127.0.0.1 (VISA resource
 ``TCPIP::127.0.0.1::PORT::SOCKET``, one command or query a line), answering the commands of
 :mod:`drivers.scpi_supply` as a Keysight E36xx does (``*IDN?``, ``INST:NSEL``, ``VOLT``, ``CURR``, ``OUTP``,
-``MEAS:VOLT?``, ``MEAS:CURR?``, ``SYST:ERR?``), any client served. Its output powers the emulated unit: each
-power-on of the unit's output is counted, and the unit draws ``load_a`` (within the current limit) while it is on."""
+``MEAS:VOLT?``, ``MEAS:CURR?``, ``SYST:ERR?``), any client served. Its output powers the emulated unit: the
+unit is powered while its output is on at a voltage above 0, each power-on is counted and told to ``on_power``,
+and the unit draws ``load_a`` (within the current limit) while powered. ``hil emulate`` starts it
+(:func:`powering`) feeding the emulated IMU's :class:`emulators.clocks.PowerLine`."""
 
 from __future__ import annotations
 
 import socketserver
 import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from emulators.clocks import PowerLine
+    from hil.config_environment import PowerConfig
 
 IDENTITY = "turntable-hil,emulated supply E3631-like,0,1.0"
 CHANNELS = 3
@@ -18,10 +25,12 @@ UNDEFINED_HEADER = '-113,"Undefined header"'
 
 class SupplyState:
     """The emulated supply's outputs: the selected one, each one's set points and state, the errors queued, and
-    how often the unit's output (``unit_channel``) was switched on."""
+    how often the unit on its output (``unit_channel``) was powered on; ``on_power(powered)`` is called (with
+    :attr:`lock` held) whenever the unit is powered on or off."""
 
     def __init__(self, load_a: float, unit_channel: int = 1) -> None:
         self.load_a, self.unit_channel = load_a, unit_channel
+        self.on_power: Callable[[bool], None] | None = None
         self.selected = 1
         self.voltage = dict.fromkeys(range(1, CHANNELS + 1), 0.0)
         self.current = dict.fromkeys(range(1, CHANNELS + 1), 1.0)
@@ -35,6 +44,7 @@ class SupplyState:
         header, _, argument = line.strip().partition(" ")
         header = header.upper()
         with self.lock:
+            powered = self.powered()
             handler = self._handlers().get(header)
             if handler is None:
                 self.errors.append(UNDEFINED_HEADER)
@@ -44,6 +54,18 @@ class SupplyState:
             except (ValueError, KeyError):
                 self.errors.append('-224,"Illegal parameter value"')
                 return None
+            finally:
+                if self.powered() != powered:
+                    self._powered(not powered)
+
+    def powered(self) -> bool:
+        """Whether the unit is powered: its output on, at a voltage above 0."""
+        return self.on[self.unit_channel] and self.voltage[self.unit_channel] > 0
+
+    def _powered(self, on: bool) -> None:
+        self.power_ons += on
+        if self.on_power is not None:
+            self.on_power(on)
 
     def _handlers(self) -> dict[str, Callable[[str], str | None]]:
         ch = self.selected
@@ -68,14 +90,10 @@ class SupplyState:
         self.selected = channel
 
     def _output(self, channel: int, on: bool) -> None:
-        if on and not self.on[channel] and channel == self.unit_channel:
-            self.power_ons += 1
         self.on[channel] = on
 
     def _drawn(self, channel: int) -> float:
-        if not self.on[channel] or channel != self.unit_channel or self.voltage[channel] <= 0:
-            return 0.0
-        return min(self.load_a, self.current[channel])
+        return min(self.load_a, self.current[channel]) if channel == self.unit_channel and self.powered() else 0.0
 
 
 def _level(text: str) -> float:
@@ -123,3 +141,20 @@ class EmulatedSupply:
         self._server.shutdown()
         self._server.server_close()
         self._thread.join(5)
+
+
+def powering(cfg: PowerConfig, line: PowerLine, lock: threading.RLock) -> EmulatedSupply:
+    """The emulated supply of ``environment.power`` for ``hil emulate``: the unit's output on at the configured
+    voltage and current limit from the start (the IMU streams as powered hardware does), then each switch of the
+    unit's power switching ``line`` with ``lock`` held (the lock the emulator's pulse loop takes)."""
+
+    def switch(on: bool) -> None:
+        with lock:
+            line.switch(on)
+
+    state = SupplyState(cfg.load_a, cfg.options.channel or 1)
+    for command in (f"INST:NSEL {state.unit_channel}", f"VOLT {cfg.options.voltage_v:g}",
+                    f"CURR {cfg.options.current_limit_a:g}", "OUTP ON"):
+        state.handle(command)
+    state.on_power = switch
+    return EmulatedSupply(state)

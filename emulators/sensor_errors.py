@@ -250,18 +250,22 @@ class SensorErrorModel:
         if self._thermal is not None:
             self._thermal.chamber = air
 
-    def temperature_c(self, t: np.ndarray) -> np.ndarray:
-        """The sensor's temperature (deg C) at trial times t (N,): the configured constant, or the thermal model's."""
+    def temperature_c(self, t: np.ndarray, since_on: np.ndarray | None = None) -> np.ndarray:
+        """The sensor's temperature (deg C) at trial times t (N,): the configured constant, or the thermal model's
+        (its self-heating from the last power-on, ``since_on`` s before each t, or from trial time 0)."""
         if self._thermal is not None:
-            return self._thermal.temperature_c(t)
+            return self._thermal.temperature_c(t, since_on)
         if len(t):
             self._chamber(float(t[-1]))
         return np.full(len(t), self._temperature_c)
 
-    def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, accel_bias: np.ndarray | None = None,
+              since_on: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Measured increments from ideal ones over consecutive intervals ending at t (N,).
 
         dtheta (N, 3) in rad and dv (N, 3) in m/s; returns (dtheta, dv) as measured, same shapes.
+        ``accel_bias`` (N, 3) m/s^2: added to the accelerometers' bias (a power-on's turn-on bias); ``since_on``
+        (N,): s since the last power-on, where the thermal model's self-heating counts from.
         """
         t = np.asarray(t, dtype=float)
         dtheta = np.asarray(dtheta, dtype=float)
@@ -275,9 +279,12 @@ class SensorErrorModel:
         draws = self._rng.standard_normal((n, 12))
         bias = self._instability(n) if self._instability is not None else np.zeros((n, 6))
         if self._thermal is not None:  # on the ideal increments, before the sensor's response and quantisation
-            thermal_dtheta, thermal_dv = self._thermal.errors(t, dtheta, dv)
+            thermal_dtheta, thermal_dv = self._thermal.errors(t, dtheta, dv, since_on)
             dtheta, dv = dtheta + thermal_dtheta, dv + thermal_dv
+        accel = bias[:, 3:] if self._accel_instability else None
+        if accel_bias is not None:
+            accel = accel_bias if accel is None else accel + accel_bias
         return (
             self._gyro(t, dtheta, draws[:, 0:3], draws[:, 6:9], bias[:, :3] if self._gyro_instability else None),
-            self._accel(t, dv, draws[:, 3:6], draws[:, 9:12], bias[:, 3:] if self._accel_instability else None),
+            self._accel(t, dv, draws[:, 3:6], draws[:, 9:12], accel),
         )

@@ -4,11 +4,12 @@ Each device ticks on its :class:`emulators.clocks.DeviceClock` (the shared sync 
 clock when free-running); tick k of the IMU reports the increments over its latch interval, tick k of
 the table the gimbal angles at its latch instant; both carry their clock's counter (its start plus k,
 or plus n k for a table latching every n-th pulse; from 0 again after a power cycle, whose ticks are
-not sent). Frames are encoded by the drivers' codecs, so the emulator speaks
+not sent; an IMU fed by the emulated supply is silent while its output is off, and boots when it comes back
+on, with a new turn-on bias). Frames are encoded by the drivers' codecs, so the emulator speaks
 exactly what the drivers read. The table's motion is the servo's (:mod:`emulators.servo`): a
 :class:`DeviceStream` computes its frames a chunk ahead and recomputes the chunk when the servo's
-plan changes, from a snapshot of its random state, so a command changes the frames from the next
-pulse and everything stays reproducible. :mod:`emulators.paced_writer` puts the frames on the ports.
+plan (or the supply's output) changes, from a snapshot of its random state, so a command changes the frames
+from the next pulse and everything stays reproducible. :mod:`emulators.paced_writer` puts the frames on the ports.
 """
 
 from __future__ import annotations
@@ -20,13 +21,14 @@ from typing import Any
 import numpy as np
 
 from drivers.tts1 import FULL_TURN_UDEG, UDEG_PER_RAD, Status, Tts1Codec
-from emulators.clocks import DeviceClock
+from emulators.clocks import TURN_ON_STREAM, DeviceClock, turn_on_offset_ug
 from emulators.faults import flagged_samples
 from emulators.sensor_errors import SensorErrorModel
 from emulators.servo import Servo
 from emulators.truth import Truth
 from hil.config_emulated import ImuFaultConfig
 from hil.samples import ImuSample, TableSample
+from hil.units import UG
 
 
 @dataclass(frozen=True)
@@ -57,33 +59,44 @@ class FrameSource:
 class ImuSource(FrameSource):
     """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``; the status
     word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised); the sensor's
-    temperature where the frames carry one."""
+    temperature where the frames carry one. Each power-on by the emulated supply adds a turn-on bias to the
+    accelerometers' (1-sigma ``turn_on_bias_ug`` per axis, ug)."""
 
     def __init__(self, clock: DeviceClock, seed: int, codec: Any, errors: SensorErrorModel,
-                 faults: ImuFaultConfig | None = None) -> None:
+                 faults: ImuFaultConfig | None = None, turn_on_bias_ug: tuple[float, ...] = (0.0, 0.0, 0.0)) -> None:
         super().__init__(clock, seed, 0)
-        self.codec = codec
+        self.codec, self.seed, self.turn_on_bias_ug = codec, seed, turn_on_bias_ug
         self.faults = faults or ImuFaultConfig()
         self.state["errors"] = errors
         self.state["flags_rng"] = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, 0, 2])))
 
     def compute(self, k: np.ndarray, truth: Truth, servo: Servo) -> list[Emission]:
-        s, codec = self.state, self.codec
-        latch = self.clock.latch_times(k, s["rng"])
+        s, codec, clock = self.state, self.codec, self.clock
+        latch = clock.latch_times(k, s["rng"])
+        warm = latch - clock.powered_at(k)  # the self-heating's time since power-on
         dtheta, dv = truth.increments(s["last"], latch)
-        dtheta, dv = s["errors"].apply(latch, dtheta, dv)
+        dtheta, dv = s["errors"].apply(latch, dtheta, dv, self.turn_on_bias(k), warm)
         s["last"] = float(latch[-1])
-        clock = self.clock
         dev = clock.device_time(latch).tolist() if codec.device_time else [None] * len(k)
         flagged = flagged_samples(self.faults, latch, clock.since_power_on(k), s["flags_rng"])
         statuses = (codec.healthy_status, codec.flagged_status(codec.start_up_flags))
-        temperature = s["errors"].temperature_c(latch).tolist()
+        temperature = s["errors"].temperature_c(latch, warm).tolist()
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
                     ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=statuses[bad], temperature_c=temp))),
                          bool(on), bad)
                 for i, c, t, end, a, b, d, on, bad, temp in zip(
                     clock.pulses(k), clock.counters(k), clock.tick_times(k), latch, dtheta.tolist(), dv.tolist(), dev,
                     clock.powered(k), flagged.tolist(), temperature)]
+
+    def turn_on_bias(self, k: np.ndarray) -> np.ndarray | None:
+        """The turn-on bias (m/s^2, N x 3) at ticks k, of the supply's power-on they follow (None: no power-on)."""
+        supply = self.clock.supply
+        if supply is None or not supply.switches:
+            return None
+        _, number = supply.boots(k)
+        drawn = {n: turn_on_offset_ug(self.turn_on_bias_ug, (self.seed, TURN_ON_STREAM, n)) * UG
+                 for n in set(number.tolist()) if n}
+        return np.array([drawn.get(n, np.zeros(3)) for n in number.tolist()]).reshape(len(number), 3)
 
 
 class TableSource(FrameSource):
@@ -123,8 +136,9 @@ def encoder_reading(true_angles: np.ndarray, zero_offset: np.ndarray) -> np.ndar
 class DeviceStream:
     """One device's emissions in tick order, computed ``chunk`` ticks ahead with the servo's current plan.
 
-    Call :meth:`pop` with the servo's lock held: a chunk computed under an older plan revision is
-    recomputed from its starting state, which leaves the frames before the change unchanged.
+    Call :meth:`pop` with the servo's lock held (the supply switches under it too): a chunk computed under an
+    older plan or supply revision is recomputed from its starting state, which leaves the frames before the
+    change unchanged.
     """
 
     def __init__(self, source: FrameSource, truth: Truth, ticks: int, chunk: int) -> None:
@@ -133,7 +147,7 @@ class DeviceStream:
         self._snapshot = copy.deepcopy(source.state)
         self._cache: list[Emission] = []
         self._pos = 0
-        self._revision = -1
+        self._revision: tuple[int, int] | None = None  # the servo's and the supply's revisions the chunk is of
 
     def done(self) -> bool:
         return self._start + self._pos > self.ticks
@@ -147,10 +161,14 @@ class DeviceStream:
             self._start += self._pos
             self._snapshot = copy.deepcopy(self.source.state)
             self._cache, self._pos = [], 0
-        if not self._cache or self._revision != servo.revision:
+        supply = self.source.clock.supply
+        revision = (servo.revision, supply.revision if supply is not None else 0)
+        if not self._cache or self._revision != revision:
             self.source.state = copy.deepcopy(self._snapshot)
             k = np.arange(self._start, min(self._start + self.chunk, self.ticks + 1))
             self._cache = self.source.compute(k, replace(self.truth, motion=servo.motion), servo)
-            self._revision = servo.revision
+            self._revision = revision
         self._pos += 1
+        if supply is not None:
+            supply.emitted = self._start + self._pos - 1
         return self._cache[self._pos - 1]

@@ -5,7 +5,8 @@ starts at, and the electronics add ``self_heating_c`` after power-on with time c
 
     T(t) = T_ch + (T_0 - T_ch) exp(-t / case_tau_s) + self_heating_c (1 - exp(-t / warmup_tau_s))
 
-with t the trial time (the device powered at 0) and the chamber held at T_ch; a chamber whose air moves is
+with t the trial time (the device powered at 0; the self-heating's t counts from the last power-on where the
+caller gives it) and the chamber held at T_ch; a chamber whose air moves is
 taken as constant over each batch of samples (its value at the batch's first time), the case's lag carried
 from batch to batch. With dT = T - reference_c, the
 accelerometer bias is ``a1 dT + a2 dT^2`` (ug), the gyro bias ``g1 dT`` (deg/h), and each scale factor error
@@ -32,8 +33,9 @@ class ThermalModel:
         self._case_c, self._t = start_c, 0.0
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last batch's times and temperatures
 
-    def temperature_c(self, t: np.ndarray) -> np.ndarray:
-        """The sensor's temperature (deg C) at trial times t (N,), the batch after the last one."""
+    def temperature_c(self, t: np.ndarray, since_on: np.ndarray | None = None) -> np.ndarray:
+        """The sensor's temperature (deg C) at trial times t (N,), the batch after the last one; ``since_on`` (N,)
+        s since the device's last power-on (None: since trial time 0)."""
         c, t = self.cfg, np.asarray(t, dtype=float)
         if self._last is not None and np.array_equal(t, self._last[0]):
             return self._last[1]
@@ -42,7 +44,8 @@ class ThermalModel:
         air = self.chamber(float(t[0]))
         case = air + (self._case_c - air) * np.exp(-(t - self._t) / c.case_tau_s)
         self._case_c, self._t = float(case[-1]), float(t[-1])
-        self._last = (t.copy(), case + c.self_heating_c * -np.expm1(-t / c.warmup_tau_s))
+        on = t if since_on is None else np.asarray(since_on, dtype=float)
+        self._last = (t.copy(), case + c.self_heating_c * -np.expm1(-on / c.warmup_tau_s))
         return self._last[1]
 
     def biases(self, temperature_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,9 +55,10 @@ class ThermalModel:
         accel = (d * np.array(c.accel_bias_ug_per_c) + d * d * np.array(c.accel_bias_ug_per_c2)) * UG
         return gyro, accel
 
-    def errors(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def errors(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
+               since_on: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The thermal errors (rad, m/s) added to ideal increments dtheta, dv (N, 3) over intervals ending at t."""
-        temperature = self.temperature_c(t)
+        temperature = self.temperature_c(t, since_on)
         d = (temperature - self.cfg.reference_c)[:, None]
         gyro, accel = self.biases(temperature)
         return (gyro * self.period + d * np.array(self.cfg.gyro_scale_ppm_per_c) * PPM * dtheta,
