@@ -12,12 +12,15 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
 from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
+
+if TYPE_CHECKING:
+    from drivers.config_query import ConfigDialogue
 
 R = TypeVar("R")
 
@@ -205,6 +208,15 @@ class Codec(ABC, Generic[R]):
                  if self.kind == "imu"
                  else TableSample(1, (0.0, 0.0, 0.0)))
         return len(self.encode(self.from_sample(probe)))
+
+    def config_dialogue(self) -> ConfigDialogue | None:
+        """How the harness asks the device for its configuration before a trial (:mod:`drivers.config_query`);
+        None: the protocol has no such query (or ``imu.options.check_config`` is false)."""
+        return None
+
+    def expected_config(self) -> dict[str, Any]:
+        """The config keys the device's own configuration is compared with, and their values in this config."""
+        return {}
 
     def unit_advice(self) -> tuple[str, str, str]:
         """What to check when the readings are off by a unit: the keys of :attr:`unit_keys`, else the protocol."""

@@ -1,8 +1,10 @@
-"""KVH 1750 "format A": 36-byte big-endian frames with a CRC-32/MPEG-2 (docs/wire-formats.md, "KVH 1750")."""
+"""KVH 1750 "format A": 36-byte big-endian frames with a CRC-32/MPEG-2 (docs/wire-formats.md, "KVH 1750"), and its
+configuration mode's ASCII queries (docs/devices.md, "Configuration check")."""
 
 from __future__ import annotations
 
 import math
+import re
 import struct
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
@@ -10,6 +12,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 
 from drivers.codec import FrameBatch, HealthFlag
+from drivers.config_query import ConfigDialogue, DeviceConfig, Exchange, Setting, UnreadableReply
 from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
@@ -28,6 +31,69 @@ FIELDS = np.dtype([("header", "S4"), ("gyro", ">f4", 3), ("accel", ">f4", 3), ("
                    ("temperature", ">i2"), ("crc", ">u4")])
 
 Vec3 = tuple[float, float, float]
+
+# Configuration mode (KVH 1750/1775 technical manual, "Commands and Queries"; TRECVT/ros_kvh1750 imu.cpp): ASCII
+# lines ended by CR and/or LF; "=NAME,VALUE" sets and is answered "NAME,VALUE", "?NAME" is answered "NAME,VALUE".
+# Normal mode streams frames and ignores every command but a few (=CONFIG,1 among them); configuration mode sends
+# no frames and answers an unknown command "INVALID,<what it received>". Leaving it (=CONFIG,0) is not answered.
+ENTER_CONFIG, LEAVE_CONFIG = "=CONFIG,1", "=CONFIG,0"
+QUERIES = ("MSYNC", "DR", "ROTFMT", "ROTUNITS", "TEMPUNITS")  # MSYNC first: with EXT, DR is not the output rate
+# A query's reply value -> the config key it sets and the value in the config's terms (DR: the rate, a number)
+STATED: dict[str, tuple[str, dict[str, str]]] = {
+    "ROTFMT": ("imu.options.gyro_output", {"DELTA": "delta", "RATE": "rate"}),
+    "ROTUNITS": ("imu.options.gyro_unit", {"DEG": "deg", "RAD": "rad"}),
+    "TEMPUNITS": ("imu.options.temperature_unit", {"C": "C", "F": "F"}),
+}
+# The values each reply may carry (DR: any rate); MSYNC: output timed by the IMU's clock at DR, or by the MSYNC input
+ACCEPTED: dict[str, tuple[str, ...]] = {"CONFIG": ("1",), "MSYNC": ("IMU", "EXT"),
+                                        **{name: tuple(table) for name, (_, table) in STATED.items()}}
+
+
+def command_line(text: str) -> bytes:
+    """A command or query as sent on the line."""
+    return text.encode("ascii") + b"\r\n"
+
+
+def reply_line(buf: bytes | bytearray, name: str) -> str | None:
+    """The first whole line in ``buf`` answering ``name`` ("NAME,..." or "INVALID,..."), frames around it ignored;
+    None until one has arrived up to its line end."""
+    match = re.search(rb"(?:" + re.escape(name.encode("ascii")) + rb"|INVALID),[\x20-\x7e]*?(?=[\r\n])", buf)
+    return None if match is None else match.group().decode("ascii")
+
+
+class KvhConfigDialogue(ConfigDialogue):
+    """=CONFIG,1, then each of :data:`QUERIES`, then =CONFIG,0 whatever happened."""
+
+    def query(self, port: Exchange) -> DeviceConfig:
+        replies: dict[str, str] = {}
+        try:
+            replies["CONFIG"] = self._ask(port, ENTER_CONFIG, "CONFIG", ACCEPTED["CONFIG"])
+            for name in QUERIES:
+                replies[name] = self._ask(port, "?" + name, name, ACCEPTED.get(name))
+        finally:
+            port.send(command_line(LEAVE_CONFIG))
+        return DeviceConfig(replies, stated_settings(replies))
+
+    @staticmethod
+    def _ask(port: Exchange, request: str, name: str, values: tuple[str, ...] | None) -> str:
+        """The device's reply to ``request``, checked: it answers ``name`` with one of ``values`` (None: a rate in
+        Hz)."""
+        reply = port.ask(command_line(request), lambda buf: reply_line(buf, name), f"{request!r}")
+        value = reply.partition(",")[2].strip()
+        readable = value in values if values is not None else re.fullmatch(r"\d+(\.\d+)?", value) and float(value) > 0
+        if reply.startswith("INVALID,") or not readable:
+            raise UnreadableReply(f"the KVH 1750 answers {request!r} with {reply!r}")
+        return reply
+
+
+def stated_settings(replies: dict[str, str]) -> tuple[Setting, ...]:
+    """The config keys the checked replies set: the output rate (unless MSYNC says the output follows the external
+    input), the gyro output and unit, the temperature unit."""
+    values = {name: reply.partition(",")[2].strip() for name, reply in replies.items()}
+    settings = [Setting(key, table[values[name]], replies[name]) for name, (key, table) in STATED.items()]
+    if values["MSYNC"] == "IMU":
+        settings.insert(0, Setting("imu.rate_hz", float(values["DR"]), replies["DR"]))
+    return tuple(settings)
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,6 +114,7 @@ class Kvh1750Options(Model):
     gyro_output: Literal["delta", "rate"] = "delta"
     accel_unit: Literal["g", "m/s^2"] = "g"
     temperature_unit: Literal["C", "F"] = "C"  # its TEMPUNITS
+    check_config: bool = True  # ask the IMU for its configuration before a trial (a read-only line: false)
 
 
 class Kvh1750Codec(ByteCodec[KvhFrame]):
@@ -78,6 +145,21 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
 
     def frame_lengths(self, buf: np.ndarray, starts: np.ndarray) -> np.ndarray:
         return np.full(len(starts), FRAME_SIZE, dtype=np.int64)
+
+    def config_dialogue(self) -> KvhConfigDialogue | None:
+        return KvhConfigDialogue() if self.options.check_config else None
+
+    def expected_config(self) -> dict[str, Any]:
+        return {"imu.rate_hz": self.rate_hz, "imu.options.gyro_output": self.gyro_output,
+                "imu.options.gyro_unit": self.gyro_unit, "imu.options.temperature_unit": self.options.temperature_unit}
+
+    def stated_values(self) -> dict[str, str]:
+        """What a KVH 1750 set up as this codec answers each of :data:`QUERIES` (the emulated device's replies)."""
+        options = {"imu.options.gyro_output": self.gyro_output, "imu.options.gyro_unit": self.gyro_unit,
+                   "imu.options.temperature_unit": self.options.temperature_unit}
+        stated = {name: next(v for v, ours in table.items() if ours == options[key])
+                  for name, (key, table) in STATED.items()}
+        return {"MSYNC": "IMU", "DR": f"{self.rate_hz:g}", **stated}
 
     def parse(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         frames = fixed_rows(buf, starts, FRAME_SIZE)

@@ -22,6 +22,7 @@ from drivers.registry import imu_codec
 from emulators.chamber import EmulatedChamber, emulated_chamber
 from emulators.clocks import device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
+from emulators.imu_commands import CommandedPty, Responder, responder_for
 from emulators.ports import CanPort, PtyPort
 from emulators.servo import Servo
 from emulators.simulation import Simulation
@@ -125,10 +126,9 @@ class Bench:
         private = any(unplugging) and link_dir is None
         self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
 
-        def pty(name: str, unplugs: bool) -> PtyPort:
-            if link_dir is not None:
-                return PtyPort(link_dir / name)
-            return PtyPort(Path(self._links.name) / name if unplugs else None)
+        def pty(name: str, unplugs: bool, responder: Responder | None = None) -> PtyPort:
+            link = link_dir / name if link_dir is not None else Path(self._links.name) / name if unplugs else None
+            return PtyPort(link) if responder is None else CommandedPty(link, responder)
 
         try:
             if link_dir is not None:
@@ -137,7 +137,8 @@ class Bench:
                 imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
             else:
                 check_baudrate("imu", codec.frame_bytes(), rate, imu_cfg.baudrate)
-                imu_port, imu_damage, imu_baud = pty("imu", unplugging[0]), ByteDamage(), imu_cfg.baudrate
+                imu_port = pty("imu", unplugging[0], responder_for(codec))  # it answers its configuration queries
+                imu_damage, imu_baud = ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
             check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)  # it sends tts1
             self.ports["turntable_data"] = pty("turntable_data", unplugging[1])

@@ -36,6 +36,8 @@ class PtyPort:
 
     def __init__(self, link: Path | None = None) -> None:
         self.link = link
+        self.inbox: bytearray | None = None  # a bytearray: what the reader writes is kept there (else dropped)
+        self._reading = threading.Lock()  # the master's input is read by one thread at a time, and not once closed
         self._open()
 
     def _open(self) -> None:
@@ -74,15 +76,29 @@ class PtyPort:
     def flushed(self) -> bool:
         """True once the reader has emptied its input (a serial library does as it opens the port, just after
         setting the line up): bytes written from then on reach it. Packet mode reports the flush to the master
-        as a status byte; what the reader wrote to the port is read and dropped with it."""
-        readable = select.POLLIN | select.POLLPRI
-        while not self._flushed and any(e & readable for e in self._events(0, readable)):
-            try:
-                packet = os.read(self.master, 4096)
-            except OSError:  # EIO: no reader holds the port
-                break
-            self._flushed = bool(packet) and (packet[0] & termios.TIOCPKT_FLUSHREAD) != 0
+        as a status byte (:meth:`take_input`)."""
+        if not self._flushed:
+            self.take_input()
         return self._flushed
+
+    def take_input(self, wait_s: float = 0.0) -> None:
+        """Read what the reader's side sent, waiting up to ``wait_s`` for it: its flushes (noted for :meth:`flushed`)
+        and the bytes it wrote (kept in :attr:`inbox` when there is one, else dropped)."""
+        readable = select.POLLIN | select.POLLPRI
+        while any(e & readable for e in self._events(wait_s * 1000, readable)):
+            wait_s = 0.0
+            with self._reading:
+                try:
+                    packet = os.read(self.master, 4096) if self.plugged else b""
+                except OSError:  # EIO: no reader holds the port
+                    packet = b""
+                if not packet:
+                    return
+                if packet[0] == termios.TIOCPKT_DATA:
+                    if self.inbox is not None:
+                        self.inbox += packet[1:]
+                else:
+                    self._flushed = self._flushed or (packet[0] & termios.TIOCPKT_FLUSHREAD) != 0
 
     def write(self, data: bytes, stop: threading.Event) -> bool:
         """Write all of ``data``, waiting while the kernel buffer is full; False if stopped first."""
@@ -122,9 +138,10 @@ class PtyPort:
 
     def unplug(self) -> None:
         """Close the master; clients then read end-of-file/EIO and the slave disappears."""
-        if self.plugged:
-            os.close(self.master)
-            self.plugged = False
+        with self._reading:
+            if self.plugged:
+                os.close(self.master)
+                self.plugged = False
 
     def replug(self) -> None:
         self._open()

@@ -55,12 +55,13 @@ def test_one_percent_flagged_completes_counted_never_estimated_and_judged_by_inv
 
 
 def test_an_imu_streaming_at_another_rate_than_configured_ends_the_trial_naming_imu_rate_hz(tmp_path, capsys):
-    """An emulated KVH 1750 at 1000 Hz, the config saying 200 Hz: the trial ends early within seconds naming
-    both rates and the key, not the table."""
+    """An emulated KVH 1750 at 1000 Hz, the config saying 200 Hz and the configuration query off (a read-only
+    line): the trial ends early within seconds naming both rates and the key, not the table."""
     cfg = emulated(1000.0, baudrate=921600)
     with Emulator(tmp_path, cfg) as emulator:
         time.sleep(max(0.0, 1.0 - (time.monotonic() - emulator.started)))
-        lab = lab_config({**cfg, "imu": {**cfg["imu"], "rate_hz": RATE_HZ}}, emulator.ports, tmp_path)
+        unchecked = {**cfg["imu"], "rate_hz": RATE_HZ, "options": {"check_config": False}}
+        lab = lab_config({**cfg, "imu": unchecked}, emulator.ports, tmp_path)
         started = time.monotonic()
         code = main(["run", str(lab), "--duration", "20", "--out", str(tmp_path / "run"), "--viewer", "none",
                      "--quiet", "--no-figures"])

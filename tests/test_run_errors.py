@@ -133,12 +133,13 @@ def test_swapped_ports_end_the_trial_with_one_line_naming_the_port(tmp_path, cap
         proc.wait()
     lines = capsys.readouterr().err.strip().splitlines()
     swapped = "are the IMU and table ports swapped?"
-    assert len(lines) == 1 and lines[0] in (  # whichever stream's 5 s run out first
+    unchecked = f"hil: WARNING: imu: no answer to '=CONFIG,1' within 1 s on {ports['turntable_data']}"
+    assert len(lines) == 2 and lines[0].startswith(unchecked) and lines[1] in (  # whichever stream's 5 s run out first
         f"hil: trial early: the imu port ({ports['turntable_data']}) carries tts1 frames: {swapped}",
         f"hil: trial early: the turntable data port ({ports['imu']}) carries kvh1750 frames: {swapped}"), lines
-    assert took < 12.0  # output.stream_timeout_s (5 s) after the first bytes, and the start and the outputs
+    assert took < 13.0  # the IMU's configuration query (1 s), output.stream_timeout_s (5 s), the start and outputs
     result = yaml.safe_load((out / "result.json").read_text())
-    assert result["ended"] == f"early: {lines[0].removeprefix('hil: trial early: ')}"
+    assert result["ended"] == f"early: {lines[1].removeprefix('hil: trial early: ')}"
 
 
 

@@ -56,17 +56,20 @@ def trial_record(cfg: Config, config_text: str, started: datetime, ended: dateti
     datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it started), else
     the config's."""
     recorded = read_start_record(out / "recording.mcap") or {}
-    ports = json.loads(recorded["ports"]) if recorded.get("ports") else None
-    return {**run_record(cfg.record.model_dump(), config_text, started, ended), **_devices(cfg, ports)}
+    ports, imu_config = (json.loads(recorded[key]) if recorded.get(key) else None for key in ("ports", "imu_config"))
+    return {**run_record(cfg.record.model_dump(), config_text, started, ended), **_devices(cfg, ports),
+            "imu_config": imu_config}
 
 
-def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None) -> dict[str, Any]:
+def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None,
+                 imu_config: dict[str, Any] | None = None) -> dict[str, Any]:
     """The record of a trial as it starts (the recording's metadata): :func:`trial_record`'s fields but
-    ``ended_utc``, with the ``ports`` the devices were found on (None: the config's)."""
+    ``ended_utc``, with the ``ports`` the devices were found on (None: the config's) and what the IMU said of its
+    configuration (``imu_config``: :func:`hil.trial.imu_config.check_imu_config`; None: not asked)."""
     now = datetime.now(timezone.utc)
     record = run_record(cfg.record.model_dump(), config_text, now, now)
     del record["ended_utc"]
-    return {**record, **_devices(cfg, ports)}
+    return {**record, **_devices(cfg, ports), "imu_config": imu_config}
 
 
 def recorded_block(recording: Path, block: RecordConfig) -> RecordConfig:

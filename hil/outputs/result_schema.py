@@ -100,6 +100,9 @@ class Record(_Block):
     host: str
     ports: dict[str, Any] | None
     controller: str | None
+    # what the IMU said of its configuration as the trial attached (docs/devices.md, "Configuration check"):
+    # {answered, replies, settings}; null when it was not asked
+    imu_config: dict[str, Any] | None = None
 
 
 class Result(_Block):

@@ -37,6 +37,7 @@ from hil.pipeline.decoding import IMU, TABLE, stream_codecs
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished, Health, Listener, Progress
 from hil.pipeline.stream_watch import StreamWatch
+from hil.trial.imu_config import check_imu_config
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
@@ -205,8 +206,9 @@ class LiveTrial:
             check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
+        imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
-                                 record=start_record(cfg, config_text, ports))  # once the trial can start
+                                 record=start_record(cfg, config_text, ports, imu_config))  # once the trial can start
         self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
