@@ -1,6 +1,7 @@
 """``hil plan PLAN.yaml``: the plan's steps run in order into ``OUT/NN-<kind>/``, its state in ``OUT/plan.json``
-after every step, ``--resume`` going on from it, ``--dry-run`` the schedule alone; on every way out the power
-supply is brought to its ``on_exit`` and read back (each trial turns its table Off itself)."""
+after every step, ``--resume`` going on from it, ``--dry-run`` the schedule alone; on every way out the table
+commanded on its own port is turned Off and the power supply brought to its ``on_exit``, both read back (each
+trial turns its table Off itself too)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from hil.plan.soak import PlanChamber
 from hil.plan.spec import TRIAL_KINDS, Plan, Step, load_plan
 from hil.plan.state import PlanState
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED, StepContext, run_trial_step
+from hil.plan.table import PlanTable
 from hil.trial.stop_signals import StopSignals
 
 Commands = dict[str, Callable[[argparse.Namespace], int]]
@@ -39,18 +41,20 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
     with claimed(out, ()):
         state = PlanState.open(out, plan, args.resume)
         ctx = StepContext(out, plan.name, state.doc["run"], args, commands)
-        with StopSignals() as stop, power, chamber:
+        devices = Devices(power, chamber, PlanTable(plan.config))
+        with StopSignals() as stop, power, chamber, devices.table:  # left in reverse: the table Off first
             power.restore(plan, state)
             chamber.restore(plan, state)
-            ended = _steps(plan, state, ctx, Devices(power, chamber), stop)
-        return _close(plan, state, ended, power)
+            ended = _steps(plan, state, ctx, devices, stop)
+        return _close(plan, state, ended, devices)
 
 
 class Devices(NamedTuple):
-    """What a plan's steps drive besides the trials: the power supply and the chamber."""
+    """What a plan drives besides the trials: the power supply, the chamber, and the table on its way out."""
 
     power: PlanPower
     chamber: PlanChamber
+    table: PlanTable
 
 
 def _steps(plan: Plan, state: PlanState, ctx: StepContext, devices: Devices, stop: StopSignals) -> str:
@@ -93,7 +97,7 @@ def _run_step(step: Step, ctx: StepContext, devices: Devices, stop: StopSignals)
     return (*power.step(step, stop), {})
 
 
-def _close(plan: Plan, state: PlanState, ended: str, power: PlanPower) -> int:
+def _close(plan: Plan, state: PlanState, ended: str, devices: Devices) -> int:
     """The plan's end in plan.json, plan.html and junit.xml; its exit code as a trial's."""
     from hil.plan.pages import write_pages
     from hil.plan.repeatability import units_figures
@@ -108,8 +112,10 @@ def _close(plan: Plan, state: PlanState, ended: str, power: PlanPower) -> int:
     state.close(ended, verdict, units_figures(plan, state))
     write_pages(state)
     print(f"plan {plan.name}: {ended}, verdict {verdict or 'none judged'}; {state.out / 'plan.html'}")
-    if power.exit_state:
-        print(f"power supply: {power.exit_state}")
+    if devices.table.exit_state:
+        print(f"turntable: {devices.table.exit_state}")
+    if devices.power.exit_state:
+        print(f"power supply: {devices.power.exit_state}")
     return {None: 0, "PASS": 0, "FAIL": 3}.get(verdict, 1)
 
 

@@ -1,0 +1,35 @@
+"""The plan's turntable: on every way out of a plan whose config commands the table on its own port (a lab's
+table, or ``hil emulate``'s), every axis Off, read back, after the steps and before the supply and the chamber
+go to their ``on_exit``. An emulated trial's table (``command_port: emulator``) lives and ends with its trial."""
+
+from __future__ import annotations
+
+from hil.config import Config
+
+
+class PlanTable:
+    """The table of ``config`` (none without a command port of its own), sent Off when the plan ends."""
+
+    def __init__(self, config: Config) -> None:
+        port = config.turntable.command_port
+        self.table = config.turntable
+        self.url = port if port and port != "emulator" else None
+        self.exit_state: str | None = None
+
+    def __enter__(self) -> PlanTable:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Every axis Off and the modes read back; what the table said in :attr:`exit_state`."""
+        from drivers.table_controller import TableError
+        from hil.trial.table_control import TableControl
+
+        if self.url is None:
+            return
+        try:
+            control = TableControl(self.url, self.table).open()
+        except TableError as exc:
+            self.exit_state = f"not confirmed: {exc}"
+            return
+        control.stop()
+        self.exit_state = f"not confirmed: {control.stop_error}" if control.stop_error else "every axis Off (read back)"
