@@ -141,6 +141,7 @@ class Codec(ABC, Generic[R]):
     # The status bits that mark a sample invalid (docs/devices.md, "Health flags"); none: every sample is valid.
     health_flags: ClassVar[tuple[HealthFlag, ...]] = ()
     start_up_flags: ClassVar[tuple[str, ...]] = ()  # those it raises while it starts (the emulator's flagged samples)
+    clip_flags: ClassVar[tuple[str, ...]] = ()  # those it raises for a gyro x, y, z reading its range (none: no such)
     device_time: ClassVar[bool] = False  # the frames carry the device's own clock (the emulator fills it in)
     # The config keys that set the accelerometer unit, the gyro unit and the gyro output (rate or increment),
     # which the plausibility check names when the readings are off by a unit; None: the protocol fixes them.

@@ -292,6 +292,7 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     healthy_status: ClassVar[int] = SELF_TEST_PASSED
     health_flags: ClassVar[tuple[HealthFlag, ...]] = HEALTH_FLAGS
     start_up_flags: ClassVar[tuple[str, ...]] = ("self_test_failed",)
+    clip_flags: ClassVar[tuple[str, ...]] = ("clipping_gyro_x", "clipping_gyro_y", "clipping_gyro_z")
 
     def __init__(self, rate_hz: float, **options: Any) -> None:
         super().__init__(rate_hz, **options)

@@ -140,6 +140,7 @@ class _Channel:
         limit: float | None = None,
     ) -> None:
         self._limit = None if limit is None else limit * period  # the output's range, as an increment
+        self.clipped: np.ndarray | None = None  # (N, 3) of the last call: where the output read its range
         self._asymmetry = None if asymmetry is None or not asymmetry.any() else asymmetry / 2.0
         self._response = response
         matrix = np.diag(1.0 + scale) @ misalignment_matrix(misalignment)
@@ -172,6 +173,7 @@ class _Channel:
             rate_error = rate_error + instability
         x = x + rate_error * period
         if self._limit is not None:
+            self.clipped = np.abs(x) >= self._limit
             x = np.clip(x, -self._limit, self._limit)
         return self._quantise(x) if self._quantise is not None else x
 
@@ -258,6 +260,11 @@ class SensorErrorModel:
         if len(t):
             self._chamber(float(t[-1]))
         return np.full(len(t), self._temperature_c)
+
+    def gyro_clipped(self) -> np.ndarray | None:
+        """Per sample and axis of the last :meth:`apply` (N, 3), whether the gyro read its range
+        (``gyro_range_dps``); None without a range."""
+        return self._gyro.clipped
 
     def apply(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, accel_bias: np.ndarray | None = None,
               since_on: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -58,7 +58,8 @@ class FrameSource:
 
 class ImuSource(FrameSource):
     """IMU frames: increments over each latch interval, with the sensor errors, encoded by ``codec``; the status
-    word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised); the sensor's
+    word healthy but where the ``faults`` flag a sample (the codec's start-up flags raised) and where a gyro reads
+    its range (``imu.errors.gyro_range_dps``: the codec's clip flag of that axis raised); the sensor's
     temperature where the frames carry one. Each power-on by the emulated supply adds a turn-on bias to the
     accelerometers' (1-sigma ``turn_on_bias_ug`` per axis, ug)."""
 
@@ -79,14 +80,20 @@ class ImuSource(FrameSource):
         s["last"] = float(latch[-1])
         dev = clock.device_time(latch).tolist() if codec.device_time else [None] * len(k)
         flagged = flagged_samples(self.faults, latch, clock.since_power_on(k), s["flags_rng"])
-        statuses = (codec.healthy_status, codec.flagged_status(codec.start_up_flags))
+        clipped = s["errors"].gyro_clipped()
+        raised = [(codec.start_up_flags if bad else ()) + tuple(self.clip_flags(axes)) for bad, axes in
+                  zip(flagged.tolist(), np.zeros((len(k), 3), bool) if clipped is None else clipped)]
         temperature = s["errors"].temperature_c(latch, warm).tolist()
         return [Emission(int(i), float(t), float(end), codec.encode(codec.from_sample(
-                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=statuses[bad], temperature_c=temp))),
-                         bool(on), bad)
-                for i, c, t, end, a, b, d, on, bad, temp in zip(
+                    ImuSample(int(c), tuple(a), tuple(b), device_time=d, status=codec.flagged_status(names),
+                              temperature_c=temp))), bool(on), bool(names))
+                for i, c, t, end, a, b, d, on, names, temp in zip(
                     clock.pulses(k), clock.counters(k), clock.tick_times(k), latch, dtheta.tolist(), dv.tolist(), dev,
-                    clock.powered(k), flagged.tolist(), temperature)]
+                    clock.powered(k), raised, temperature)]
+
+    def clip_flags(self, axes: np.ndarray) -> list[str]:
+        """The codec's clip flags of the gyro ``axes`` (3,) that read their range (none for a codec without)."""
+        return [name for name, hit in zip(self.codec.clip_flags, axes.tolist()) if hit]
 
     def turn_on_bias(self, k: np.ndarray) -> np.ndarray | None:
         """The turn-on bias (m/s^2, N x 3) at ticks k, of the supply's power-on they follow (None: no power-on)."""
