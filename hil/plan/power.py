@@ -13,6 +13,7 @@ import numpy as np
 
 from drivers.scpi_supply import ScpiSupply, SupplyError, SupplySettings
 from hil.config import Config
+from hil.config_environment import PowerConfig
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED
@@ -53,10 +54,8 @@ class PlanPower:
 
             self.server = EmulatedSupply(SupplyState(self.settings.load_a, self.settings.options.channel or 1))
             resource = self.server.resource
-        options = self.settings.options
         try:
-            self.supply = ScpiSupply(resource, SupplySettings(options.voltage_v, options.current_limit_a,
-                                                              options.channel)).open()
+            self.supply = supply_driver(self.settings, resource).open()
         except SupplyError as exc:
             self._close()
             raise InputError(f"environment.power: {exc}") from None
@@ -134,6 +133,15 @@ class PlanPower:
         """The output on or off (read back); a power-on of the emulated unit draws its turn-on bias."""
         self.supply.output(on)
         if on and self.settings.source == "emulator":
+            from emulators.clocks import turn_on_offset_ug
+
             errors = self.config.imu.errors
-            draw = np.random.default_rng([self.config.trial.seed, step.index]).normal(size=3)
-            self.bias_ug = (np.asarray(errors.accel_bias_ug) + draw * np.asarray(errors.turn_on_bias_ug)).tolist()
+            offset = turn_on_offset_ug(errors.turn_on_bias_ug, (self.config.trial.seed, step.index))
+            self.bias_ug = (np.asarray(errors.accel_bias_ug) + offset).tolist()
+
+
+def supply_driver(settings: PowerConfig, resource: str) -> ScpiSupply:
+    """The driver of ``environment.power`` for the supply at VISA ``resource``, not yet open: the class its
+    ``controller`` names (``scpi``; the emulated supply speaks SCPI), with the options to write."""
+    options = settings.options
+    return ScpiSupply(resource, SupplySettings(options.voltage_v, options.current_limit_a, options.channel))
