@@ -43,7 +43,7 @@ from drivers.kvh1750 import Kvh1750Codec
 from drivers.stim300 import Stim300Codec
 from drivers.tts1 import Tts1Codec
 from drivers.xsens import XsensCodec
-from hil.config import CanSignals
+from drivers.can_settings import CanSignals
 from hil.samples import ImuSample, TableSample
 
 BLOCK = 20_000  # frames per framer instance

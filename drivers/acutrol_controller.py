@@ -35,7 +35,7 @@ class AcutrolController(TableController):
 
     name: ClassVar[str] = "acutrol"
     Options: ClassVar[type] = AcutrolOptions
-    emulated_table: ClassVar[str] = "emulators.acutrol_table:AcutrolTable"
+    emulated: ClassVar[str] = "emulators.acutrol_table:AcutrolTable"
 
     def send(self, *commands: AclCommand) -> AclReply:
         """Send one program message (the commands chained with ``;``) and return its reply; raises

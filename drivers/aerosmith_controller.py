@@ -40,7 +40,7 @@ class AerosmithController(TableController):
 
     name: ClassVar[str] = "aerosmith"
     Options: ClassVar[type] = AerosmithOptions
-    emulated_table: ClassVar[str] = "emulators.aerosmith_table:AerosmithTable"
+    emulated: ClassVar[str] = "emulators.aerosmith_table:AerosmithTable"
     baudrate: ClassVar[int] = 9600
 
     @property

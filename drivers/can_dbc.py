@@ -15,9 +15,9 @@ import can
 import cantools
 import numpy as np
 
+from drivers.can_settings import CanSignals
 from drivers.codec import Codec, FrameBatch, Framer, HealthFlag, RawChunk
 from drivers.framing import SequenceUnwrapper, host_rate
-from hil.config import CanSignals
 from hil.inputs import resolve_path
 from hil.samples import ImuSample, ImuSamples
 from hil.units import G0

@@ -19,13 +19,14 @@ from can.io.blf import BLFParseError
 from pydantic import ValidationError
 
 from drivers.can_dbc import CanDbcCodec
+from drivers.can_settings import CanConfig
 from drivers.codec import RawChunk, raised_flags
 from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES, byte_codecs, detect
+from drivers.registry import CODECS
 from drivers.tap import message_to_chunk
-from hil.config import CanConfig, InputError
 from hil.config_types import describe_validation
-from hil.plugins import codec_class
+from hil.inputs import InputError
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
 DEFAULT_DBC = CanConfig().dbc  # the shipped DBC the config defaults to
@@ -118,9 +119,9 @@ def _capture_file(path: str | Path) -> Path:
 def _codec_class(protocol: str) -> Any:
     """The codec class of a protocol that has data frames."""
     try:
-        cls = codec_class(protocol)
-    except KeyError as exc:
-        raise CaptureError(exc.args[0]) from None
+        cls = CODECS.get(protocol)
+    except ValueError as exc:
+        raise CaptureError(f"protocol: {exc}") from None
     kind = getattr(cls, "kind", None)
     if kind not in ("imu", "table"):
         raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")

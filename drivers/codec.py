@@ -3,7 +3,7 @@ IMU's rate and its own options, a stream framer that gives a read's frames as ar
 records <-> wire for the emulator, and what the harness asks of a device (counter modulus, frame size,
 status of a healthy device, the keys that set its units).
 
-A codec is the plug-in for one protocol (found by name: :mod:`hil.plugins`). Records keep the device's own
+A codec is the plug-in for one protocol (found by name: :mod:`drivers.registry`). Records keep the device's own
 fields and units; :meth:`Codec.samples` converts a batch of frames to the SI arrays of :mod:`hil.samples`
 and :meth:`Codec.from_sample` builds a record from SI values (the emulators encode with it).
 """
@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 import numpy as np
 
 from hil.config_types import Model
+from hil.inputs import ConfigError
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
 
 if TYPE_CHECKING:
@@ -238,8 +239,6 @@ BITS_PER_BYTE = 10  # a serial line's 8N1
 def check_baudrate(name: str, frame_bytes: int, rate_hz: float, baudrate: int) -> None:
     """Raise :class:`ConfigError` naming ``<name>.baudrate`` when frames of ``frame_bytes`` at ``rate_hz`` do not
     fit the serial line (8N1): the device could not send them, or is not set as the config says."""
-    from hil.config import ConfigError  # here: hil.config finds the codecs through drivers.registry, which imports this
-
     needed = frame_bytes * BITS_PER_BYTE * rate_hz
     if needed > baudrate:
         raise ConfigError(f"{name}.baudrate: {frame_bytes}-byte frames at {rate_hz:g} Hz need {needed:.0f} baud "

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.framing import ByteCodec, find_frames
-from hil.plugins import codec_class, protocol_names
+from drivers.registry import CODECS
 
 DETECT_BYTES = 1 << 16  # bytes the detector looks at: a few hundred frames of any shipped protocol
 MIN_RUN = 3  # consecutive valid frames a protocol needs for them to count
@@ -31,9 +31,9 @@ class Detection:
 def byte_codecs() -> dict[str, ByteCodec]:
     """An instance of every registered byte-stream codec (one that cannot be built with its defaults is left out)."""
     codecs = {}
-    for name in protocol_names():
+    for name in CODECS.names():
         try:
-            cls = codec_class(name)
+            cls = CODECS.get(name)
             if issubclass(cls, ByteCodec):
                 codecs[name] = cls(NOMINAL_RATE_HZ)
         except Exception:  # a plug-in that needs options, or cannot be loaded: not detected

@@ -55,7 +55,7 @@ class TableController(ABC):
 
     name: ClassVar[str] = ""
     Options: ClassVar[type[BaseModel]] = NoOptions
-    emulated_table: ClassVar[str] = ""  # "module:Class" of its emulated table (emulators/table_server.py)
+    emulated: ClassVar[str] = ""  # "module:Class" of its emulated table (drivers.registry.Registry.emulated)
     gimbals: ClassVar[tuple[str, ...]] = GIMBAL_AXES
     modes: ClassVar[frozenset[str]] = frozenset(MODES)
     sync_command: ClassVar[bool] = False

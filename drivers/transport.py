@@ -23,7 +23,7 @@ import serial
 from drivers.codec import RawChunk
 from drivers.pty_guard import PtyGuard
 from drivers.tap import message_to_chunk
-from hil.config import InputError
+from hil.inputs import InputError
 
 POLL_S = 0.05  # longest a read waits, so a reader thread notices a stop request promptly
 CAN_READ_MAX = 2000  # CAN messages one read takes at most (1/6 s of a 2 kHz IMU sending six a sample)

@@ -10,11 +10,12 @@ emulator's log) and says the axes' modes (:meth:`modes`).
 
 from __future__ import annotations
 
-import importlib
 import selectors
 import socket
 import threading
 
+from drivers.controllers import controller_options
+from drivers.registry import TABLE_CONTROLLERS
 from emulators.servo import Servo
 from hil.config import ConfigError
 
@@ -22,15 +23,12 @@ POLL_S = 0.05
 
 
 def emulated_table(cfg, servo: Servo, log: bool = False):
-    """The emulated table of ``turntable.controller``, on ``servo``, with the controller's options."""
-    from drivers.controllers import controller_class, controller_options
-
-    cls = controller_class(cfg.turntable.controller)
-    if not cls.emulated_table:
+    """The emulated table of ``turntable.controller`` (found by the controller's name), on ``servo``, with the
+    controller's options."""
+    table = TABLE_CONTROLLERS.emulated(cfg.turntable.controller)
+    if table is None:
         raise ConfigError(f"turntable.controller: {cfg.turntable.controller!r} has no emulated table; "
                           "with it the table is a real one (turntable.source: serial)")
-    module, _, name = cls.emulated_table.partition(":")
-    table = getattr(importlib.import_module(module), name)
     return table(servo, controller_options(cfg.turntable), log=log)
 
 

@@ -11,26 +11,24 @@ from __future__ import annotations
 import logging
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationError, model_validator
 
+from drivers.can_settings import CanConfig
+from drivers.registry import IMU_CODECS, TABLE_CODECS, TABLE_CONTROLLERS
 from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
 from hil.config_environment import EnvironmentConfig
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
-from hil.inputs import InputError
-from hil.plugins import imu_codec_class, imu_options
+from hil.inputs import ConfigError, InputError  # noqa: F401 (InputError: for the config's users)
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 MIN_READ_S = 0.02  # the shortest time between a live trial's reads (Config.read_s)
 MAX_READ_FRAMES = 50  # IMU frames a live read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
 _log = logging.getLogger(__name__)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
-class ConfigError(InputError, ValueError):
-    """A configuration that cannot be used; the message names the key path and the reason."""
-
 
 class TrialConfig(Model):
     name: str = "trial"
@@ -107,9 +105,10 @@ class TurntableConfig(Model):
     source: Literal["emulator", "serial"] = "emulator"
     data_port: str | None = None
     command_port: str | None = None
-    controller: str = "acutrol"  # a name of drivers/controllers.py (built-in or entry point)
-    controller_options: dict[str, Any] = Field(default_factory=dict)  # validated by the controller's own model
-    data_protocol: str = "tts1"  # the codec registry's name of the table's data frames
+    controller: Annotated[str, TABLE_CONTROLLERS.name_check()] = "acutrol"  # a table controller's registry name
+    controller_options: Annotated[dict[str, Any], TABLE_CONTROLLERS.options_check("controller", fill=False)] = Field(
+        default_factory=dict, validate_default=True)  # validated by the controller's own model
+    data_protocol: Annotated[str, TABLE_CODECS.name_check()] = "tts1"  # a table data protocol's registry name
     baudrate: int = Field(115200, gt=0)
     motion: MotionConfig = MotionConfig()
     azimuth_deg: float = 0.0  # azimuth of the outer axis zero, from north towards east
@@ -129,40 +128,11 @@ class TurntableConfig(Model):
         return self
 
 
-class CanSignals(Model):
-    """Which DBC signals carry which quantity, as ``Message.Signal`` (x, y, z order).
-
-    Each signal's DBC unit says what it is: an increment (rad, deg, m/s) or a rate (rad/s, deg/s,
-    m/s^2, g), which the driver converts to increments with the IMU rate.
-    """
-
-    gyro: tuple[str, str, str] = ("IMU_DThetaX.DThetaX", "IMU_DThetaY.DThetaY", "IMU_DThetaZ.DThetaZ")
-    accel: tuple[str, str, str] = ("IMU_DVX.DVX", "IMU_DVY.DVY", "IMU_DVZ.DVZ")
-    sync: str | None = "SyncCounter"  # signal name present in every message above; None: count samples
-    status: str | None = "Status"  # fault flags present in every message above (OR-ed), or None
-    temperature: str | None = None  # the IMU's temperature (deg C) as Message.Signal, or None
-
-
-class CanConfig(Model):
-    """The IMU's python-can bus. The default, ``udp_multicast`` on python-can's IPv4 group (hop limit 0:
-    never off this host), can be opened by another process; ``virtual`` only within one process."""
-
-    interface: str = "udp_multicast"
-    channel: str = "239.74.163.2"
-    dbc: str = "configs/imu_lab_highres.dbc"
-    bitrate: int = Field(1_000_000, gt=0)
-    signals: CanSignals = CanSignals()
-
-    @property
-    def port(self) -> dict[str, str | int]:
-        """The bus as :func:`drivers.transport.open_transport` takes it."""
-        return {"interface": self.interface, "channel": self.channel, "bitrate": self.bitrate}
-
-
 class ImuConfig(Model):
     source: Literal["emulator", "serial", "can"] = "emulator"
-    protocol: str = "kvh1750"  # a codec's name (hil.plugins: the built-ins and the entry points)
-    options: dict[str, Any] = Field({}, validate_default=True)  # the device's own output settings (its codec's model)
+    protocol: Annotated[str, IMU_CODECS.name_check()] = "kvh1750"  # an IMU protocol's registry name
+    # the device's own output settings, validated by its codec's model
+    options: Annotated[dict[str, Any], IMU_CODECS.options_check("protocol")] = Field({}, validate_default=True)
     port: str | None = None
     baudrate: int = Field(921600, gt=0)
     can: CanConfig | None = None  # a CAN protocol: the default bus when left out
@@ -187,23 +157,11 @@ class ImuConfig(Model):
             _log.warning("hil: imu.kvh1750 is deprecated and will be removed: write its keys under imu.options")
             data["options"] = data.pop("kvh1750")
         try:
-            on_can = imu_codec_class(data.get("protocol", "kvh1750")).link == "can"
+            on_can = IMU_CODECS.get(data.get("protocol", "kvh1750")).link == "can"
         except (ValueError, TypeError):  # an unknown protocol: its field's check names it
             on_can = False
         return {**data, "can": {}} if on_can and data.get("can") is None and data.get("source", "emulator") == \
             "emulator" else data
-
-    @field_validator("protocol")
-    @classmethod
-    def _known_protocol(cls, name: str) -> str:
-        imu_codec_class(name)  # raises naming the IMU protocols there are
-        return name
-
-    @field_validator("options")
-    @classmethod
-    def _codec_options(cls, options: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
-        name = info.data.get("protocol")  # None: the protocol failed its check
-        return options if name is None else imu_options(name, options)
 
     @model_validator(mode="after")
     def _transport_given(self) -> ImuConfig:

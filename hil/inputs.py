@@ -13,6 +13,10 @@ class InputError(Exception):
     """Input that cannot be used (config, data, port, arguments): one line naming it and why, exit 2."""
 
 
+class ConfigError(InputError, ValueError):
+    """A configuration that cannot be used; the message names the key path and the reason."""
+
+
 def resolve_path(path: str | Path) -> Path:
     """A config or DBC path as named in a config or a default: the path itself if it exists, else the shipped
     file of that name (``configs/NAME`` or ``NAME``), else the path unchanged so that its error names it."""

@@ -109,7 +109,8 @@ def test_a_three_axis_swing_on_the_rate_table_is_refused_before_anything_moves(t
     path.write_text(yaml.safe_dump(cfg))
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--viewer", "none", "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "turntable.controller_options.axis: Input should be" in err
+    assert err.count("\n") == 1 and "turntable.controller_options: axis: Input should be" in err
+    assert "(the aerosmith options)" in err
 
 
 def test_a_rate_test_on_the_emulated_rate_table_recovers_the_bias(tmp_path):
@@ -127,8 +128,8 @@ def test_a_rate_test_on_the_emulated_rate_table_recovers_the_bias(tmp_path):
 
 
 @pytest.mark.parametrize(("protocol", "message"), [
-    ("kvh1750", "turntable.data_protocol: 'kvh1750' is not a turntable data protocol (its kind is 'imu')"),
-    ("tts9", "turntable.data_protocol: protocol 'tts9': unknown; known protocols:")])
+    ("kvh1750", "turntable.data_protocol: 'kvh1750': unknown; table data protocols: tts1"),
+    ("tts9", "turntable.data_protocol: 'tts9': unknown; table data protocols: tts1")])
 def test_the_table_data_protocol_is_a_table_codec_of_the_registry(tmp_path, capsys, protocol, message):
     cfg = yaml.safe_load((ROOT / "configs" / "rate_table_aerosmith.yaml").read_text())
     cfg["turntable"]["data_protocol"] = protocol

@@ -11,11 +11,10 @@ PACKAGES = ("hil", "drivers", "emulators")
 MAX_LINES = 400
 # docs/design.md, "Layers": an import may only point to its own layer or one above it in this list
 LAYERS = (
-    ("hil.config", "hil.config_emulated", "hil.config_environment", "hil.config_ratetests", "hil.config_types",
-     "hil.inputs", "hil.units",
-     "hil.samples", "hil.frames", "hil.plugins"),
-    ("hil.estimation",),
+    ("hil.config_types", "hil.inputs", "hil.units", "hil.samples", "hil.vocabulary"),
     ("drivers",),
+    ("hil.config", "hil.config_emulated", "hil.config_environment", "hil.config_ratetests", "hil.frames"),
+    ("hil.estimation",),
     ("emulators",),
     ("hil.pipeline", "hil.recording"),
     ("hil.outputs", "hil.viewer"),

@@ -197,7 +197,7 @@ def bad_inputs(tmp_path):
         (["decode", "kvh1750", "{d}/missing.bin"], "missing.bin", "no such file"),
         (["decode", "kvh1750", "{d}/run"], "run", "a directory, not a capture"),
         (["decode", "kvh1750", "{d}/empty.bin"], "empty.bin", "empty file, nothing to decode"),
-        (["decode", "nmea", "{d}/cap.bin"], "protocol 'nmea'", "unknown; known protocols: acl, can-dbc"),
+        (["decode", "nmea", "{d}/cap.bin"], "protocol: 'nmea'", "unknown; protocols: acl, can-dbc"),
         (["decode", "acl", "{d}/cap.bin"], "protocol 'acl'", "a command protocol, no data frames"),
         (["decode", "can-dbc", "{d}/cap.bin"], "cap.bin", "a can-dbc capture must be a python-can log (.blf"),
         (["decode", "can-dbc", "{d}/cap.blf"], "cap.blf", "not a readable .blf CAN log"),

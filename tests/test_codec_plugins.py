@@ -8,9 +8,8 @@ import logging
 import pytest
 
 from drivers.codec import Codec
-from drivers.registry import imu_codec, make_codec
+from drivers.registry import CODECS, imu_codec, make_codec
 from hil.config import ConfigError, parse_config
-from hil.plugins import codec_class, protocol_names
 
 BASE = {"trial": {"duration_s": 10}, "site": {"latitude_deg": 32}}
 
@@ -25,7 +24,7 @@ def test_imu_protocol_is_a_registry_name_and_its_options_the_codecs():
     assert (codec.precision, codec.outputs) == ("fp16.32", "increments")  # the default filled in
     with pytest.raises(ConfigError, match=r"imu.protocol: 'nmea': unknown; IMU protocols: can-dbc, kvh1750, stim300, "):
         config({"protocol": "nmea"})
-    with pytest.raises(ConfigError, match=r"imu.protocol: 'tts1': a table protocol, not an IMU's"):
+    with pytest.raises(ConfigError, match=r"imu.protocol: 'tts1': unknown; IMU protocols: can-dbc, kvh1750, "):
         config({"protocol": "tts1"})
     with pytest.raises(ConfigError, match=r"imu.options: precision: Input should be .* \(the xsens-mtdata2 options\)"):
         config({"protocol": "xsens-mtdata2", "options": {"precision": "float16"}})
@@ -44,8 +43,8 @@ def test_the_old_kvh1750_block_is_taken_as_options_with_one_deprecation_line(cap
 
 
 def test_every_codec_is_found_by_name_and_built_with_its_options():
-    for name in protocol_names():
-        assert codec_class(name).name == name
+    for name in CODECS.names():
+        assert CODECS.get(name).name == name
     table = make_codec("tts1", pulses_per_frame=5)
     assert table.kind == "table" and table.sequence_step == 5
     with pytest.raises(ValueError, match="pulses_per_frame"):

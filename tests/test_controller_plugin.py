@@ -33,7 +33,7 @@ class TinyOptions(BaseModel):
 class TinyController(TableController):
     name = "tiny"
     Options = TinyOptions
-    emulated_table = "tiny_table:TinyTable"
+    emulated = "tiny_table:TinyTable"
 
     def ask(self, line):
         port = self._io(line)
@@ -169,4 +169,4 @@ def test_a_controller_from_an_installed_package_drives_an_emulated_trial(tmp_pat
     bad = subprocess.run([str(python), "-m", "hil.cli", "run", str(config), "--out", str(tmp_path / "bad"),
                           "--viewer", "none", "--quiet"], capture_output=True, text=True, cwd=tmp_path, check=False)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1
-    assert "turntable.controller_options.greting: unknown key" in bad.stderr
+    assert "turntable.controller_options: greting: unknown key (the tiny options)" in bad.stderr

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from pydantic import BaseModel
 
-from hil.plugins import BUILT_IN as CODECS
+from drivers.registry import CODECS_BUILT_IN as CODECS
 from hil.cli import build_parser
 from hil.config import Config
 

@@ -12,11 +12,10 @@ from hypothesis import strategies as st
 from drivers.codec import DecodeError
 from drivers.crc import crc16_xmodem, crc32_mpeg2
 from drivers.kvh1750 import STATUS_ALL_VALID, Kvh1750Codec, KvhFrame
-from drivers.registry import imu_codec, make_codec
+from drivers.registry import CODECS, imu_codec, make_codec
 from drivers.tts1 import Tts1Codec, Tts1Frame, wrap_udeg
 from drivers.xsens import XsensCodec
 from hil.config import parse_config
-from hil.plugins import codec_class
 from hil.samples import ImuSample, TableSample
 
 KVH_PUBLISHED = bytes.fromhex("FE81FF55 37A96A6E 38586C1F B75BF862 BF803E78 BB650D28 3B0A37AC 77 3D 0028 4BFA34D8")
@@ -165,10 +164,10 @@ def test_xsens_from_sample_round_trips(dtheta, dv, index, outputs):
 
 def test_registry_finds_every_protocol_by_name():
     for name in ("kvh1750", "xsens-mtdata2", "can-dbc", "tts1", "acl"):
-        assert codec_class(name).name == name
+        assert CODECS.get(name).name == name
     assert make_codec("kvh1750", rate_hz=100).rate_hz == 100
-    with pytest.raises(KeyError, match="known protocols"):
-        codec_class("nmea")
+    with pytest.raises(ValueError, match="'nmea': unknown; protocols: acl, can-dbc, kvh1750, stim300, tts1, xsens"):
+        CODECS.get("nmea")
 
 
 def test_imu_codec_follows_the_config():

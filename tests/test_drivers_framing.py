@@ -15,7 +15,7 @@ from drivers.framing import SequenceUnwrapper
 from drivers.kvh1750 import Kvh1750Codec, KvhFrame
 from drivers.tts1 import Tts1Codec, Tts1Frame
 from drivers.xsens import MtData2Frame, XsensCodec
-from hil.config import CanSignals
+from drivers.can_settings import CanSignals
 from hil.samples import ImuSample
 
 # Bytes after the plan: more than the longest frame a header can announce (Xsens: 6 + 2048 + 1). A truncated

@@ -15,6 +15,7 @@ from tests.helpers import make_config
 
 from drivers.codec import RawChunk, raised_flags
 from drivers.kvh1750 import Kvh1750Codec
+from drivers.registry import IMU_CODECS
 from drivers.stim300 import Stim300Codec
 from drivers.xsens import XsensCodec
 from emulators.simulation import Simulation
@@ -22,7 +23,6 @@ from hil.config import ReportLimits
 from hil.outputs.measurements import FAIL, PASS, measurements
 from hil.pipeline.decoding import IMU, TABLE, stream_codecs
 from hil.pipeline.processor import TrialProcessor
-from hil.plugins import codec_class
 from hil.samples import ImuSample, TableSample
 
 # TRECVT/ros_kvh1750 test/utest.cpp, case "early": a KVH 1750 frame at power-up, status 0x70 (accelerometers
@@ -65,7 +65,7 @@ def test_a_stim300_gyro_status_in_start_up_flags_the_sample():
 
 @pytest.mark.parametrize("protocol", ["kvh1750", "xsens-mtdata2", "stim300", "can-dbc"])
 def test_a_healthy_device_raises_no_flag_and_each_flag_names_one_bit(protocol):
-    cls = codec_class(protocol)
+    cls = IMU_CODECS.get(protocol)
     assert cls.health_flags and not raised_flags(cls.health_flags, np.array([cls.healthy_status])).any()
     masks = [flag.mask for flag in cls.health_flags]
     assert all(bin(m).count("1") == 1 for m in masks) and len(set(masks)) == len(masks)

@@ -49,9 +49,9 @@ def run(python: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_the_plugin_is_not_seen_here():
-    from hil.plugins import protocol_names
+    from drivers.registry import IMU_CODECS
 
-    assert "demo-imu" not in protocol_names()
+    assert "demo-imu" not in IMU_CODECS.names()
 
 
 def test_a_third_party_codec_is_configured_decoded_and_emulated(venv):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from drivers.codec import RawChunk, StreamEvent
 from drivers.detect import DETECT_BYTES, detect
 from hil.config import Config
-from hil.plugins import codec_class
+from drivers.registry import IMU_CODECS
 from hil.pipeline.processor import IMU, TABLE
 
 SWAPPED = "are the IMU and table ports swapped?"
@@ -33,7 +33,7 @@ class Expected:
     def of(cls, cfg: Config) -> dict[str, Expected]:
         """The IMU's and the table's, from a trial config."""
         imu = cfg.imu
-        check = ("imu.can.dbc and imu.can.signals" if codec_class(imu.protocol).link == "can"
+        check = ("imu.can.dbc and imu.can.signals" if IMU_CODECS.get(imu.protocol).link == "can"
                  else "imu.baudrate and imu.protocol")
         return {IMU: cls("imu port", "imu", imu.protocol, "imu.protocol", check),
                 TABLE: cls("turntable data port", "table", cfg.turntable.data_protocol, "turntable.data_protocol",

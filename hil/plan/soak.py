@@ -10,8 +10,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from drivers.registry import CHAMBERS
 from hil.config import Config
-from hil.config_environment import chamber_class
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED
@@ -92,9 +92,9 @@ class PlanChamber:
 
             start = cfg.set_point_c if self.set_point_c is None else self.set_point_c
             self.emulated = emulated_chamber(cfg.model_copy(update={"set_point_c": start}))
-            port, cls, options = self.emulated.path, chamber_class("watlow-f4"), {}
+            port, cls, options = self.emulated.path, CHAMBERS.get("watlow-f4"), {}
         else:
-            port, cls, options = cfg.port, chamber_class(cfg.controller), cfg.options
+            port, cls, options = cfg.port, CHAMBERS.get(cfg.controller), cfg.options
         self.controller = cls(port, cls.Options.model_validate(options)).open()
 
     def _wait(self, seconds: float, stop: StopSignals) -> bool:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import sys
 
-from hil.config_environment import ChamberConfig, chamber_class
+from drivers.registry import CHAMBERS
+from hil.config_environment import ChamberConfig
 from hil.trial.outcome import TrialSetupError
 
 
@@ -19,9 +20,9 @@ def open_chamber(cfg: ChamberConfig | None, ports: dict | None):
     if cfg.source == "emulator":
         if not ports or "chamber" not in ports:
             raise TrialSetupError("environment.chamber: source: emulator, but the emulator opened no chamber port")
-        port, cls, options = ports["chamber"], chamber_class("watlow-f4"), {}
+        port, cls, options = ports["chamber"], CHAMBERS.get("watlow-f4"), {}
     else:
-        port, cls, options = cfg.port, chamber_class(cfg.controller), cfg.options
+        port, cls, options = cfg.port, CHAMBERS.get(cfg.controller), cfg.options
     controller = cls(port, cls.Options.model_validate(options))
     try:
         controller.open()

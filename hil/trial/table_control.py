@@ -1,7 +1,7 @@
 """Turntable control during a trial: arm the configured motion through the controller interface, check it,
 always stop.
 
-:class:`TableControl` opens ``turntable.controller`` (:mod:`drivers.controllers`), loads the limits, checks
+:class:`TableControl` opens ``turntable.controller`` (:data:`drivers.registry.TABLE_CONTROLLERS`), loads the limits, checks
 the interlocks, commands ``turntable.motion`` (swing: synthesis mode, an oscillator about the centre
 position; static: position; rate: rate) and turns the sync output on where the controller has a command
 for it. :func:`refusal` says, before anything moves, why a controller cannot run a trial. :class:`MotionCheck` then watches the gimbal angles the table reports: after one
@@ -18,7 +18,8 @@ from collections import deque
 
 import numpy as np
 
-from drivers.controllers import controller_class, controller_options, make_controller
+from drivers.controllers import controller_options, make_controller
+from drivers.registry import TABLE_CONTROLLERS
 from drivers.table_controller import MOTION_MODES, TableError
 from hil.config import TurntableConfig
 from hil.pipeline.progress import Progress
@@ -46,9 +47,9 @@ def motion_needs(table: TurntableConfig) -> tuple[set[str], set[str]]:
 
 def check_controller(table: TurntableConfig, modes: set[str], gimbals: set[str]) -> None:
     """Raise :class:`TableError` (one line) when ``turntable.controller`` cannot move ``gimbals`` in ``modes``,
-    or a :class:`hil.config.ConfigError` when its options are not valid; nothing is sent."""
+    nothing is sent."""
     options = controller_options(table)
-    why = controller_class(table.controller).refusal(modes, gimbals, options)
+    why = TABLE_CONTROLLERS.get(table.controller).refusal(modes, gimbals, options)
     if why is not None:
         raise TableError(f"{why}; nothing was sent")
 
