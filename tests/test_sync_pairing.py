@@ -185,3 +185,25 @@ def test_unpaced_a_receive_time_pairing_that_lost_frames_misled_is_set_right_onc
     assert [r["cause"] for r in report.repairs] == [f"imu: gyro/table disagreement ({lost:+d} pulses)"]
     moved_at = (moves - start - lost) / RATE  # trial time counts from the first IMU sample paired
     assert moved_at < report.repairs[0]["at_s"] < moved_at + 2 * 2.0  # within two checks
+
+
+def test_unpaced_an_imu_that_lost_seconds_of_its_first_frames_is_still_paired_by_motion_to_the_exact_pulse():
+    """A loaded host's reader can flush more than a second of a stream's first frames on opening: the first
+    counters then put the coarse offset that far off, and the motion search covers it."""
+    pairing = _pairing(None)
+    pairing.add_table(_table(np.arange(150_000, 153_000)))
+    pairing.add_imu(_imu(np.arange(150_000 + 700, 153_000)))  # 3.5 s of its first frames lost
+    assert pairing.report.paired_by == "motion" and pairing.report.offset_pulses == OFFSET
+
+
+def test_unpaced_an_imu_held_longer_than_its_hold_is_paired_from_its_first_counter_not_its_oldest_kept():
+    """A slow table reader: 12 s of IMU reads wait for the table's first (both streams began together); the
+    oldest are trimmed as unpaired, and the coarse offset still comes from the IMU's first counter."""
+    pairing = _pairing(None)
+    for first in range(150_000, 152_400, PER):
+        pairing.add_imu(_imu(np.arange(first, first + PER)))
+    assert pairing.report.paired_by is None and pairing.report.unpaired > 0
+    for first in range(150_000, 152_400, PER):  # the table's reader catches up
+        pairing.add_table(_table(np.arange(first, first + PER)))
+    _run(pairing, 152_400, 154_000, jitter=0.0)
+    assert pairing.report.paired_by == "motion" and pairing.report.offset_pulses == OFFSET

@@ -31,6 +31,7 @@ class StreamPairing:
     offset_before: int | None = None  # the offset before the break
     before_break: Samples | None = None  # held samples from before the break, paired as they were: yet to go out
     tried: int | None = None  # newest table pulse at the last motion search for this stream
+    first: int | None = None  # the stream's first counter (unpaced, the coarse offset's; held reads may be trimmed)
 
     def baseline(self, reads: int = MIN_READS) -> float | None:
         """The least lateness of the paired reads (pulses), once there are ``reads`` of them."""

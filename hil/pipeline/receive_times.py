@@ -67,7 +67,7 @@ class ReceiveTimes:
         if self.host_rate is None:
             if s.offset_before is not None:
                 return s.offset_before  # reconnected: the unwrapped count carries on, unless the device restarted
-            return None if table_first is None else table_first - int(s.held[0].sync_index[0])
+            return None if table_first is None or s.first is None else table_first - s.first
         if len(s.segment) < MIN_READS and s.waited(rate) < STILL_S:
             return None
         other = self.table if s is self.imu else self.imu

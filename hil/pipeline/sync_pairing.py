@@ -47,7 +47,7 @@ HOLD_S = 5.0  # samples wait this long (of their own time) for a pairing; older 
 HISTORY_S = 4.0  # paired samples kept for the motion checks
 CHECK_S = 2.0  # a paired IMU is checked against the table's motion this often (of IMU time)
 SEARCH_S = 0.02  # at least this much of either side of the coarse offset is searched by motion
-UNPACED_SEARCH_S = 1.0
+UNPACED_SEARCH_S = HOLD_S  # a reader's flush on opening may take up to this much of a stream's first frames
 RETRY_S = 0.2  # of new table data before a waiting IMU is searched by motion again
 MOTION, RECEIVE_TIME = "motion", "receive_time"
 
@@ -151,6 +151,7 @@ class SyncPairing:
         if not len(samples):
             return None
         h = float(samples.host_time[-1])
+        s.first = int(samples.sync_index[0]) if s.first is None else s.first
         e = self.receive.lateness(s, h, int(samples.sync_index[-1]))
         if s.offset is None:
             s.held.append(samples)
