@@ -16,8 +16,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
-from drivers.codec import DecodeError, RawChunk
-
 REPLY_TIMEOUT_S = 1.0  # longest wait for one reply (a KVH answers within 100 ms, an MTi within a few)
 T = TypeVar("T")
 
@@ -26,14 +24,19 @@ class NoAnswer(Exception):
     """The device did not answer a request within its timeout (a read-only line, a one-way converter)."""
 
 
-class UnreadableReply(DecodeError):
+class UnreadableReply(ValueError):
     """The device answered something the codec cannot read; the message names the reply."""
 
 
-class BytePort(Protocol):
-    """What an exchange needs of a transport (:class:`drivers.transport.SerialTransport`)."""
+class Chunk(Protocol):
+    data: bytes
 
-    def read(self) -> list[RawChunk]: ...
+
+class BytePort(Protocol):
+    """What an exchange needs of a transport (:class:`drivers.transport.SerialTransport`): its reads' chunks
+    (:class:`drivers.codec.RawChunk`) and a write."""
+
+    def read(self) -> list[Chunk]: ...
 
     def write(self, data: bytes) -> None: ...
 

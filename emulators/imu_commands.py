@@ -15,8 +15,8 @@ from pathlib import Path
 
 from drivers.codec import Codec
 from drivers.kvh1750 import ENTER_CONFIG, LEAVE_CONFIG, Kvh1750Codec
-from drivers.xsens import (ERROR, GO_TO_CONFIG, GO_TO_MEASUREMENT, REQ_OUTPUT_CONFIGURATION, XsensCodec,
-                           xbus_message, xbus_messages)
+from drivers.xbus import ERROR, GO_TO_CONFIG, GO_TO_MEASUREMENT, REQ_OUTPUT_CONFIGURATION, xbus_message, xbus_messages
+from drivers.xsens import XsensCodec
 from emulators.ports import WAIT_S, PtyPort
 
 INVALID_MESSAGE = 0x04  # the MTi's Error code for a message it does not take (ethzasl_xsens_driver mtdef.py)

@@ -17,7 +17,8 @@ from lab_form import Emulator, emulated, lab_config
 from drivers.codec import RawChunk
 from drivers.kvh1750 import HEADER, Kvh1750Codec
 from drivers.transport import SerialTransport
-from drivers.xsens import XsensCodec, xbus_message, xbus_messages
+from drivers.xbus import xbus_message, xbus_messages
+from drivers.xsens import XsensCodec
 from emulators.imu_commands import KvhResponder, XsensResponder
 from emulators.in_process import EmulatorThread
 from hil.cli import main
