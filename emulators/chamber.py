@@ -24,15 +24,27 @@ POLL_MS = 100
 
 class ChamberModel:
     """The chamber's air temperature (deg C) at trial time t: d T/dt = (set point - T) / tau_s, its magnitude at
-    most ``ramp_c_per_min_max`` / 60; starts at ``start_c``."""
+    most ``ramp_c_per_min_max`` / 60; starts at ``start_c``. From ``fault_at_s`` (a heater fault) the air holds the
+    temperature it has then, whatever the set point."""
 
-    def __init__(self, tau_s: float, ramp_c_per_min_max: float, start_c: float) -> None:
+    def __init__(self, tau_s: float, ramp_c_per_min_max: float, start_c: float,
+                 fault_at_s: float | None = None) -> None:
         self.tau_s, self.ramp = tau_s, ramp_c_per_min_max / 60.0
         self.temperature_c = self.set_point_c = start_c
         self.t = 0.0
+        self.fault_at_s = fault_at_s
 
     def advance(self, t: float) -> float:
         """The temperature at trial time ``t`` (>= the last), the set point held since the last call."""
+        if self.fault_at_s is not None and t > self.fault_at_s:
+            if self.t < self.fault_at_s:
+                self._follow(self.fault_at_s)
+            self.t = max(t, self.t)
+            return self.temperature_c
+        return self._follow(t)
+
+    def _follow(self, t: float) -> float:
+        """The air moved on to trial time ``t`` (>= the last) towards the set point."""
         dt, self.t = max(t - self.t, 0.0), max(t, self.t)
         gap = self.set_point_c - self.temperature_c
         if abs(gap) / self.tau_s > self.ramp:  # ramp-limited until the gap is ramp * tau, then exponential
@@ -147,5 +159,33 @@ class EmulatedChamber:
 def emulated_chamber(cfg: ChamberConfig) -> EmulatedChamber:
     """The emulated chamber of ``environment.chamber`` (``source: emulator``) at address 1, its air starting at
     ``set_point_c`` (else ``ambient_c``); its time is the emulated IMU's, moved on by :meth:`EmulatedChamber.air_at`."""
-    model = ChamberModel(cfg.tau_s, cfg.ramp_c_per_min_max, cfg.ambient_c if cfg.set_point_c is None else cfg.set_point_c)
+    model = chamber_model(cfg)
     return EmulatedChamber(F4Registers(model, lambda: model.t))
+
+
+def chamber_model(cfg: ChamberConfig) -> ChamberModel:
+    """The first-order chamber of ``environment.chamber``, its air starting at ``set_point_c`` (else ``ambient_c``)."""
+    start = cfg.ambient_c if cfg.set_point_c is None else cfg.set_point_c
+    return ChamberModel(cfg.tau_s, cfg.ramp_c_per_min_max, start, cfg.heater_fault_at_s)
+
+
+class SimulatedChamber:
+    """A chamber controller's interface (``temperature_c``, ``set_point_c``, ``set_set_point_c``) straight over a
+    :class:`ChamberModel` in this process, for a simulated trial (``--simulate``): its reading at the model's time,
+    which the simulated IMU's samples move on, to the F4's one decimal."""
+
+    def __init__(self, model: ChamberModel) -> None:
+        self.model = model
+
+    def temperature_c(self) -> float:
+        return round(self.model.temperature_c, 1)
+
+    def set_point_c(self) -> float:
+        return self.model.set_point_c
+
+    def set_set_point_c(self, value_c: float) -> None:
+        self.model.advance(self.model.t)
+        self.model.set_point_c = round(value_c, 1)
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -74,4 +74,5 @@ class ServoSimulation:
         dtheta, dv = truth.increments(t0, t)
         dtheta, dv = self.errors.apply(t, dtheta, dv)
         self.samples = n
-        return AlignedBatch(t, dtheta, dv, encoder_reading(truth.angles(t), self.zero_offset), t0)
+        return AlignedBatch(t, dtheta, dv, encoder_reading(truth.angles(t), self.zero_offset), t0,
+                            temperature_c=self.errors.temperature_c(t) if self.errors.thermal else None)

@@ -19,7 +19,7 @@ from pydantic import Field, ValidationError, model_validator
 from drivers.can_settings import CanConfig
 from drivers.registry import IMU_CODECS, TABLE_CODECS, TABLE_CONTROLLERS
 from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
-from hil.config_environment import EnvironmentConfig
+from hil.config_environment import EnvironmentConfig, SoakSettings
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.inputs import ConfigError, InputError  # noqa: F401 (InputError: for the config's users)
@@ -216,6 +216,9 @@ class CalibrationConfig(Model):
     gyro_terms: list[Literal["bias", "scale", "misalignment", "zero_offset"]] = [
         "bias", "scale", "misalignment", "zero_offset"]
     rank_tolerance: float = Field(1e-6, gt=0, lt=1)  # a term's unexplained fraction of its scaled design column
+    temperatures_c: list[float] | None = Field(None, min_length=1)  # chamber set points: a soak and the schedule at each
+    soak: SoakSettings = SoakSettings()
+    thermal_order: int = Field(1, ge=1, le=3)  # each term a polynomial of this order in the IMU's temperature
 
     @model_validator(mode="after")
     def _positions_listed(self) -> CalibrationConfig:
@@ -262,6 +265,26 @@ class Config(Model):
             raise ValueError(f"imu.rate_hz: {self.imu_rate_hz:g} Hz is not an integer multiple of trial.rate_hz "
                              f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
                              "table latches every n-th pulse")
+        return self
+
+    @model_validator(mode="after")
+    def _temperatures_within_the_chamber(self) -> Config:
+        """``calibration.temperatures_c`` needs a chamber, set points within its ``limits_c`` and more of them than
+        ``calibration.thermal_order``."""
+        temperatures, chamber = self.calibration.temperatures_c, self.environment.chamber
+        if temperatures is None:
+            return self
+        if chamber is None:
+            raise ValueError("calibration.temperatures_c: a calibration over temperature needs environment.chamber")
+        low, high = chamber.limits_c
+        for k, value in enumerate(temperatures):
+            if not low <= value <= high:
+                raise ValueError(f"calibration.temperatures_c[{k}]: {value:g} deg C is outside environment.chamber."
+                                 f"limits_c [{low:g}, {high:g}]")
+        order = self.calibration.thermal_order
+        if len(set(temperatures)) <= order:
+            raise ValueError(f"calibration.thermal_order: a polynomial of order {order} needs at least {order + 1} "
+                             f"different temperatures in calibration.temperatures_c ({len(set(temperatures))} given)")
         return self
 
     @property

@@ -64,6 +64,7 @@ class ChamberConfig(Model):
     tau_s: float = Field(600.0, gt=0)  # emulator
     ramp_c_per_min_max: float = Field(3.0, gt=0, le=100)  # emulator
     ambient_c: float = Field(25.0, ge=-100, le=200)  # emulator
+    heater_fault_at_s: float | None = Field(None, ge=0)  # emulator: from this trial time the air holds where it is
 
     @model_validator(mode="after")
     def _one_kind_within_limits(self) -> ChamberConfig:
@@ -83,3 +84,16 @@ class ChamberConfig(Model):
 class EnvironmentConfig(Model):
     power: PowerConfig | None = None
     chamber: ChamberConfig | None = None
+
+
+class SoakSettings(Model):
+    """``calibration.soak``: at each of ``calibration.temperatures_c`` the chamber is sent to the set point and,
+    once its reading is within ``stable_within_c`` of it, the IMU's own reported temperature must stay within
+    ``stable_within_c`` of its latest value for ``for_s``; ``timeout_s`` from the set point's write ends the trial
+    early. A chamber reading that changes less than a tenth of a degree for ``stalled_s`` while it is more than
+    2 deg C from its set point (a heater or cooling fault) ends it at once."""
+
+    stable_within_c: float = Field(0.2, gt=0, le=10)
+    for_s: float = Field(600.0, gt=0)
+    timeout_s: float = Field(14400.0, gt=0)
+    stalled_s: float = Field(600.0, gt=0)

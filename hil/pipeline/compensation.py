@@ -23,6 +23,7 @@ import numpy as np
 
 from hil.config import ConfigError
 from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate, inverse
+from hil.estimation.thermal_calibration import ThermalTerms, compensate_each
 from hil.samples import AlignedBatch, ImuSamples, TableSamples
 from hil.units import ARCSEC, DEG_PER_H, PPM, UG, UG_PER_G2
 
@@ -45,14 +46,24 @@ class Compensation:
         data, doc = _read(Path(path))
         self.accel, self.gyro = _thetas(Path(path), doc)
         self.zero_offsets = _zero_offsets(Path(path), doc)
+        self.thermal = thermal_terms(Path(path), doc)
         self.period = period
         self.applied = {"path": self.path, "sha256": hashlib.sha256(data).hexdigest(), **applied_terms(doc)}
+
+    def _compensated(self, dtheta: np.ndarray, dv: np.ndarray, dt, temperature_c: np.ndarray | None):
+        """Compensated increments: with the terms at each sample's temperature when the file has ``thermal``."""
+        if self.thermal is None:
+            return compensate(self.accel, self.gyro, dtheta, dv, dt)
+        temperature = np.full(len(dv), np.nan) if temperature_c is None else temperature_c
+        accel, gyro = self.thermal
+        return compensate_each(accel.thetas(self.accel, temperature), gyro.thetas(self.gyro, temperature), dtheta,
+                               dv, dt)
 
     def samples(self, samples: ImuSamples) -> ImuSamples:
         """Decoded IMU samples with compensated increments (one vectorised call a chunk)."""
         if not len(samples):
             return samples
-        dtheta, dv = compensate(self.accel, self.gyro, samples.dtheta, samples.dv, self.period)
+        dtheta, dv = self._compensated(samples.dtheta, samples.dv, self.period, samples.temperature_c)
         return dataclasses.replace(samples, dtheta=dtheta, dv=dv)
 
     def table(self, samples: TableSamples) -> TableSamples:
@@ -62,7 +73,7 @@ class Compensation:
     def batch(self, batch: AlignedBatch) -> AlignedBatch:
         """A batch with compensated increments, each over its own interval, and zero-offset angles."""
         dt = np.diff(np.concatenate(([batch.t0], batch.t)))
-        dtheta, dv = compensate(self.accel, self.gyro, batch.dtheta, batch.dv, dt)
+        dtheta, dv = self._compensated(batch.dtheta, batch.dv, dt, batch.temperature_c)
         angles = None if batch.angles is None else batch.angles + self.zero_offsets
         return dataclasses.replace(batch, dtheta=dtheta, dv=dv, angles=angles)
 
@@ -91,7 +102,8 @@ def compensated_bias(accel: np.ndarray, bias: np.ndarray, drift: np.ndarray) -> 
 
 def applied_terms(doc: dict) -> dict:
     """``terms``: per block the keys with a value applied; ``null_terms``: ``block.key.index`` of the terms
-    left uncompensated (``null``), of a document :func:`load_calibration` accepts."""
+    left uncompensated (``null``), of a document :func:`load_calibration` accepts; with a ``thermal`` block,
+    ``thermal``: its ``reference_c``, ``order`` and the terms applied at each sample's temperature."""
     terms: dict[str, list[str]] = {}
     nulls: list[str] = []
     blocks = [("accel", ACCEL_KEYS, doc["accel"]), ("gyro", GYRO_KEYS, doc["gyro"])]
@@ -100,7 +112,42 @@ def applied_terms(doc: dict) -> dict:
     for block, keys, part in blocks:
         terms[block] = [key for key, _, _ in keys if any(v is not None for v in part[key])]
         nulls += [f"{block}.{key}.{i}" for key, _, _ in keys for i, v in enumerate(part[key]) if v is None]
-    return {"terms": terms, "null_terms": nulls}
+    thermal = doc.get("thermal")
+    extra = {} if not isinstance(thermal, dict) else {"thermal": {
+        "reference_c": thermal.get("reference_c"), "order": thermal.get("order"), "terms": sorted(thermal["terms"])}}
+    return {"terms": terms, "null_terms": nulls, **extra}
+
+
+def thermal_terms(path: Path, doc: dict) -> tuple[ThermalTerms, ThermalTerms] | None:
+    """The (accel, gyro) :class:`~hil.estimation.thermal_calibration.ThermalTerms` of the file's ``thermal`` block
+    (None without one): each ``terms`` entry ``block.key.index`` with ``coefficients`` lowest order first, in the
+    key's unit per deg C^j; raises :class:`CalibrationFileError` naming the key."""
+    part = doc.get("thermal")
+    if part is None:
+        return None
+    where = f"imu.calibration: {path}: thermal"
+    if not isinstance(part, dict) or not isinstance(part.get("terms"), dict):
+        raise CalibrationFileError(f"{where}: expected an object with reference_c, order and terms")
+    reference = _number(path, "thermal.reference_c", part.get("reference_c", "missing"))
+    order = part.get("order")
+    if order not in (1, 2, 3):
+        raise CalibrationFileError(f"{where}.order: expected 1, 2 or 3, got {order!r}")
+    keys = {"accel": {key: (sl, unit) for key, sl, unit in ACCEL_KEYS},
+            "gyro": {key: (sl, unit) for key, sl, unit in GYRO_KEYS}}
+    slopes = {block: np.zeros((order, len(TERMS))) for block in keys}
+    for name, term in part["terms"].items():
+        block, key, index = (name.split(".") + ["", "", ""])[:3]
+        found = keys.get(block, {}).get(key)
+        if found is None or not index.isdigit() or int(index) >= found[0].stop - found[0].start:
+            raise CalibrationFileError(f"{where}.terms.{name}: not a term (expected block.key.index, e.g. "
+                                       "accel.bias_ug.0)")
+        coefficients = term.get("coefficients") if isinstance(term, dict) else None
+        if not isinstance(coefficients, list) or len(coefficients) != order + 1:
+            raise CalibrationFileError(f"{where}.terms.{name}.coefficients: expected a list of {order + 1} numbers")
+        for j, value in enumerate(coefficients[1:], start=1):
+            slopes[block][j - 1, found[0].start + int(index)] = _number(
+                path, f"thermal.terms.{name}.coefficients[{j}]", value) * found[1]
+    return ThermalTerms(reference, slopes["accel"]), ThermalTerms(reference, slopes["gyro"])
 
 
 def _read(path: Path) -> tuple[bytes, dict]:

@@ -197,10 +197,12 @@ class TrialProcessor:
         self._decoding.temperature.solved([s.t for s in snapshots[self._step[0]:]])
         counts = self._counts()
         stalled = self._decoding.imu_rate.mismatch or (self._pairing.failure if self._pairing is not None else None)
+        health = _health(self._decoding, counts, bool(self._batched[0]))
         progress = Progress(trial_time, self._aligner.counters.aligned, self._blocks.waiting, self._estimation.updates,
                             self._complete(), stalled or self._judge.stalled(self._decoding.unit_keys()),
-                            self._decoding.frames(), counts, self._health(counts), tuple(self._step[1]),
-                            tuple(snapshots[self._step[0]:]), snapshots[-1] if snapshots else None, self._offset)
+                            self._decoding.frames(), counts, health, tuple(self._step[1]),
+                            tuple(snapshots[self._step[0]:]), snapshots[-1] if snapshots else None, self._offset,
+                            self._decoding.temperature.latest)
         for listener in self._listeners:
             listener(progress)
         self._last = progress
@@ -229,20 +231,6 @@ class TrialProcessor:
         return StreamCounts(imu.frames, table.frames, self._aligner.counters.aligned, imu.missing + table.missing,
                             imu.corrupt + table.corrupt + self._judge.plausibility.rejected, MappingProxyType(extra))
 
-    def _health(self, counts: StreamCounts) -> Health:
-        """Per-stream counters for the viewer's stream-health panel and the console."""
-        if self._batched[0]:
-            return read_only({"aligner": {"aligned": counts.aligned}})
-        out = {}
-        for name in (IMU, TABLE):
-            c = self._decoding.counters(name)
-            out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
-                         "outages": counts.extra[f"{name}_outages"]}
-        out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
-                          "bridged": counts.extra["aligner_imu_bridged"],
-                          "without_angles": counts.extra["aligner_without_angles"]}
-        return read_only(out)
-
 
 def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, earth: Earth,
                  geometry: TableGeometry) -> SyncPairing:
@@ -256,6 +244,21 @@ def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, eart
         return TableRotations(geometry, earth, rate, cfg.table_counts_per_frame, counts, angles)
 
     return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
+
+
+def _health(decoding: Decoding, counts: StreamCounts, batched: bool) -> Health:
+    """Per-stream counters for the viewer's stream-health panel and the console."""
+    if batched:
+        return read_only({"aligner": {"aligned": counts.aligned}})
+    out = {}
+    for name in (IMU, TABLE):
+        c = decoding.counters(name)
+        out[name] = {"frames": c.frames, "corrupt": c.corrupt, "missing": c.missing,
+                     "outages": counts.extra[f"{name}_outages"]}
+    out["aligner"] = {"aligned": counts.aligned, "filled": counts.extra["aligner_imu_filled"],
+                      "bridged": counts.extra["aligner_imu_bridged"],
+                      "without_angles": counts.extra["aligner_without_angles"]}
+    return read_only(out)
 
 
 def _temperature(track: TemperatureTrack) -> MappingProxyType:

@@ -46,7 +46,8 @@ class Progress:
     ``taken`` the blocks the estimator took with this item, ``snapshots`` the solutions they gave, ``latest``
     the newest solution so far. ``time_offset_s``: the table's lag behind the IMU (s,
     :mod:`hil.pipeline.time_offset`), measured every ``offset_every_s`` of trial time when the pipeline was
-    asked to, else None.
+    asked to, else None. ``temperature_c``: the IMU's own temperature (deg C), the mean of the last read whose
+    frames reported one (None before any did).
     """
 
     trial_time: float
@@ -62,6 +63,7 @@ class Progress:
     snapshots: tuple[Snapshot, ...] = ()
     latest: Snapshot | None = None
     time_offset_s: float | None = None
+    temperature_c: float | None = None
 
     def samples(self) -> list[AlignedBatch]:
         """The runs of samples the estimator took with this item, in order."""

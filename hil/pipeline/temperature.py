@@ -21,6 +21,7 @@ class TemperatureTrack:
         self._since = (0.0, 0)  # sum and count of the temperatures since the last solution
         self._last = math.nan  # the last solution's
         self._at: dict[float, float] = {}  # solution time (s) -> deg C
+        self.latest: float | None = None  # the mean temperature of the last read that reported one
 
     def add(self, temperature_c: np.ndarray | None) -> None:
         """One read's samples' temperatures (deg C, NaN or None: none)."""
@@ -33,6 +34,7 @@ class TemperatureTrack:
         self._sum, self._n = self._sum + total, self._n + len(known)
         self._low, self._high = min(self._low, float(known.min())), max(self._high, float(known.max()))
         self._since = (self._since[0] + total, self._since[1] + len(known))
+        self.latest = total / len(known)
 
     def solved(self, times: Sequence[float]) -> None:
         """Solutions at trial times ``times`` (s): each has the mean temperature since the one before, else that

@@ -9,6 +9,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 from drivers.table_controller import TableError
 from hil.config import Config
 from hil.estimation.accel_calibration import calibrate_accelerometers
@@ -17,6 +19,7 @@ from hil.estimation.calibration_schedule import Schedule, check_limits, schedule
 from hil.estimation.gyro_calibration import calibrate_gyros
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import calibration_document, write_calibration
+from hil.outputs.calibration_thermal import thermal_document
 from hil.outputs.calibration_report import (
     Residuals,
     calibration_summary,
@@ -28,6 +31,7 @@ from hil.outputs.calibration_report import (
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
+from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 from hil.trial.table_control import check_controller
 
@@ -58,8 +62,11 @@ def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
 
 
 def emulated_length(cfg: Config, schedule: Schedule) -> float:
-    """Trial seconds the emulated devices run for a schedule (see :data:`EMULATED_MARGIN`)."""
-    return EMULATED_MARGIN * schedule_duration(schedule, cfg.turntable.limits) + 120.0
+    """Trial seconds the emulated devices run for a schedule (see :data:`EMULATED_MARGIN`), at each of
+    ``calibration.temperatures_c`` after a soak of at most ``calibration.soak.timeout_s``."""
+    length = EMULATED_MARGIN * schedule_duration(schedule, cfg.turntable.limits) + 120.0
+    temperatures = cfg.calibration.temperatures_c
+    return length if temperatures is None else len(temperatures) * (length + cfg.calibration.soak.timeout_s)
 
 
 @dataclass
@@ -87,11 +94,10 @@ class CalibrationOutcome(TrialOutcome):
             return cls(**fields)
 
         try:
-            windows = sequence.windows()
+            document, residuals = fit_sequence(outcome.cfg, sequence, truth)
         except ValueError as exc:  # a window whose samples were all lost (gated out, or gaps in the data)
             fields["result"]["ended"] = str(TrialEnd.early(exc))
             return cls(**fields)
-        document, residuals = fit_windows(outcome.cfg, windows, truth)
         fields["result"]["calibration"] = calibration_summary(document)
         return cls(**fields, calibration=document, residuals=residuals)
 
@@ -108,6 +114,23 @@ class CalibrationOutcome(TrialOutcome):
             write_calibration(self.out / "calibration.json", self.calibration)
             write_calibration_report(self.out, self.calibration, self.result, verdict, image)
         return verdict
+
+
+def fit_sequence(cfg: Config, sequence, truth: bool) -> tuple[dict, Residuals]:
+    """The calibration of a completed sequence's windows: at one temperature (:func:`fit_windows`), or at each
+    of a :class:`~hil.trial.calibration_thermal.ThermalSequence`'s with the terms' polynomials over them
+    (:func:`~hil.outputs.calibration_thermal.thermal_document`, the residuals of every temperature in turn).
+    ValueError for a window that lost its samples."""
+    if not isinstance(sequence, ThermalSequence):
+        return fit_windows(cfg, sequence.windows(), truth)
+    fits = [fit_windows(cfg, point.sequence.windows(), truth) for point in sequence.points]
+    document = thermal_document(cfg.calibration.thermal_order, [point.record() for point in sequence.points],
+                                [doc for doc, _ in fits], cfg.imu.errors if truth else None,
+                                cfg.turntable.zero_offset_arcsec)
+    parts = [residuals for _, residuals in fits]
+    joined = [None if getattr(parts[0], f.name) is None else np.vstack([getattr(r, f.name) for r in parts])
+              for f in dataclasses.fields(Residuals)]
+    return document, Residuals(*joined)
 
 
 def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:

@@ -18,6 +18,7 @@ from hil.config import Config
 from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.calibration_sequence import CalibrationSequence
+from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.live import TrialHooks
 from hil.trial.live_runner import emulated, run_live
 from hil.trial.outcome import TrialSetupError
@@ -38,17 +39,23 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
     duration = emulated_length(cfg, schedule) if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
-    def commanded(control, cfg: Config, viewer) -> TrialHooks:
+    def commanded(control, cfg: Config, viewer, chamber) -> TrialHooks:
         control.client.apply_limits()
         limits = (cfg.limits.missing_max, cfg.limits.gated_max)  # a window may lack what the trial may
         lacking = 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
-        sequence = CalibrationSequence(schedule, control.client, 1.0 / cfg.imu_rate_hz,
-                                       **sequence_views(viewer, schedule, cfg), lacking_max=lacking)
+
+        def schedule_sequence(steps) -> CalibrationSequence:
+            return CalibrationSequence(steps, control.client, 1.0 / cfg.imu_rate_hz,
+                                       **sequence_views(viewer, steps, cfg), lacking_max=lacking)
+
+        thermal = cfg.calibration.temperatures_c is not None
+        sequence = ThermalSequence(cfg, schedule, control.client, chamber, schedule_sequence) if thermal \
+            else schedule_sequence(schedule)
         sequence.start()
         control.client.sync_output(True)
         sequences.append(sequence)
-        return TrialHooks(motion_check=sequence, finished=lambda: sequence.done,
-                          queue_items=QUEUE_ITEMS)
+        return TrialHooks(motion_check=sequence, finished=lambda: sequence.done, queue_items=QUEUE_ITEMS,
+                          early_end=(lambda: sequence.soak_failure) if thermal else lambda: None)
 
     outcome, viewer = run_live(cfg, config_path, out, duration, speed, dataclasses.replace(viewer, layout="calibration"),
                                quiet, commanded)

@@ -23,13 +23,16 @@ import sys
 from pathlib import Path
 
 from drivers.table_controller import InterlockError, LimitError, TableError
+from emulators.chamber import SimulatedChamber, chamber_model
 from emulators.servo_simulation import ServoSimulation
 from hil.config import Config
+from hil.estimation.calibration_schedule import Schedule
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.calibration_sequence import CalibrationSequence
+from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 
@@ -45,13 +48,13 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     step = cfg.block_samples
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable)
-    sequence = CalibrationSequence(schedule, client, 1.0 / rate, **sequence_views(viewer, schedule, cfg))
+    sequence = simulated_sequence(cfg, schedule, sim, client, sequence_views(viewer, schedule, cfg))
     processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
     try:
         client.apply_limits()
         sequence.start()
         client.sync_output(True)
-        while not sequence.done and sequence.failure is None and sim.samples < end:
+        while not sequence.done and sequence.failure is None and soak_failure(sequence) is None and sim.samples < end:
             processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
     except (TableError, LimitError, InterlockError) as exc:
         if viewer is not None:
@@ -65,8 +68,30 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     finished = processor.finish()
     if viewer is not None and finished.estimator is not None:
         viewer.log_snapshots(finished.snapshots)
-    ended = str(TrialEnd(COMPLETED) if sequence.failure is None
+    ended = str(TrialEnd.early(soak_failure(sequence)) if soak_failure(sequence) is not None
+                else TrialEnd(COMPLETED) if sequence.failure is None
                 else TrialEnd.early(f"turntable is not moving as commanded: {sequence.failure}"))
     outcome = TrialOutcome.of(finished, cfg, config_text, out, ended, emulated_truth(cfg))
     unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
     return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
+
+
+def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, client, views: dict):
+    """The calibration's sequence on the simulated table ``client``: the schedule's, or at each of
+    ``calibration.temperatures_c`` a soak and the schedule, the chamber then a first-order model in this process
+    (:class:`emulators.chamber.SimulatedChamber`) whose air the simulated IMU follows."""
+    period = 1.0 / cfg.imu_rate_hz
+
+    def sequence(steps: Schedule) -> CalibrationSequence:
+        return CalibrationSequence(steps, client, period, **views)
+
+    if cfg.calibration.temperatures_c is None:
+        return sequence(schedule)
+    model = chamber_model(cfg.environment.chamber)
+    sim.errors.follow_chamber(model.advance)
+    return ThermalSequence(cfg, schedule, client, SimulatedChamber(model), sequence)
+
+
+def soak_failure(sequence) -> str | None:
+    """Why a calibration over temperature's soak ended it (None: it did not, or there is no soak)."""
+    return sequence.soak_failure if isinstance(sequence, ThermalSequence) else None

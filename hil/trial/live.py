@@ -155,7 +155,8 @@ class TrialHooks:
     ``finished`` is polled every step: True ends the trial as completed (a trial whose length is set by what the
     harness commands).
     ``queue_items`` bounds the processing queue: a small one holds the emulated devices close behind the
-    processing (the table then answers a command without lag).
+    processing (the table then answers a command without lag). ``early_end`` is polled every step: a reason ends
+    the trial early (a calibration's soak that did not settle).
     """
 
     motion_check: MotionCheck | None = None
@@ -167,6 +168,7 @@ class TrialHooks:
     listeners: tuple[Listener, ...] = ()
     finished: Callable[[], bool] = lambda: False
     queue_items: int = QUEUE_ITEMS
+    early_end: Callable[[], str | None] = lambda: None
 
 
 class LiveTrial:
@@ -288,8 +290,8 @@ class LiveTrial:
         self.progress = progress
         if self.hooks.motion_check is not None and self.hooks.motion_check.failure:
             raise TrialAborted(f"turntable is not moving as commanded: {self.hooks.motion_check.failure}")
-        if progress.stalled:
-            raise TrialAborted(progress.stalled)
+        if progress.stalled or self.hooks.early_end():
+            raise TrialAborted(progress.stalled or self.hooks.early_end())
         if isinstance(item, StreamEvent):
             self.stream_watch.event(item)
         elif item.stream in progress.frames:

@@ -29,10 +29,11 @@ def emulated(cfg: Config) -> bool:
     return sources == {"emulator"}
 
 
-# Given the open table control, the config and the viewer (or None), starts the table and returns the trial's
-# hooks for it: what watches it (``motion_check``, a listener of the pipeline), and for a trial the harness paces,
-# ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it (:class:`MotionCheck`).
-Commanded = Callable[[object, Config, object], TrialHooks]
+# Given the open table control, the config, the viewer (or None) and the open chamber controller (or None), starts
+# the table and returns the trial's hooks for it: what watches it (``motion_check``, a listener of the pipeline), and
+# for a trial the harness paces, ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it
+# (:class:`MotionCheck`).
+Commanded = Callable[[object, Config, object, object], TrialHooks]
 
 
 def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
@@ -80,7 +81,7 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
             if command_url is not None:
                 control = TableControl(command_url, cfg.turntable)
                 control.open()
-                hooks = dataclasses.replace(commanded(control, cfg, viewer), on_end=control.stop)
+                hooks = dataclasses.replace(commanded(control, cfg, viewer, chamber), on_end=control.stop)
             if emulator is not None:
                 hooks = dataclasses.replace(hooks, source_done=lambda: emulator.poll() is not None
                                             or (out / "emulator.json").exists())
@@ -111,7 +112,7 @@ def _check_motion(cfg: Config) -> None:
         raise TrialSetupError(str(exc)) from None
 
 
-def _arm(control, cfg: Config, viewer) -> TrialHooks:
+def _arm(control, cfg: Config, viewer, chamber) -> TrialHooks:
     """``hil run``: the configured motion, checked against what the table reports."""
     control.arm()
     return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))

@@ -1,0 +1,124 @@
+"""calibration.json of a calibration over temperature (docs/contracts.md, "calibration.json", ``thermal``).
+
+From the calibrations at each temperature (each a document as :func:`hil.outputs.calibration.calibration_document`
+gives it), every term with a value at every temperature gets its polynomial in T - ``reference_c``
+(:func:`hil.estimation.thermal_calibration.fit_polynomial`; ``reference_c`` the mean of the IMU's temperatures,
+to 0.1 deg C) under ``thermal.terms`` keyed ``block.key.index``, coefficients lowest order first in the key's unit
+per deg C^j; the ``accel`` and ``gyro`` blocks hold the constant terms (the calibration at ``reference_c``) with
+their sigmas, so that a reader without ``thermal`` still applies the calibration of the middle of the range. A term
+null at some temperature is null, its reasons under ``unobservable`` with the temperatures. ``positions`` lists
+every temperature's, each with the IMU's ``temperature_c``; the table's zero offsets are the weighted mean of the
+temperatures'. An emulated IMU's truth gains ``thermal.terms`` (its ``imu.errors.thermal`` about ``reference_c``)
+and ``as_observed`` at ``reference_c``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hil.config import ImuErrors
+from hil.estimation.thermal_calibration import SIGMA_FLOOR, fit_polynomial
+from hil.outputs.calibration_report import BLOCKS, observed_truth
+
+# term key -> (the errors.thermal fields of its polynomial's first and second order coefficients)
+THERMAL_TRUTH = {("accel", "bias_ug"): ("accel_bias_ug_per_c", "accel_bias_ug_per_c2"),
+                 ("accel", "scale_ppm"): ("accel_scale_ppm_per_c", None),
+                 ("gyro", "bias_dph"): ("gyro_bias_dph_per_c", None),
+                 ("gyro", "scale_ppm"): ("gyro_scale_ppm_per_c", None)}
+
+
+def _known(value) -> bool:
+    return value is not None and math.isfinite(value)
+
+
+def thermal_document(order: int, points: list[dict], documents: list[dict], errors: ImuErrors | None = None,
+                     zero_offset_arcsec: tuple[float, float, float] | None = None) -> dict:
+    """The calibration.json mapping from ``documents``, the calibrations at the temperatures ``points``
+    (``{set_point_c, chamber_c, imu_c, soak_s}`` each), and the IMU's ``errors`` when emulated (module docstring)."""
+    temperatures = np.array([p["imu_c"] for p in points])
+    reference = round(float(np.mean(temperatures)), 1)
+    doc: dict = {"sigma": {}}
+    terms: dict[str, dict] = {}
+    unobservable: dict[str, str] = {}
+    for block, keys in BLOCKS:
+        if block not in documents[0]:
+            continue
+        doc[block], doc["sigma"][block] = {}, {}
+        for key, _, _ in keys:
+            values, sigmas = [], []
+            for i in range(len(documents[0][block][key])):
+                name = f"{block}.{key}.{i}"
+                v = [d[block][key][i] for d in documents]
+                s = [d["sigma"][block][key][i] for d in documents]
+                if not all(_known(x) for x in v + s):
+                    unobservable[name] = _reasons(name, points, documents)
+                    values.append(None)
+                    sigmas.append(None)
+                    continue
+                c, cs = fit_polynomial(temperatures, np.array(v), np.array(s), order, reference)
+                terms[name] = {"coefficients": c.tolist(), "sigma": cs.tolist()}
+                values.append(float(c[0]))
+                sigmas.append(float(cs[0]))
+            doc[block][key], doc["sigma"][block][key] = values, sigmas
+    doc["turntable"] = _zero_offsets(points, documents, unobservable)
+    doc["positions"] = [{**p, "temperature_c": point["imu_c"]} for point, d in zip(points, documents, strict=True)
+                        for p in d["positions"]]
+    doc["unobservable"] = unobservable
+    doc["thermal"] = {"reference_c": reference, "order": order, "terms": terms, "temperatures": [
+        {**point, **{k: d[k] for k in ("accel", "gyro", "sigma") if k in d}}
+        for point, d in zip(points, documents, strict=True)]}
+    if errors is not None:
+        doc["truth"] = dict(documents[0]["truth"])
+        doc["truth"]["as_observed"], doc["truth"]["thermal"] = thermal_truth(errors, zero_offset_arcsec, reference,
+                                                                             order)
+    return doc
+
+
+def _reasons(name: str, points: list[dict], documents: list[dict]) -> str:
+    """Why ``name`` (``block.key.index``) has no value or sigma at some temperature, temperature by temperature."""
+    block, key, index = name.split(".")
+    return "; ".join(f"at {p['imu_c']:.1f} deg C: {d['unobservable'].get(name, 'its sigma is unknown')}"
+                     for p, d in zip(points, documents, strict=True)
+                     if not (_known(d[block][key][int(index)]) and _known(d["sigma"][block][key][int(index)])))
+
+
+def _zero_offsets(points: list[dict], documents: list[dict], unobservable: dict[str, str]) -> dict:
+    """The table's zero offsets (arcsec): the mean over the temperatures weighted by their sigmas, and its sigma."""
+    values, sigmas = [], []
+    for axis in range(3):
+        v = [d["turntable"]["zero_offset_arcsec"][axis] for d in documents]
+        s = [d["turntable"]["zero_offset_sigma_arcsec"][axis] for d in documents]
+        if not all(_known(x) for x in v + s):
+            name = f"turntable.zero_offset_arcsec.{axis}"
+            unobservable[name] = "; ".join(f"at {p['imu_c']:.1f} deg C: {d['unobservable'].get(name, 'no value')}"
+                                           for p, d in zip(points, documents, strict=True))
+            values.append(None)
+            sigmas.append(None)
+            continue
+        w = 1.0 / np.maximum(np.array(s), SIGMA_FLOOR) ** 2
+        values.append(float(np.sum(w * np.array(v)) / np.sum(w)))
+        sigmas.append(float(1.0 / math.sqrt(np.sum(w))))
+    return {"zero_offset_arcsec": values, "zero_offset_sigma_arcsec": sigmas}
+
+
+def thermal_truth(errors: ImuErrors, zero_offset_arcsec, reference_c: float, order: int) -> tuple[dict, dict]:
+    """(``as_observed`` at ``reference_c``, ``{reference_c, terms}``): the injected errors as the schedule sees
+    them, their ``imu.errors.thermal`` polynomials moved to ``reference_c`` and cut at ``order``."""
+    observed = observed_truth(errors, zero_offset_arcsec)
+    thermal = errors.thermal
+    terms = {}
+    for block, keys in BLOCKS:
+        for key, _, _ in keys:
+            for i, base in enumerate(observed[block][key]):
+                poly = [base, 0.0, 0.0, 0.0]
+                fields = THERMAL_TRUTH.get((block, key))
+                if thermal is not None and fields is not None:
+                    d0 = reference_c - thermal.reference_c
+                    first = getattr(thermal, fields[0])[i]
+                    second = getattr(thermal, fields[1])[i] if fields[1] else 0.0
+                    poly[:3] = [base + first * d0 + second * d0 * d0, first + 2.0 * second * d0, second]
+                observed[block][key][i] = poly[0]
+                terms[f"{block}.{key}.{i}"] = poly[:order + 1]
+    return observed, {"reference_c": reference_c, "terms": terms}

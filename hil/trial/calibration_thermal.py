@@ -1,0 +1,107 @@
+"""The calibration over temperature (``calibration.temperatures_c``): at each chamber set point in turn a soak
+(:class:`~hil.trial.calibration_soak.Soak`, the table held at the schedule's first position), then the whole
+schedule (:class:`~hil.trial.calibration_sequence.CalibrationSequence`), its windows kept with the IMU's mean
+temperature over them. A listener of the pipeline as the one-temperature sequence is, with the same
+:attr:`done`, :attr:`failure` and :attr:`progress`; a soak's failure is :attr:`soak_failure` (the table moved
+as commanded: the chamber or the sensor did not)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.config import Config
+from hil.estimation.calibration_schedule import Schedule
+from hil.pipeline.progress import Progress
+from hil.samples import GIMBAL_AXES
+from hil.trial.calibration_sequence import CalibrationSequence
+from hil.trial.calibration_soak import Soak
+from hil.units import DEG
+
+
+@dataclass(frozen=True)
+class TemperaturePoint:
+    """One temperature's completed schedule (its windows: ``sequence.windows()``), the IMU's mean temperature
+    (deg C) over it and its soak's figures (:meth:`~hil.trial.calibration_soak.Soak.record`)."""
+
+    imu_c: float
+    sequence: CalibrationSequence
+    soak: dict
+
+    def record(self) -> dict:
+        """calibration.json's ``thermal.temperatures`` entry but the terms."""
+        return {**self.soak, "imu_c": self.imu_c}
+
+
+class ThermalSequence:
+    """Soak and schedule at each of ``cfg.calibration.temperatures_c`` through the table ``client`` and the
+    ``chamber`` controller; ``sequence(schedule)`` makes each temperature's
+    :class:`~hil.trial.calibration_sequence.CalibrationSequence`."""
+
+    def __init__(self, cfg: Config, schedule: Schedule, client, chamber,
+                 sequence: Callable[[Schedule], CalibrationSequence]) -> None:
+        self.temperatures = list(cfg.calibration.temperatures_c)
+        self.settings = cfg.calibration.soak
+        self.schedule, self.client, self.chamber, self.make = schedule, client, chamber, sequence
+        self.points: list[TemperaturePoint] = []
+        self.soak: Soak | None = None
+        self.sequence: CalibrationSequence | None = None
+        self.soak_failure: str | None = None
+        self._temperatures: list[float] = []  # the IMU's over the current schedule
+        self._t = 0.0
+
+    @property
+    def done(self) -> bool:
+        return len(self.points) == len(self.temperatures)
+
+    @property
+    def failure(self) -> str | None:
+        """The current schedule's failure (the table did not move as commanded)."""
+        return None if self.sequence is None else self.sequence.failure
+
+    @property
+    def progress(self) -> str:
+        """Where the calibration is, for the console and an early end's reason."""
+        if self.done:
+            return f"all {len(self.temperatures)} temperatures done"
+        where = f"temperature {len(self.points) + 1} of {len(self.temperatures)}"
+        step = self.soak.state if self.sequence is None and self.soak is not None else \
+            self.sequence.progress if self.sequence is not None else "not started"
+        return f"{where}, {step}"
+
+    def start(self) -> None:
+        """The first soak."""
+        self._soak(0.0)
+
+    def on_progress(self, progress: Progress) -> None:
+        """A listener of the pipeline: the soak, then the schedule, of the current temperature."""
+        if self.done or self.soak_failure is not None:
+            return
+        self._t = progress.trial_time
+        if self.sequence is None:
+            self.soak.update(progress.trial_time, progress.temperature_c)
+            self.soak_failure = self.soak.failure
+            if self.soak.done:
+                self.sequence = self.make(self.schedule)
+                self.sequence.start()
+            return
+        if progress.temperature_c is not None:
+            self._temperatures.append(progress.temperature_c)
+        self.sequence.on_progress(progress)
+        if self.sequence.done:
+            self.points.append(TemperaturePoint(float(np.mean(self._temperatures)) if self._temperatures
+                                                else float("nan"), self.sequence, self.soak.record()))
+            self.sequence, self._temperatures = None, []
+            if not self.done:
+                self._soak(progress.trial_time)
+
+    def _soak(self, t: float) -> None:
+        """The table to the schedule's first position, the chamber to the next temperature."""
+        first = (list(self.schedule.dwells) + list(self.schedule.plateaus))[0]
+        for k, gimbal in enumerate(GIMBAL_AXES):
+            if gimbal in self.client.gimbals:
+                self.client.demand_position(gimbal, first.angles[k] / DEG)
+                self.client.set_mode(gimbal, "position")
+        self.soak = Soak(self.temperatures[len(self.points)], self.settings, self.chamber, t)

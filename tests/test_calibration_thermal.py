@@ -1,0 +1,196 @@
+"""The calibration over temperature: a soak at each chamber set point judged on the IMU's own temperature, the
+multi-position calibration at each, every term's polynomial in temperature fitted with its sigma, and
+calibration.json's ``thermal`` applied at each sample's temperature."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from emulators.chamber import ChamberModel
+from hil.cli import main
+from hil.config_environment import SoakSettings
+from hil.estimation.thermal_calibration import fit_polynomial
+from hil.pipeline.compensation import Compensation
+from hil.samples import ImuSamples
+from hil.trial.calibration_soak import Soak
+from hil.units import UG
+
+ROOT = Path(__file__).resolve().parents[1]
+THERMAL = ROOT / "configs" / "calibration_thermal.yaml"
+
+
+def _config(tmp_path: Path, name: str, change) -> Path:
+    cfg = yaml.safe_load(THERMAL.read_text())
+    change(cfg)
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> Path:
+    """``hil calibrate configs/calibration_thermal.yaml --simulate``: its output directory."""
+    out = tmp_path_factory.mktemp("thermal") / "out"
+    assert main(["calibrate", str(THERMAL), "--simulate", "--out", str(out), "--viewer", "none",
+                 "--no-figures"]) == 0
+    return out
+
+
+def test_a_calibration_over_three_temperatures_fits_every_thermal_term_within_4_sigma_of_the_truth(calibrated):
+    doc = json.loads((calibrated / "calibration.json").read_text())
+    thermal, truth = doc["thermal"], doc["truth"]["thermal"]["terms"]
+    assert [t["set_point_c"] for t in thermal["temperatures"]] == [-10, 25, 60]
+    # the soak waited for the sensor: 2 deg C of self-heating above the chamber's air
+    assert [round(t["imu_c"], 1) for t in thermal["temperatures"]] == [-8.0, 27.0, 62.0]
+    assert thermal["reference_c"] == 27.0 and thermal["order"] == 2 and len(thermal["terms"]) == 12
+    errors = {name: [(c - t) / s for c, s, t in zip(term["coefficients"], term["sigma"], truth[name], strict=True)]
+              for name, term in thermal["terms"].items()}
+    assert all(abs(e) <= 4.0 for values in errors.values() for e in values), errors
+    # the accelerometers' first-order coefficient, 4 ug/deg C on x, to within a few percent
+    assert thermal["terms"]["accel.bias_ug.0"]["coefficients"][1] == pytest.approx(4.0 + 2 * 0.05 * 2.0, abs=0.1)
+    assert doc["accel"]["bias_ug"][0] == thermal["terms"]["accel.bias_ug.0"]["coefficients"][0]
+    assert len(doc["positions"]) == 18 and {p["temperature_c"] for p in doc["positions"]} == {
+        t["imu_c"] for t in thermal["temperatures"]}
+
+
+def _swing(tmp_path: Path, calibration: Path | None) -> dict:
+    """A simulated swing at 40 deg C (between the calibration's 25 and 60) with ``calibration`` applied: its
+    result.json."""
+
+    def change(cfg: dict) -> None:
+        cfg["trial"].update(duration_s=60, name="swing-40")
+        cfg["turntable"].pop("command_port")
+        cfg["turntable"]["motion"] = {"kind": "swing", "axes": {
+            "outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
+            "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
+            "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6}}}
+        cfg["imu"]["errors"]["temperature_c"] = cfg["environment"]["chamber"]["set_point_c"] = 40.0
+        if calibration is not None:
+            cfg["imu"]["calibration"] = str(calibration)
+        del cfg["calibration"], cfg["output"]
+
+    name = "calibrated" if calibration else "raw"
+    out = tmp_path / name
+    assert main(["simulate", str(_config(tmp_path, name, change)), "--out", str(out), "--viewer", "none",
+                 "--no-figures"]) == 0
+    return json.loads((out / "result.json").read_text())
+
+
+def test_a_swing_between_the_calibration_temperatures_sees_the_bias_calibrated_away(calibrated, tmp_path):
+    doc = json.loads((calibrated / "calibration.json").read_text())
+    raw, calibrated_run = _swing(tmp_path, None), _swing(tmp_path, calibrated / "calibration.json")
+    assert min(abs(b) for b in raw["estimate"]["accel_bias_ug"]) > 100.0  # uncalibrated: the bias at 42 deg C
+    assert calibrated_run["calibration_applied"]["thermal"]["terms"][0] == "accel.bias_ug.0"
+    for k, (bias, sigma) in enumerate(zip(calibrated_run["estimate"]["accel_bias_ug"],
+                                          calibrated_run["estimate"]["accel_bias_sigma_ug"], strict=True)):
+        # the calibration's own sigma at 42 deg C: within that of its constant and first-order terms
+        term = doc["thermal"]["terms"][f"accel.bias_ug.{k}"]["sigma"]
+        combined = np.hypot(sigma, term[0] + term[1] * 15.0 + term[2] * 15.0 ** 2)
+        assert abs(bias) <= 3.0 * combined, (k, bias, combined)
+
+
+def test_a_thermal_calibration_file_is_applied_at_each_samples_own_temperature(tmp_path):
+    """A bias of 100 + 5 dT ug on x about 20 deg C: samples at 20 and 30 deg C come out with the bias of their
+    own temperature taken away, a sample without a temperature with the reference's."""
+    doc = {"accel": {"bias_ug": [100.0, 0, 0], "scale_ppm": [0, 0, 0], "misalignment_arcsec": [0] * 6,
+                     "nonlinearity_ug_per_g2": [0, 0, 0]},
+           "gyro": {"bias_dph": [0, 0, 0], "scale_ppm": [0, 0, 0], "misalignment_arcsec": [0] * 6},
+           "thermal": {"reference_c": 20.0, "order": 1,
+                       "terms": {"accel.bias_ug.0": {"coefficients": [100.0, 5.0], "sigma": [1.0, 0.1]}}}}
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps(doc))
+    period = 0.01
+    bias = np.array([100.0, 150.0, 100.0]) * UG
+    samples = ImuSamples(np.arange(3), np.zeros((3, 3)), np.column_stack([bias * period, np.zeros(3), np.zeros(3)]),
+                         np.zeros(3), np.zeros(3, dtype=np.int64), np.array([20.0, 30.0, np.nan]))
+    out = Compensation(path, period).samples(samples)
+    assert np.max(np.abs(out.dv)) < 1e-15
+
+
+def test_a_thermal_order_the_temperatures_cannot_hold_is_refused_naming_the_key(tmp_path, capsys):
+    path = _config(tmp_path, "order", lambda cfg: cfg["calibration"].update(temperatures_c=[-10, 60]))
+    assert main(["calibrate", str(path), "--simulate", "--out", str(tmp_path / "out"), "--viewer", "none"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "calibration.thermal_order: a polynomial of order 2 needs at least 3 different temperatures" in err
+    assert len(err.splitlines()) == 1
+
+
+def test_a_calibration_temperature_beyond_the_chambers_limits_is_refused_naming_it(tmp_path, capsys):
+    path = _config(tmp_path, "limits", lambda cfg: cfg["environment"]["chamber"].update(limits_c=[-20, 50]))
+    assert main(["calibrate", str(path), "--simulate", "--out", str(tmp_path / "out"), "--viewer", "none"]) == 2
+    assert "calibration.temperatures_c[2]: 60 deg C is outside environment.chamber.limits_c [-20, 50]" in \
+        capsys.readouterr().err
+
+
+def test_a_polynomial_through_noisy_points_has_the_sigma_of_its_least_squares():
+    temperatures, sigmas = np.array([-10.0, 25.0, 60.0, 80.0]), np.array([1.0, 2.0, 1.0, 4.0])
+    values = 3.0 + 0.5 * (temperatures - 25.0)
+    coefficients, sigma = fit_polynomial(temperatures, values, sigmas, 1, 25.0)
+    assert coefficients == pytest.approx([3.0, 0.5], abs=1e-12)
+    design = np.column_stack([np.ones(4), temperatures - 25.0])
+    expected = np.sqrt(np.diag(np.linalg.inv(design.T @ np.diag(sigmas**-2) @ design)))
+    assert sigma == pytest.approx(expected, rel=1e-12)  # residuals zero: never shrunk below the points' sigmas
+
+
+class _Chamber:
+    """A chamber controller over a :class:`ChamberModel` whose time the test moves on."""
+
+    def __init__(self, model: ChamberModel) -> None:
+        self.model = model
+
+    def temperature_c(self) -> float:
+        return round(self.model.temperature_c, 1)
+
+    def set_set_point_c(self, value: float) -> None:
+        self.model.set_point_c = value
+
+
+def _soak(model: ChamberModel, imu, seconds: float, settings: SoakSettings) -> Soak:
+    """A soak to 40 deg C fed every 0.1 s for ``seconds``, the IMU at ``imu(t)``."""
+    soak = Soak(40.0, settings, _Chamber(model), 0.0)
+    for t in np.arange(0.1, seconds, 0.1):
+        model.advance(t)
+        soak.update(float(t), imu(t))
+        if soak.done or soak.failure:
+            break
+    return soak
+
+
+def test_a_soak_waits_for_the_imus_own_temperature_not_the_chamber():
+    settings = SoakSettings(stable_within_c=0.05, for_s=5, timeout_s=200, stalled_s=20)
+    model = ChamberModel(1.0, 100.0, 40.0)  # the chamber there already
+    soak = _soak(model, lambda t: 40.0 - 15.0 * np.exp(-t / 10.0), 200.0, settings)
+    # 15 exp(-t/10) moves less than 0.05 deg C over 5 s from t = 10 ln(15 (1 - e^-0.5) / 0.05) = 47.6 s
+    assert soak.done and 52.0 <= soak.took_s <= 54.0
+
+
+def test_a_soak_that_does_not_settle_ends_naming_the_temperatures_seen():
+    settings = SoakSettings(stable_within_c=0.05, for_s=5, timeout_s=30, stalled_s=20)
+    soak = _soak(ChamberModel(1.0, 100.0, 40.0), lambda t: 20.0 + 0.1 * t, 100.0, settings)
+    assert not soak.done and soak.failure.startswith("soak at 40 deg C: not stable within 30 s "
+                                                     "(calibration.soak.timeout_s): the chamber at 40.0 deg C, "
+                                                     "the IMU at 23.")
+
+
+def test_a_chamber_that_stops_changing_far_from_its_set_point_ends_the_soak_as_a_heater_fault():
+    settings = SoakSettings(stable_within_c=0.05, for_s=5, timeout_s=300, stalled_s=20)
+    model = ChamberModel(2.0, 60.0, 0.0, fault_at_s=10.0)  # ramping at 1 deg C/s, then held at 10 deg C
+    soak = _soak(model, lambda t: 5.0, 300.0, settings)
+    assert soak.failure == ("soak at 40 deg C: the chamber's reading held at 10.0 deg C for 20 s "
+                            "(calibration.soak.stalled_s), 30.0 deg C from its set point: a heater or cooling fault "
+                            "of environment.chamber")
+    assert model.t < 32.0  # at once, not at the timeout
+
+
+def test_a_simulated_calibration_whose_chamber_heater_fails_ends_early_naming_it(tmp_path):
+    path = _config(tmp_path, "fault", lambda cfg: cfg["environment"]["chamber"].update(heater_fault_at_s=60.0))
+    out = tmp_path / "out"
+    assert main(["calibrate", str(path), "--simulate", "--out", str(out), "--viewer", "none", "--no-figures"]) == 1
+    ended = json.loads((out / "result.json").read_text())["ended"]
+    assert "soak at 25 deg C: the chamber's reading held at" in ended and "heater" in ended
+    assert not (out / "calibration.json").exists()
