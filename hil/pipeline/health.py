@@ -12,6 +12,8 @@ import numpy as np
 from drivers.codec import HealthFlag, raised_flags
 from hil.samples import ImuSamples
 
+FLAG_PREFIX = "flag_"  # a flag's count of samples among the stream health figures: ``flag_<name>`` (/health/flags)
+
 
 class HealthCheck:
     """Marks the samples the device flags invalid by ``flags``; :attr:`invalid` counts them, :attr:`by_flag` per

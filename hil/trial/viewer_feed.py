@@ -15,6 +15,7 @@ import numpy as np
 from hil.config import Config, ReportLimits
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
+from hil.pipeline.health import FLAG_PREFIX
 from hil.pipeline.progress import Health, Progress
 from hil.samples import StreamCounts
 from hil.trial.outcome import TrialSetupError, emulated_truth
@@ -95,6 +96,15 @@ def finish_viewer(viewer: Viewer | None) -> None:
         viewer.stop()
 
 
+def flag_health(counts: StreamCounts) -> dict[str, dict[str, float]]:
+    """The IMU's health flags as stream health (/health/flags): the samples it flagged invalid so far, ``invalid``,
+    and each flag's, ``flag_<name>`` (those raised so far); none where the pipeline does not read the flags."""
+    if "imu_invalid" not in counts.extra:
+        return {}
+    by_flag = counts.extra.get("imu_invalid_by_flag") or {}
+    return {"imu": {"invalid": counts.extra["imu_invalid"], **{FLAG_PREFIX + name: n for name, n in by_flag.items()}}}
+
+
 class ViewerFeed:
     """A listener of the pipeline logging to a viewer (or nowhere): the table angles of each block the estimator
     took and, with ``snapshots``, each new solution with the stream health (``live`` adds a live trial's
@@ -117,6 +127,8 @@ class ViewerFeed:
         live = {} if self.live is None else {stream: dict(values) for stream, values in self.live().items()}
         if progress.time_offset_s is not None:  # a live trial's check of the streams' lag
             live.setdefault("aligner", {})["table_lag_ms"] = 1e3 * progress.time_offset_s
+        for stream, values in flag_health(progress.counts).items():
+            live.setdefault(stream, {}).update(values)
         health = progress.with_live(live) if live else progress.health
         self.viewer.log_streams(progress.counts)
         for snap in progress.snapshots:

@@ -9,15 +9,18 @@ from __future__ import annotations
 import rerun as rr
 import rerun.blueprint as rrb
 
+from hil.pipeline.health import FLAG_PREFIX
+
 TIMELINE = "trial_time"
 AXES = ("x", "y", "z")
 ANGLES = ("pitch", "roll", "yaw")
 # the stream-health figures (the pipeline's and a live trial's) by entity: /health/<entity>, a series per stream
 HEALTH_GROUPS = {"frames": "frames", "aligned": "frames", "corrupt": "faults", "missing": "faults",
                  "outages": "faults", "filled": "faults", "bridged": "faults", "without_angles": "faults",
-                 "queue": "queue", "table_lag_ms": "sync_ms"}  # fmt: skip
+                 "queue": "queue", "table_lag_ms": "sync_ms", "invalid": "flags"}  # fmt: skip
 HEALTH_VIEWS = (("frames", "frames decoded, samples aligned"),
                 ("faults", "corrupt, missing, outages; filled, bridged, without angles"),
+                ("flags", "samples the IMU flags invalid, in all and by flag"),
                 ("latency_ms", "latency and age, p50 / p99 / max (ms)"), ("queue", "queue (items)"),
                 ("sync_ms", "table's lag behind the IMU (ms)"))
 
@@ -32,10 +35,10 @@ STREAM_COLORS = ((55, 126, 184), (228, 26, 28), (77, 175, 74), (152, 78, 163), (
 
 
 def health_entity(metric: str) -> str:
-    """The health entity of a metric: its group of ``HEALTH_GROUPS``, else ``latency_ms`` for a figure in ms
-    (``*_ms``), else one of its own (its name, escaped)."""
-    if metric in HEALTH_GROUPS:
-        return HEALTH_GROUPS[metric]
+    """The health entity of a metric: its group of ``HEALTH_GROUPS`` (a health flag's, ``flag_<name>``: ``flags``),
+    else ``latency_ms`` for a figure in ms (``*_ms``), else one of its own (its name, escaped)."""
+    if metric in HEALTH_GROUPS or metric.startswith(FLAG_PREFIX):
+        return HEALTH_GROUPS.get(metric, "flags")
     return "latency_ms" if metric.endswith("_ms") else rr.escape_entity_path_part(metric)
 
 
