@@ -127,3 +127,53 @@ def test_a_supply_that_stops_answering_ends_the_step_early_naming_it_without_a_t
     assert code == 1 and doc["steps"][1]["ended"].endswith("MEAS:CURR?: timeout")
     captured = capsys.readouterr()
     assert "power supply: not confirmed" in captured.out and "Traceback" not in captured.err
+
+
+LOGGED_SUPPLY = '''
+from drivers.scpi_supply import Reading
+
+
+class LoggedSupply:
+    """A supply that writes what it is told to the file its resource names."""
+
+    def __init__(self, resource, settings):
+        self.resource, self.settings, self.on = resource, settings, False
+
+    def say(self, line):
+        with open(self.resource, "a") as log:
+            log.write(line + "\\n")
+
+    def open(self):
+        self.say(f"open {self.settings.voltage_v:g} V {self.settings.current_limit_a:g} A")
+        return self
+
+    def output(self, on):
+        self.on = on
+        self.say("on" if on else "off")
+
+    def read(self):
+        return Reading(self.on, self.settings.voltage_v if self.on else 0.0, 0.2 if self.on else 0.0)
+
+    def close(self):
+        self.say("close")
+'''
+
+
+def test_a_supply_plug_in_of_the_entry_point_group_runs_the_power_steps_and_ends_off(tmp_path, monkeypatch, capsys):
+    site = tmp_path / "site"
+    info = site / "bench_supply-0.1.dist-info"
+    info.mkdir(parents=True)
+    (site / "logged_supply.py").write_text(LOGGED_SUPPLY)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: bench-supply\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[turntable_hil.power_supplies]\nlogged = logged_supply:LoggedSupply\n")
+    monkeypatch.syspath_prepend(str(site))
+    log = tmp_path / "supply.log"
+    cfg = yaml.safe_load(Path(POWER_CONFIG).read_text())
+    cfg["environment"]["power"] = {"controller": "logged", "port": str(log), "options": {"voltage_v": 12}}
+    (tmp_path / "lab.yaml").write_text(yaml.safe_dump(cfg))
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(yaml.safe_dump({"name": "plug-in", "config": str(tmp_path / "lab.yaml"),
+                                    "steps": [{"power": "on"}, {"power": "cycle", "off_s": 1}]}))
+    code = main(["plan", str(plan), "--out", str(tmp_path / "out"), "--speed", "max", "--no-history"])
+    assert code == 0 and log.read_text().splitlines() == ["open 12 V 1 A", "on", "off", "on", "off", "close"]
+    assert "power supply: output off (read back), 0 V, 0 A" in capsys.readouterr().out

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.registry import POWER_SUPPLIES
 from drivers.scpi_supply import ScpiSupply, SupplyError, SupplySettings
 from hil.config import Config
 from hil.config_environment import PowerConfig
@@ -141,7 +142,9 @@ class PlanPower:
 
 
 def supply_driver(settings: PowerConfig, resource: str) -> ScpiSupply:
-    """The driver of ``environment.power`` for the supply at VISA ``resource``, not yet open: the class its
-    ``controller`` names (``scpi``; the emulated supply speaks SCPI), with the options to write."""
+    """The driver of ``environment.power`` for the supply at ``resource``, not yet open: the class its ``controller``
+    names in :data:`drivers.registry.POWER_SUPPLIES` (``scpi``, or a plug-in of ``turntable_hil.power_supplies``;
+    the emulated supply speaks SCPI), given the settings to write."""
     options = settings.options
-    return ScpiSupply(resource, SupplySettings(options.voltage_v, options.current_limit_a, options.channel))
+    cls = POWER_SUPPLIES.get(settings.controller or "scpi")
+    return cls(resource, SupplySettings(options.voltage_v, options.current_limit_a, options.channel))
