@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
+from drivers.watlow_f4 import ChamberError
 from emulators.chamber import ChamberModel
 from hil.cli import main
 from hil.config_environment import SoakSettings
@@ -194,3 +195,14 @@ def test_a_simulated_calibration_whose_chamber_heater_fails_ends_early_naming_it
     ended = json.loads((out / "result.json").read_text())["ended"]
     assert "soak at 25 deg C: the chamber's reading held at" in ended and "heater" in ended
     assert not (out / "calibration.json").exists()
+
+
+def test_a_chamber_that_stops_answering_during_a_soak_ends_it_naming_the_chamber():
+    class Silent(_Chamber):
+        def temperature_c(self) -> float:
+            raise ChamberError("chamber at /dev/ttyUSB1: read register 100: no response")
+
+    soak = Soak(40.0, SoakSettings(), Silent(ChamberModel(1.0, 100.0, 40.0)), 0.0)
+    soak.update(1.0, 25.0)
+    assert soak.failure == ("soak at 40 deg C: environment.chamber: chamber at /dev/ttyUSB1: read register 100: "
+                            "no response") and not soak.done

@@ -38,7 +38,7 @@ class Soak:
         self.failure: str | None = None
         self.took_s = 0.0
         self._next_poll = t0
-        chamber.set_set_point_c(set_point_c)
+        self._chamber_call(lambda: chamber.set_set_point_c(set_point_c))
 
     @property
     def state(self) -> str:
@@ -63,7 +63,9 @@ class Soak:
     def _poll(self, t: float) -> None:
         """Read the chamber and judge the soak at trial time ``t``."""
         s = self.settings
-        reading = self.chamber.temperature_c()
+        reading = self._chamber_call(self.chamber.temperature_c)
+        if reading is None:
+            return
         self.chamber_readings.append((t, reading))
         while self.chamber_readings[0][0] < t - s.stalled_s:
             self.chamber_readings.popleft()
@@ -80,6 +82,17 @@ class Soak:
                             f"(calibration.soak.timeout_s): the chamber at {reading:.1f} deg C, the IMU at "
                             f"{self._imu_c():.2f} deg C, moving over {span:.2f} deg C in the last {s.for_s:g} s "
                             f"(stable_within_c {s.stable_within_c:g})")
+
+    def _chamber_call(self, request):
+        """``request()`` to the chamber's controller; one that fails (the controller stopped answering) fails the
+        soak naming ``environment.chamber`` (None)."""
+        from drivers.watlow_f4 import ChamberError
+
+        try:
+            return request()
+        except ChamberError as exc:
+            self.failure = f"soak at {self.set_point_c:g} deg C: environment.chamber: {exc}"
+            return None
 
     def _check_heater(self, t: float, reading: float) -> None:
         """Fail when the chamber's reading has held still for ``stalled_s`` while far from the set point."""
