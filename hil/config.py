@@ -178,6 +178,7 @@ class EstimatorConfig(Model):
     batch_samples: int | None = Field(None, ge=1, le=10000)  # live: samples a block spans (Config.block_samples)
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
     gyro_table_gate: bool = True  # off: no gyro sample is held to the table's rotation (hil ratetest's live form)
+    pair_by_motion: bool = True  # off: the IMU is paired by its counter and receive times alone (frequency response)
 
 
 class ReportLimits(Model):

@@ -44,7 +44,7 @@ def ratetest_command(args: argparse.Namespace) -> int:
     with claimed(out, RATETEST_OUTPUTS, args.overwrite, (Path(args.config),)):
         steps_run = simulate_steps if args.simulate else \
             partial(live_steps, config_path=Path(args.config), out=out, speed=args.speed, quiet=args.quiet,
-                    table_gate=key == "scale_factor")
+                    response=key == "frequency_response")
         doc = run(cfg, getattr(cfg, key), steps_run)
         text = Path(args.config).read_text()
         doc["record"] = run_record(cfg.record.model_dump(), text, args.started, datetime.now(timezone.utc))

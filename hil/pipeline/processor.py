@@ -243,7 +243,8 @@ def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, eart
     def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
         return TableRotations(geometry, earth, rate, cfg.table_counts_per_frame, counts, angles)
 
-    return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations)
+    return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations,
+                       cfg.estimator.pair_by_motion)
 
 
 def _health(decoding: Decoding, counts: StreamCounts, batched: bool) -> Health:

@@ -18,6 +18,11 @@ stage finds, watches and re-finds (docs/harness.md, "Sync pairing"):
   re-paired. While paired by motion, every ``CHECK_S`` the gyros are matched against the table again.
   A broken stream's samples wait (at most ``HOLD_S``) for the new offset; what cannot wait is counted
   ``unpaired``, never estimated against angles of an unconfirmed pairing.
+- **Receive times alone** (``by_motion`` False, a frequency response's live form): the IMU is paired once
+  ``RECEIVE_S`` of its reads are held, at the offset their least lateness gives, and never moved by its motion:
+  a gyro that lags the table (its low-pass, its output delay) would pull the motion's offset by that lag
+  rounded to whole pulses, and a frequency response measures that lag. Good while the least lateness of
+  ``RECEIVE_S`` of each stream's reads is within half a pulse of the other's (docs/ratetests.md).
 
 The table is the reference: its first offset is 0, so the pulse line is the table's count; a table that
 breaks is re-paired on its own receive times, the IMU by motion against it. At ``--speed max`` the host
@@ -49,6 +54,7 @@ CHECK_S = 2.0  # a paired IMU is checked against the table's motion this often (
 SEARCH_S = 0.02  # at least this much of either side of the coarse offset is searched by motion
 UNPACED_SEARCH_S = HOLD_S  # a reader's flush on opening may take up to this much of a stream's first frames
 RETRY_S = 0.2  # of new table data before a waiting IMU is searched by motion again
+RECEIVE_S = 4.0  # of the IMU's reads held before their receive times alone pair it (one second's can be a pulse off)
 MOTION, RECEIVE_TIME = "motion", "receive_time"
 
 
@@ -80,11 +86,12 @@ class SyncPairing:
     ``rate_hz`` is the pulse train's rate, ``table_step`` the counts between table frames, ``imu_modulus`` the
     IMU counter's (None: no counter), ``time_scale`` the devices' speed on the host's clock (None: unpaced),
     ``wire_s`` the (IMU, table) frames' time on their lines, ``rotations`` builds the table's interval
-    rotations from (counts, angles).
+    rotations from (counts, angles); ``by_motion`` False: the IMU is paired by its receive times alone (paced).
     """
 
     def __init__(self, rate_hz: float, table_step: int, imu_modulus: int | None, time_scale: float | None,
-                 wire_s: tuple[float, float], rotations: Callable[[np.ndarray, np.ndarray], TableRotations]) -> None:
+                 wire_s: tuple[float, float], rotations: Callable[[np.ndarray, np.ndarray], TableRotations],
+                 by_motion: bool = True) -> None:
         self.rate = rate_hz
         self.host_rate = None if time_scale is None else rate_hz * time_scale  # pulses per host second
         self.table_step = table_step
@@ -96,6 +103,7 @@ class SyncPairing:
         self._checked = 0  # IMU pulse of the last motion check
         self._first_pulse: int | None = None  # the first IMU pulse paired: trial times count from it
         self._unconfirmed = 0  # pulses either side of a receive-time pairing that its motion checks search
+        self.by_motion = by_motion or time_scale is None  # unpaced, the receive times say nothing
 
     @property
     def failure(self) -> str | None:
@@ -105,7 +113,7 @@ class SyncPairing:
     def add_imu(self, samples: ImuSamples) -> tuple[TableSamples | None, ImuSamples | None]:
         """One IMU read; returns the (table, IMU) samples now paired."""
         released = self._read(self.imu, samples)
-        if released is not None and self.report.paired_by is not None:
+        if released is not None and self.report.paired_by is not None and self.by_motion:
             self.motion.add_imu(released.sync_index, released.dtheta)
             self._check_motion(released)
         return None, released
@@ -195,6 +203,9 @@ class SyncPairing:
             return None
         if s is self.table:
             return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
+        if not self.by_motion:
+            held_enough = s.waited(self.rate) >= RECEIVE_S
+            return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME) if held_enough else None
         pulses, _ = self.motion.table
         if not len(pulses) or (s.tried is not None and pulses[-1] - s.tried < RETRY_S * self.rate):
             return None

@@ -6,8 +6,12 @@ way out. An emulated trial runs for at most ``EMULATED_MARGIN`` times the steps'
 
 The pipeline's gyro/table gate takes out samples whose gyro disagrees with the table by more than 1 % of the
 rotation: at a constant rate it keeps every sample of a window and takes out a damaged frame, but a gyro whose
-response lags a sinusoid it would take out wholesale, so the frequency response runs without it
-(``table_gate`` False: ``estimator.gyro_table_gate``).
+response lags a sinusoid it would take out wholesale, so the frequency response runs without it; and its IMU is
+paired with the table by its counter and receive times alone, since a pairing by motion would take the gyro's lag
+(rounded to whole samples) for the streams' offset, and the delay is what it measures (``response`` True:
+``estimator.gyro_table_gate`` and ``estimator.pair_by_motion`` False). A frequency response whose streams were
+paired anew at another offset on the way (a stall of the host that lost frames and wraps) ends early: its windows
+on either side of it would disagree by the new pairing's error.
 """
 
 from __future__ import annotations
@@ -28,10 +32,11 @@ QUEUE_ITEMS = 4  # the emulated devices close behind the processing: commands ac
 
 
 def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quiet: bool = False,
-               table_gate: bool = True):
-    """Run the steps ``plan(gimbals)`` makes as a live trial (the gyro/table gate on or off); the windows and how
-    it ended."""
-    cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"gyro_table_gate": table_gate})})
+               response: bool = False):
+    """Run the steps ``plan(gimbals)`` makes as a live trial (``response``: a frequency response's, module
+    docstring); the windows and how it ended."""
+    lagging = {"gyro_table_gate": not response, "pair_by_motion": not response}
+    cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update=lagging)})
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil ratetest commands the table; set its port "
                               "('emulator' for the emulated table)")
@@ -55,4 +60,17 @@ def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quie
     if sequence is None or not sequence.done:
         where = sequence.progress if sequence is not None else "not started"
         return [], str(TrialEnd.early(f"the devices stopped before the steps ended ({where})"))
+    repaired = paired_anew(outcome.result["streams"]["sync"]) if response else None
+    if repaired is not None:
+        return [], str(TrialEnd.early(repaired))
     return sequence.windows(), COMPLETED
+
+
+def paired_anew(sync: dict | None) -> str | None:
+    """Why a frequency response's delay is not measured when its streams were paired anew at another offset
+    (``streams.sync``'s first repair); None when they kept one pairing."""
+    if not sync or not sync["repairs"]:
+        return None
+    first = sync["repairs"][0]
+    return (f"the streams were paired anew at {first['at_s']:g} s ({first['cause']}): the frequency response's "
+            "delay needs one pairing throughout; run it again")
