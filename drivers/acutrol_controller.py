@@ -19,8 +19,9 @@ import serial
 
 from drivers.acl import AXIS_NUMBER, ERRORS, HEADER, AclCommand, AclError, AclReply, ReplyReader, format_message
 from drivers.table_controller import NoOptions, TableController, TableError
+from hil.vocabulary import TableMode
 
-WORD = {"position": "Position", "rate": "Rate", "synthesis": "Synthesis", "off": "Off"}
+WORD = {mode: mode.capitalize() for mode in TableMode}  # ACL's mode words
 ERROR_QUEUE_BIT = 0x80  # *STB? bit 7: the error message queue holds an error
 
 
@@ -126,7 +127,7 @@ class AcutrolController(TableController):
         return {g: mode_of(w) for g, w in zip(self.gimbals, words)}
 
 
-def mode_of(answer: str) -> str:
+def mode_of(answer: str) -> TableMode | str:
     """The interface's mode for a ``:Mode?`` answer: a word, or its first letter as the manual's example shows."""
     answer = answer.strip().lower()
     return next((mode for mode, word in WORD.items() if answer and word.lower().startswith(answer)), answer)

@@ -22,10 +22,11 @@ import serial
 
 from drivers.table_controller import NoOptions, TableController, TableError
 from hil.samples import GIMBAL_AXES
+from hil.vocabulary import TableMode
 
 PROMPT = ">"
 SILENT = ("JOG", "SGO", "STO")  # commands that answer nothing
-STA_MODES = ("off", "position", "rate", "synthesis")
+STA_MODES = (TableMode.OFF, TableMode.POSITION, TableMode.RATE, TableMode.SYNTHESIS)
 STA_ENABLED, STA_FAULT, STA_MOVING = 4, 8, 16
 
 
@@ -98,7 +99,7 @@ class AerosmithController(TableController):
 
     def _mode(self, gimbal: str, mode: str) -> None:
         """The table's motion commands carry their mode: Off stops; the others take effect with the demand."""
-        if mode == "off":
+        if mode == TableMode.OFF:
             self.request("STO")
 
     def _position(self, gimbal: str, deg: float) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 from hil.config_types import Model
 from hil.inputs import ConfigError
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
+from hil.vocabulary import StreamEventKind
 
 if TYPE_CHECKING:
     from drivers.config_query import ConfigDialogue
@@ -61,7 +62,7 @@ class StreamEvent:
 
     stream: str
     host_time: float
-    event: str  # "outage" or "reconnected"
+    event: StreamEventKind
     detail: str = ""
 
 

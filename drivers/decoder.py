@@ -15,6 +15,7 @@ import numpy as np
 
 from drivers.codec import Codec, Counters, FrameBatch, Framer, RawChunk, StreamEvent
 from hil.samples import ImuSamples, TableSamples
+from hil.vocabulary import StreamEventKind
 
 
 @dataclass
@@ -80,5 +81,5 @@ class StreamDecoder:
 
     def event(self, event: StreamEvent) -> None:
         """A reader's event: an outage is counted; the framer forgets its partial frame."""
-        self.outages += event.event == "outage"
+        self.outages += event.event == StreamEventKind.OUTAGE
         self.framer.reset()

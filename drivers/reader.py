@@ -23,6 +23,7 @@ from collections.abc import Iterable
 from drivers.codec import RawChunk, StreamEvent
 from drivers.tap import RawListener
 from drivers.transport import Transport, TransportError
+from hil.vocabulary import StreamEventKind
 
 
 def next_tick(now: float, period: float) -> float:
@@ -83,7 +84,7 @@ class DeviceReader:
         for listener in self.raw_listeners:
             listener.on_raw(chunk)
 
-    def _event(self, event: str, detail: str = "") -> None:
+    def _event(self, event: StreamEventKind, detail: str = "") -> None:
         note = StreamEvent(self.transport.stream, time.time(), event, detail)
         for listener in self.raw_listeners:
             listener.on_event(note)
@@ -92,7 +93,7 @@ class DeviceReader:
         self.transport.close()  # released before the outage is announced
         self.outages += 1
         self.down = str(error)
-        self._event("outage", self.down)
+        self._event(StreamEventKind.OUTAGE, self.down)
         delay, longest = self.backoff_s
         while not self._stop.wait(delay):
             try:
@@ -102,5 +103,5 @@ class DeviceReader:
                 delay = min(2.0 * delay, longest)
             else:
                 self.down = None
-                self._event("reconnected")
+                self._event(StreamEventKind.RECONNECTED)
                 return

@@ -20,10 +20,11 @@ from pydantic import BaseModel, ConfigDict
 
 from drivers.transport import TransportError, open_serial
 from hil.samples import GIMBAL_AXES  # also the index order of LimitsConfig
+from hil.vocabulary import TableMode
 
-MODES = ("position", "rate", "synthesis", "off")
-MODE_LETTER = {"position": "P", "rate": "R", "synthesis": "S", "off": "O"}  # as the tts1 status reports them
-MOTION_MODES = {"swing": "synthesis", "rate": "rate", "positions": "position", "static": "position"}
+MODES = tuple(TableMode)
+MOTION_MODES = {"swing": TableMode.SYNTHESIS, "rate": TableMode.RATE, "positions": TableMode.POSITION,
+                "static": TableMode.POSITION}
 """The mode that performs each ``turntable.motion.kind``: a swing oscillates about the centre, a rate
 table turns at its demand, static and positions hold position demands."""
 
@@ -138,7 +139,7 @@ class TableController(ABC):
         """Mode position|rate|synthesis|off; any but off needs the gimbal's interlocks closed."""
         if mode not in self.modes:
             raise TableError(f"turntable.controller {self.name!r} has no {mode} mode")
-        if mode != "off" and not self.interlocks_closed(gimbal):
+        if mode != TableMode.OFF and not self.interlocks_closed(gimbal):
             raise InterlockError(f"turntable: interlocks of the {gimbal} axis are open; close them before mode {mode}")
         self._mode(gimbal, mode)
 
@@ -177,7 +178,7 @@ class TableController(ABC):
     def off(self) -> None:
         """Every commanded axis Off, then the modes read back; raises :class:`TableError` unless all are off."""
         modes = self._off()
-        if any(mode != "off" for mode in modes.values()):
+        if any(mode != TableMode.OFF for mode in modes.values()):
             raise TableError(f"turntable: after Off the axes report modes "
                              f"{', '.join(f'{g} {m}' for g, m in modes.items())}, not all off")
 

@@ -29,11 +29,12 @@ from drivers.acl import (
 )
 from emulators.servo import Refused, Servo
 from hil.samples import GIMBAL_AXES
+from hil.vocabulary import TableMode
 
 IDN = "turntable-hil,emulated Acutrol3000,0,1"
 COLUMN = {AXIS_NUMBER[g]: k for k, g in enumerate(GIMBAL_AXES)}  # axis "1".."3" -> servo column
-LETTER = {"Position": "P", "Rate": "R", "Synthesis": "S", "Off": "O", "Abort": "O"}  # Abort stops like Off
-WORD = {letter: word for word, letter in LETTER.items() if word != "Abort"}
+MODE = {mode.capitalize(): mode for mode in TableMode} | {"Abort": TableMode.OFF}  # ACL's words; Abort stops like Off
+WORD = {mode: mode.capitalize() for mode in TableMode}
 LIMIT_KIND = {"Limit:Rate": "rate", "Limit:Acceleration": "accel", "Limit:Lowposition": "low",
               "Limit:Highposition": "high"}
 REFUSAL = {"limit": OUT_OF_RANGE, "argument": OUT_OF_RANGE, "interlock": INTERLOCK}
@@ -101,10 +102,10 @@ class AcutrolTable:
             return self._query(c)
         if path.startswith("Mode"):
             word = path.partition(":")[2] or args[1]
-            if word not in LETTER:
+            if word not in MODE:
                 raise AclError(f"mode {word} is not available on this table", ILLEGAL)
             axes = self._axes(args[0])
-            self.servo.set_mode(axes, LETTER[word])
+            self.servo.set_mode(axes, MODE[word])
             self._turned_off |= set(axes) if word == "Off" else set()
         elif path.startswith("Demand:"):
             kind = path.partition(":")[2].lower().replace("deltaposition", "delta")
@@ -115,7 +116,7 @@ class AcutrolTable:
             action = path.partition(":")[2].lower()
             self.servo.interlock(self._axes(args[0]) if args else [], action)
         elif path in LIMIT_KIND:
-            mode = LETTER.get(args[0])
+            mode = MODE.get(args[0])
             if mode is None:
                 raise AclError(f"{c.text()}: no {args[0]} profiler on this table", OUT_OF_RANGE)
             self.servo.set_limit(mode, self._axes(args[1]), LIMIT_KIND[path], args[2])
@@ -135,12 +136,12 @@ class AcutrolTable:
             mode, axis = (args[0], args[1]) if len(args) == 2 else ("Position", args[0])
             k = COLUMN[axis]
             if path == "Limit:Absolute":
-                lim = self.servo.mode_limits["P"]
+                lim = self.servo.mode_limits[TableMode.POSITION]
                 return ",".join(f"{v:.5f}" for v in (lim.rate_dps[k], lim.accel_dps2[k], 0.0, lim.position_min_deg[k],
                                                       lim.position_max_deg[k], lim.rate_dps[k]))
-            if mode not in LETTER:
+            if mode not in MODE:
                 raise AclError(f"{c.text()}: no {mode} profiler on this table", OUT_OF_RANGE)
-            return f"{self.servo.limit(LETTER[mode], k, LIMIT_KIND[path]):.5f}"
+            return f"{self.servo.limit(MODE[mode], k, LIMIT_KIND[path]):.5f}"
         k = COLUMN[args[0]]
         if path == "Mode":
             return WORD[self.servo.mode(k)]

@@ -16,9 +16,9 @@ from collections import Counter
 from drivers.aerosmith_controller import PROMPT, SILENT, STA_ENABLED, STA_FAULT, STA_MODES, STA_MOVING
 from emulators.servo import Refused, Servo
 from hil.samples import GIMBAL_AXES
+from hil.vocabulary import TableMode
 
 _LINE = re.compile(r"([A-Za-z]{3})\s*([-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)?")
-_LETTER = {"off": "O", "position": "P", "rate": "R", "synthesis": "S"}
 _KEPT = ("DIR", "HOF", "SAV")
 
 
@@ -40,8 +40,7 @@ class AerosmithTable:
         self._buf = b""
 
     def modes(self) -> str:
-        letter = self.servo.mode(self.k)
-        return next(word for word, ltr in _LETTER.items() if ltr == letter).capitalize()
+        return self.servo.mode(self.k).capitalize()
 
     def feed(self, data: bytes) -> bytes:
         """The bytes answered to ``data``: ``STO`` acts at once, other commands at their line end."""
@@ -87,21 +86,21 @@ class AerosmithTable:
         if name in needs and value is None:
             raise Refused(f"{name} needs a number", "argument")
         if name == "STO":
-            servo.set_mode(axes, "O")
+            servo.set_mode(axes, TableMode.OFF)
             self.offs += 1
             return ""
         if name in ("VEL", "ACL"):
             kind = "rate" if name == "VEL" else "accel"
-            for mode in ("P", "S") if name == "VEL" else "PRSO":
+            for mode in (TableMode.POSITION, TableMode.SYNTHESIS) if name == "VEL" else TableMode:
                 servo.set_limit(mode, axes, kind, value)
             return "OK"
         if name in ("MOV", "RMO", "HOM"):
             servo.demand(axes, "delta" if name == "RMO" else "position", (value or 0.0,))
-            servo.set_mode(axes, "P")
+            servo.set_mode(axes, TableMode.POSITION)
             return "OK"
         if name == "JOG":
             servo.demand(axes, "rate", (value,))
-            servo.set_mode(axes, "R")
+            servo.set_mode(axes, TableMode.RATE)
             return ""
         if name in ("AMP", "FRQ", "PER"):
             self.sine["FRQ" if name == "PER" else name] = 1.0 / value if name == "PER" else value
@@ -112,7 +111,7 @@ class AerosmithTable:
             return "OK"
         if name == "SGO":
             servo.demand(axes, "oscillator", (self.sine["AMP"], self.sine["FRQ"], 0.0))
-            servo.set_mode(axes, "S")
+            servo.set_mode(axes, TableMode.SYNTHESIS)
             return ""
         if name in ("PPO", "PVE"):
             position, rate, _ = servo.reading(self.k)
@@ -130,6 +129,6 @@ class AerosmithTable:
     def _status(self) -> int:
         state = self.servo.interlock_state(self.k)
         rate = self.servo.reading(self.k)[1]
-        mode = STA_MODES.index(next(w for w, ltr in _LETTER.items() if ltr == self.servo.mode(self.k)))
+        mode = STA_MODES.index(self.servo.mode(self.k))
         return (mode | (STA_ENABLED if state == "closed" else 0) | (STA_FAULT if state == "fault" else 0)
                 | (STA_MOVING if abs(rate) > 1e-9 else 0))

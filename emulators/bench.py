@@ -32,6 +32,7 @@ from emulators.paced_writer import DeviceWriter
 from emulators.scpi_supply import EmulatedSupply, powering
 from hil.config import Config
 from hil.units import ARCSEC
+from hil.vocabulary import Port
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
 
@@ -100,7 +101,7 @@ def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, Devic
     table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
     streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
                                   max(1, round(CHUNK_S / source.clock.period)))
-               for name, source in (("imu", imu_source), ("turntable_data", table_source))}
+               for name, source in ((Port.IMU, imu_source), (Port.TABLE_DATA, table_source))}
     return Servo(cfg.turntable, rate, sim.truth.motion), streams
 
 
@@ -141,7 +142,7 @@ class Bench:
                 imu_damage, imu_baud = ByteDamage(), imu_cfg.baudrate
             self.ports["imu"] = imu_port
             check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)  # it sends tts1
-            self.ports["turntable_data"] = pty("turntable_data", unplugging[1])
+            self.ports[Port.TABLE_DATA] = pty(Port.TABLE_DATA, unplugging[1])
             self.server = TableServer(emulated_table(cfg, self.servo, log=True))
             chamber = cfg.environment.chamber
             if chamber is not None and chamber.source == "emulator":
@@ -151,8 +152,8 @@ class Bench:
             if line is not None:  # environment.power.source: emulator
                 self.supply = powering(cfg.environment.power, line, self.servo.lock)
             for k, (name, damage, baud, faults) in enumerate((
-                    ("imu", imu_damage, imu_baud, imu_cfg.faults),
-                    ("turntable_data", ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
+                    (Port.IMU, imu_damage, imu_baud, imu_cfg.faults),
+                    (Port.TABLE_DATA, ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
                 self.writers[name] = DeviceWriter(name, self.ports[name], FaultInjector(faults, damage, seed, k),
                                                   baud, speed, stop, wait_readers)
         except BaseException:
@@ -163,8 +164,8 @@ class Bench:
         """The ports JSON."""
         chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
         power = {} if self.supply is None else {"power": self.supply.resource}
-        return {"imu": self.ports["imu"].path, "turntable_data": self.ports["turntable_data"].path,
-                "turntable_cmd": self.server.url, **chamber, **power}
+        return {Port.IMU: self.ports[Port.IMU].path, Port.TABLE_DATA: self.ports[Port.TABLE_DATA].path,
+                Port.TABLE_CMD: self.server.url, **chamber, **power}
 
     def close(self) -> None:
         if self.server is not None:
@@ -197,7 +198,7 @@ class Bench:
                 servo.advance(t)
                 emission = streams[name].pop(servo)
                 servo.commit(emission.latest)
-                send = name != "turntable_data" or servo.sync_output
+                send = name != Port.TABLE_DATA or servo.sync_output
             if send and not self.writers[name].put(emission, clock.due(t)):
                 break
             if name in self.synced:

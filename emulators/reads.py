@@ -17,10 +17,11 @@ from collections.abc import Iterator
 from drivers.codec import RawChunk
 from emulators.bench import device_streams
 from hil.config import Config
+from hil.vocabulary import Port, Stream
 
 HOST_T0 = 1.7e9  # s, a host clock's epoch time at trial time 0
 READ_LATENCY_S = 1e-3  # a read ends this long after the last frame it holds could have been written
-STREAM_NAMES = {"imu": "imu", "turntable_data": "table"}  # device -> the stream the harness records
+STREAM_NAMES = {Port.IMU: Stream.IMU, Port.TABLE_DATA: Stream.TABLE}  # device -> the stream the harness records
 
 
 def emulated_reads(cfg: Config, duration: float, read_s: float = 0.1, host_t0: float = HOST_T0
@@ -28,10 +29,10 @@ def emulated_reads(cfg: Config, duration: float, read_s: float = 0.1, host_t0: f
     """The frames of a ``duration`` s run of ``cfg``'s emulated devices in reads of ``read_s``, in the
     order of their host times."""
     servo, streams = device_streams(cfg, duration)
-    if streams["imu"].source.codec.link != "serial":
+    if streams[Port.IMU].source.codec.link != "serial":
         raise ValueError("emulated_reads: the IMU's frames are CAN frames, not a byte stream")
     buffers = {name: bytearray() for name in streams}
-    phase = {"imu": READ_LATENCY_S, "turntable_data": 0.5 * read_s + READ_LATENCY_S}
+    phase = {Port.IMU: READ_LATENCY_S, Port.TABLE_DATA: 0.5 * read_s + READ_LATENCY_S}
     reads = dict.fromkeys(streams, 1)  # each stream's current read: it ends at reads * read_s + phase
 
     def end(name: str) -> float:
@@ -55,7 +56,7 @@ def emulated_reads(cfg: Config, duration: float, read_s: float = 0.1, host_t0: f
         servo.advance(t)
         emission = streams[name].pop(servo)
         servo.commit(emission.latest)
-        if emission.powered and (name != "turntable_data" or servo.sync_output):
+        if emission.powered and (name != Port.TABLE_DATA or servo.sync_output):
             buffers[name] += emission.payload
     for name in sorted(reads, key=end):  # the last reads
         yield from read(name)

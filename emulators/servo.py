@@ -35,7 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
-from drivers.table_controller import MODE_LETTER, MOTION_MODES
+from drivers.table_controller import MOTION_MODES
 from drivers.tts1 import Mode, Status, status_byte
 from emulators.motion import (
     ConstantRate,
@@ -48,9 +48,12 @@ from emulators.motion import (
 from hil.config import LimitsConfig, MotionConfig, TurntableConfig
 from hil.samples import GIMBAL_AXES
 from hil.units import ARCSEC, DEG
+from hil.vocabulary import TableMode
 
-_TTS1_MODE = {"O": Mode.OFF, "P": Mode.POSITION, "R": Mode.RATE, "S": Mode.SYNTHESIS}
-_RANK = "OPRS"  # the table's tts1 mode is the most active of its axes' modes
+_TTS1_MODE = {TableMode.OFF: Mode.OFF, TableMode.POSITION: Mode.POSITION, TableMode.RATE: Mode.RATE,
+              TableMode.SYNTHESIS: Mode.SYNTHESIS}
+_RANK = tuple(_TTS1_MODE)  # the table's tts1 mode is the most active of its axes' modes
+_DEMAND_MODE = {"rate": TableMode.RATE, "oscillator": TableMode.SYNTHESIS}  # a demand's mode; else position
 _STILL = 1e-12  # rad/s; below this an axis counts as not moving
 
 
@@ -62,7 +65,7 @@ class Piece:
     origin: float
     profile: MotionProfile
     column: int
-    mode: str  # P, R, S or O
+    mode: TableMode
     interlocks_closed: bool = True
     fault: bool = False
 
@@ -152,7 +155,7 @@ def _full(value: float) -> np.ndarray:
 class _Demand:
     """What one axis is told to do (deg, deg/s, Hz)."""
 
-    mode: str
+    mode: TableMode
     position: float = 0.0
     rate: float = 0.0
     oscillator: tuple[float, float, float] = (0.0, 0.0, 0.0)  # amplitude deg, frequency Hz, phase deg
@@ -168,14 +171,14 @@ class Servo:
     def __init__(self, table: TurntableConfig, rate_hz: float, initial: MotionProfile) -> None:
         self.rate_hz = rate_hz
         self.limits = table.limits  # the configured ones: where the tts1 status reports "limit reached"
-        self.mode_limits = {mode: table.limits for mode in "PRSO"}  # what the table was told, per mode
+        self.mode_limits = {mode: table.limits for mode in TableMode}  # what the table was told, per mode
         self.lock = threading.RLock()
         self.revision = 0
         self.sync_output = True
         self.horizon = -1.0 / rate_hz  # latest trial time already emitted
         self.trip_at = table.interlock_trip_at_s
         self.zero_offset_deg = np.array(table.zero_offset_arcsec) * ARCSEC / DEG
-        mode = MODE_LETTER[MOTION_MODES[table.motion.kind]]
+        mode = MOTION_MODES[table.motion.kind]
         self.demands = [_configured_demand(table.motion, axis) for axis in GIMBAL_AXES]
         self.motion = ServoMotion(tuple((Piece(0.0, 0.0, initial, k, mode),) for k in range(3)))
 
@@ -194,15 +197,17 @@ class Servo:
         if self.trip_at is not None and t >= self.trip_at:
             trip = max(math.ceil(self.trip_at * self.rate_hz - 1e-9) / self.rate_hz, self.next_pulse_time())
             self.trip_at = None
-            self._change(range(3), trip, interlocks_closed=False, fault=True, mode="O")
+            self._change(range(3), trip, interlocks_closed=False, fault=True, mode=TableMode.OFF)
 
     # Commands (the controller interface's vocabulary; the emulated tables translate their dialects to it)
 
-    def set_mode(self, axes: list[int], mode: str) -> None:
-        """Mode P, R, S or O on columns ``axes``; any but O needs closed interlocks."""
+    def set_mode(self, axes: list[int], mode: TableMode | str) -> None:
+        """A :class:`TableMode` on columns ``axes`` (ValueError for another word); any but off needs closed
+        interlocks."""
+        mode = TableMode(mode)
         with self.lock:
             t = self.next_pulse_time()
-            if mode != "O" and not all(self._state(k, t).interlocks_closed for k in axes):
+            if mode != TableMode.OFF and not all(self._state(k, t).interlocks_closed for k in axes):
                 raise Refused(f"interlock open on the {_names(axes)} axis: close it before mode {mode}", "interlock")
             self._change(axes, t, mode=mode)
 
@@ -235,9 +240,9 @@ class Servo:
                     raise Refused("interlock fault latched: reset it first", "interlock")
                 self._change(axes, t, interlocks_closed=True)
             else:
-                self._change(axes, t, interlocks_closed=False, mode="O")
+                self._change(axes, t, interlocks_closed=False, mode=TableMode.OFF)
 
-    def set_limit(self, mode: str, axes: list[int], kind: str, value: float) -> None:
+    def set_limit(self, mode: TableMode, axes: list[int], kind: str, value: float) -> None:
         """The ``rate`` (deg/s), ``accel`` (deg/s^2), ``low`` or ``high`` (deg) limit of one mode."""
         with self.lock:
             lim = self.mode_limits[mode]
@@ -256,7 +261,7 @@ class Servo:
 
     # Queries
 
-    def mode(self, k: int) -> str:
+    def mode(self, k: int) -> TableMode:
         return self.demands[k].mode
 
     def interlock_state(self, k: int) -> str:
@@ -274,14 +279,14 @@ class Servo:
         return (math.degrees(float(angles[1, k])) - self.zero_offset_deg[k], rate,
                 (rate - math.degrees(float(rates[0, k]))) * self.rate_hz)
 
-    def limit(self, mode: str, k: int, kind: str) -> float:
+    def limit(self, mode: TableMode, k: int, kind: str) -> float:
         lim = self.mode_limits[mode]
         return {"rate": lim.rate_dps, "accel": lim.accel_dps2, "low": lim.position_min_deg,
                 "high": lim.position_max_deg}[kind][k]
 
     def _check_demand(self, k: int, kind: str, values: tuple) -> None:
         name = GIMBAL_AXES[k]
-        lim = self.mode_limits[{"rate": "R", "oscillator": "S"}.get(kind, "P")]
+        lim = self.mode_limits[_DEMAND_MODE.get(kind, TableMode.POSITION)]
         low, high = lim.position_min_deg[k], lim.position_max_deg[k]
         if kind == "position":
             spans = (values[0], values[0])
@@ -331,7 +336,7 @@ class Servo:
             pieces.append(replace(flags, start=start, origin=start if origin is None else origin,
                                   profile=profile, column=k))
 
-        if flags.mode == "R":
+        if flags.mode == TableMode.RATE:
             v1 = d.rate * DEG
             t1 = t + abs(v1 - v0) / accel
             add(t, Ramp(_full(p0), _full(v0), _full(math.copysign(accel, v1 - v0))))
@@ -344,14 +349,14 @@ class Servo:
             t1 = t + abs(v0) / accel
             p1 = p0 + v0 * (t1 - t) / 2.0
             add(t, Ramp(_full(p0), _full(v0), _full(-math.copysign(accel, v0))))
-        if flags.mode == "O":
+        if flags.mode == TableMode.OFF:
             add(t1, ConstantRate(_full(p1), np.zeros(3)))
             return tuple(pieces)
         amplitude, frequency, phase = d.oscillator[0] * DEG, d.oscillator[1], d.oscillator[2] * DEG
-        target = d.position * DEG + (amplitude * math.sin(phase) if flags.mode == "S" else 0.0)
+        target = d.position * DEG + (amplitude * math.sin(phase) if flags.mode == TableMode.SYNTHESIS else 0.0)
         move = Positions(np.array([_full(p1), _full(target)]), np.array([0.0, 1.0]), lim.rate_dps[k] * DEG, accel)
         add(t1, move)
-        if flags.mode == "S":
+        if flags.mode == TableMode.SYNTHESIS:
             arrive = t1 + move.segments()[0][2]
             t_s = math.ceil(arrive * self.rate_hz - 1e-9) / self.rate_hz
             add(t_s, Swing(_full(amplitude), _full(2.0 * math.pi * frequency), _full(phase), _full(d.position * DEG)))
@@ -359,7 +364,7 @@ class Servo:
 
     def _stop_at_limit(self, k: int, t1: float, p1: float, v1: float, accel: float, add) -> None:
         """Rate mode on an axis with limited travel: decelerate so that it halts exactly at the limit."""
-        lim = self.mode_limits["R"]
+        lim = self.mode_limits[TableMode.RATE]
         low, high = lim.position_min_deg[k] * DEG, lim.position_max_deg[k] * DEG
         if high - low >= 2.0 * math.pi or abs(v1) <= _STILL:
             return
@@ -379,9 +384,9 @@ def _configured_demand(motion: MotionConfig, axis: str) -> _Demand:
     """The demand that the configured motion of one axis stands for (its first position for ``positions``)."""
     a = getattr(motion.axes, axis)
     if motion.kind == "positions":
-        return _Demand("P", getattr(motion.positions[0], f"{axis}_deg"))
+        return _Demand(TableMode.POSITION, getattr(motion.positions[0], f"{axis}_deg"))
     frequency = 0.0 if a.period_s is None else 1.0 / a.period_s
-    return _Demand(MODE_LETTER[MOTION_MODES[motion.kind]], a.center_deg, a.rate_dps,
+    return _Demand(MOTION_MODES[motion.kind], a.center_deg, a.rate_dps,
                    (a.amplitude_deg, frequency, a.phase_deg))
 
 

@@ -21,8 +21,7 @@ from pydantic import BaseModel, ConfigDict
 from drivers.table_controller import TableController, TableError
 from emulators.servo import Refused
 from hil.samples import GIMBAL_AXES
-
-LETTER = {"position": "P", "rate": "R", "synthesis": "S", "off": "O"}
+from hil.vocabulary import TableMode
 
 
 class TinyOptions(BaseModel):
@@ -83,8 +82,7 @@ class TinyTable:
         self._buf = b""
 
     def modes(self):
-        words = {letter: word for word, letter in LETTER.items()}
-        return " ".join(words[self.servo.mode(k)] for k in range(3))
+        return " ".join(self.servo.mode(k) for k in range(3))
 
     def feed(self, data):
         self._buf += data
@@ -107,18 +105,18 @@ class TinyTable:
         if word == "HELLO":
             return "tiny table"
         if word == "LIMIT":
-            for mode in "PRSO":
+            for mode in TableMode:
                 s.set_limit(mode, axes, "rate", float(args[1]))
                 s.set_limit(mode, axes, "accel", float(args[2]))
         elif word == "LOCKS?":
             return s.interlock_state(axes[0])
         elif word == "MODE":
-            s.set_mode(axes, LETTER[args[1]])
+            s.set_mode(axes, args[1])
         elif word in ("MOVE", "SPIN", "SWING"):
             kind = {"MOVE": "position", "SPIN": "rate", "SWING": "oscillator"}[word]
             s.demand(axes, kind, tuple(float(a) for a in args[1:]))
         elif word == "STOP":
-            s.set_mode([0, 1, 2], "O")
+            s.set_mode([0, 1, 2], TableMode.OFF)
             self.offs += 1
         elif word == "MODES?":
             return self.modes()

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 from hil.config import ReportLimits
 from hil.estimation.table_reference import drifts_agree
+from hil.vocabulary import Verdict
 
-PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"
+PASS, FAIL, NOT_JUDGED = Verdict.PASS, Verdict.FAIL, "not judged"
 SIGMA_DIGITS = 2  # significant digits of a value's sigma that set the decimals it is shown with
 SIGNIFICANT = 3  # significant digits of a value shown without a sigma
 # the measurements of the streams themselves, whatever the estimators made of them

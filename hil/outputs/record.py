@@ -15,6 +15,7 @@ from typing import Any
 
 from hil.config import Config, RecordConfig
 from hil.inputs import resolve_path
+from hil.vocabulary import Port
 from hil.recording.recorder import package_version, read_start_record
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
@@ -47,7 +48,7 @@ def _devices(cfg: Config, ports: dict[str, Any] | None) -> dict[str, Any]:
     port)."""
     if ports is None:
         imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
-        ports = {"imu": imu, "turntable_data": cfg.turntable.data_port, "turntable_cmd": cfg.turntable.command_port}
+        ports = {Port.IMU: imu, Port.TABLE_DATA: cfg.turntable.data_port, Port.TABLE_CMD: cfg.turntable.command_port}
     return {"ports": ports, "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
 
 

@@ -12,8 +12,9 @@ from hil.config import Config
 from hil.pipeline.plausibility import UnitKeys
 from hil.pipeline.temperature import TemperatureTrack
 from hil.samples import ImuSamples, TableSamples
+from hil.vocabulary import Stream
 
-IMU, TABLE = "imu", "table"
+IMU, TABLE = Stream.IMU, Stream.TABLE
 Samples = ImuSamples | TableSamples
 RATE_WINDOW_S = 2.0  # s of the devices' time over which the IMU's frame rate is measured, once, ...
 RATE_HOST_S = 1.0  # ... and at least this long on the host's clock (a fast emulator's reads jitter alike)

@@ -44,6 +44,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 
 from drivers.codec import RawChunk, StreamEvent
 from hil.recording.csv_input import DataError
+from hil.vocabulary import StreamEventKind
 
 FORMAT = "turntable-hil/1"
 BYTES = "application/octet-stream"
@@ -317,5 +318,6 @@ def read_recording(path: str | Path) -> Recording:
 def _item(channel: Channel, message: Message) -> RawChunk | StreamEvent:
     if channel.topic == EVENTS:
         fields = json.loads(message.data)
-        return StreamEvent(fields["stream"], message.log_time / 1e9, fields["event"], fields.get("detail", ""))
+        return StreamEvent(fields["stream"], message.log_time / 1e9, StreamEventKind(fields["event"]),
+                           fields.get("detail", ""))
     return decode_chunk(channel.topic, channel.message_encoding, message.log_time, message.data)

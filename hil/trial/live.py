@@ -41,6 +41,7 @@ from hil.trial.imu_config import check_imu_config
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
+from hil.vocabulary import Port
 
 LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
@@ -125,8 +126,8 @@ class LatencyStats:
 def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
     """The IMU and table transports, from the emulator's ports (ports.json) or from the config."""
     ports = ports or {}
-    imu_port = ports.get("imu") or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
-    table_port = ports.get("turntable_data", cfg.turntable.data_port)
+    imu_port = ports.get(Port.IMU) or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
+    table_port = ports.get(Port.TABLE_DATA, cfg.turntable.data_port)
     if not imu_port:
         raise TrialAborted("imu: no port (set imu.port, or imu.source: emulator)")
     if not table_port:

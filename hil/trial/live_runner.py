@@ -19,6 +19,7 @@ from hil.trial.stop_signals import StopSignals
 from hil.trial.table_control import MotionCheck, TableControl, check_controller, motion_needs
 from hil.trial.viewer_feed import ViewerOptions, open_viewer
 from hil.viewer.console_progress import ConsoleProgress
+from hil.vocabulary import Port
 
 
 def emulated(cfg: Config) -> bool:
@@ -122,7 +123,7 @@ def _command_url(cfg: Config, ports: dict | None) -> str | None:
     """The table's command port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
     url = cfg.turntable.command_port
     if url == "emulator":
-        if ports is None or "turntable_cmd" not in ports:
+        if ports is None or Port.TABLE_CMD not in ports:
             raise TrialSetupError("turntable.command_port: 'emulator' needs turntable.source: emulator")
-        return ports["turntable_cmd"]
+        return ports[Port.TABLE_CMD]
     return url

@@ -25,6 +25,7 @@ from hil.config import TurntableConfig
 from hil.pipeline.progress import Progress
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
+from hil.vocabulary import TableMode
 
 SETTLE_S = 2.0  # beyond the longest period, for the table to reach the commanded motion
 STATIC_TOLERANCE_DEG = 0.5
@@ -39,8 +40,9 @@ def motion_needs(table: TurntableConfig) -> tuple[set[str], set[str]]:
     for gimbal in GIMBAL_AXES:
         mode = _mode(table, gimbal)
         axis = getattr(motion.axes, gimbal)
-        moves = axis.amplitude_deg if mode == "synthesis" else axis.rate_dps if mode == "rate" else axis.center_deg
-        modes |= {mode} | ({"position"} if mode == "synthesis" else set())
+        moves = (axis.amplitude_deg if mode == TableMode.SYNTHESIS else axis.rate_dps if mode == TableMode.RATE
+                 else axis.center_deg)
+        modes |= {mode} | ({TableMode.POSITION} if mode == TableMode.SYNTHESIS else set())
         gimbals |= {gimbal} if moves else set()
     return modes, gimbals
 
@@ -54,9 +56,9 @@ def check_controller(table: TurntableConfig, modes: set[str], gimbals: set[str])
         raise TableError(f"{why}; nothing was sent")
 
 
-def _mode(table: TurntableConfig, gimbal: str) -> str:
+def _mode(table: TurntableConfig, gimbal: str) -> TableMode:
     kind, axis = table.motion.kind, getattr(table.motion.axes, gimbal)
-    return MOTION_MODES[kind] if kind != "swing" or axis.amplitude_deg else "position"
+    return MOTION_MODES[kind] if kind != "swing" or axis.amplitude_deg else TableMode.POSITION
 
 
 class TableControl:
@@ -87,12 +89,12 @@ class TableControl:
         client.apply_limits()
         for gimbal in client.gimbals:
             axis, mode = getattr(motion.axes, gimbal), _mode(self.table, gimbal)
-            if mode != "rate":
+            if mode != TableMode.RATE:
                 client.demand_position(gimbal, axis.center_deg)
-            if mode == "synthesis":  # loaded before the mode starts it (TM-8004 4.7.6)
+            if mode == TableMode.SYNTHESIS:  # loaded before the mode starts it (TM-8004 4.7.6)
                 client.demand_oscillator(gimbal, axis.amplitude_deg, 1.0 / axis.period_s, axis.phase_deg)
             client.set_mode(gimbal, mode)
-            if mode == "rate":
+            if mode == TableMode.RATE:
                 client.demand_rate(gimbal, axis.rate_dps)
         client.sync_output(True)
 

@@ -1,0 +1,45 @@
+"""The harness's words, each vocabulary one enum: what the code compares and writes is a member, never a literal
+(``tests/test_registry.py`` looks for the old literals outside this module). Members are ``str`` and equal to
+their values, so files, messages and ports.json read as before."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class TableMode(StrEnum):
+    """A table axis's servo mode: the controllers' and the emulated servo's one alphabet."""
+
+    POSITION = "position"
+    RATE = "rate"
+    SYNTHESIS = "synthesis"  # an oscillator about the centre position
+    OFF = "off"
+
+
+class Port(StrEnum):
+    """The devices' ports, as ports.json and the emulator name them."""
+
+    IMU = "imu"
+    TABLE_DATA = "turntable_data"
+    TABLE_CMD = "turntable_cmd"
+
+
+class Stream(StrEnum):
+    """The streams a trial records and decodes."""
+
+    IMU = "imu"
+    TABLE = "table"
+
+
+class StreamEventKind(StrEnum):
+    """What happened to a stream's transport (:class:`drivers.codec.StreamEvent`)."""
+
+    OUTAGE = "outage"
+    RECONNECTED = "reconnected"
+
+
+class Verdict(StrEnum):
+    """A judged measurement's, and a completed trial's, verdict."""
+
+    PASS = "PASS"
+    FAIL = "FAIL"
