@@ -129,7 +129,10 @@ class Bench:
 
         def pty(name: str, unplugs: bool, responder: Responder | None = None) -> PtyPort:
             link = link_dir / name if link_dir is not None else Path(self._links.name) / name if unplugs else None
-            return PtyPort(link) if responder is None else CommandedPty(link, responder)
+            if responder is None:
+                return PtyPort(link)
+            supply = self.streams["imu"].source.clock.supply  # an unpowered IMU hears nothing
+            return CommandedPty(link, responder, lambda: supply is None or supply.on)
 
         try:
             if link_dir is not None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from pathlib import Path
 
 from drivers.codec import Codec
@@ -100,12 +101,13 @@ def responder_for(codec: Codec) -> Responder | None:
 class CommandedPty(PtyPort):
     """The IMU's pseudo-terminal, whose device also reads it: a thread hands what the harness writes to the
     ``responder`` and writes its replies; frames written while the responder is configuring are withheld (counted
-    in :attr:`withheld`), as the device sends none in its configuration mode."""
+    in :attr:`withheld`), as the device sends none in its configuration mode. While ``powered()`` is False what
+    arrives is lost, and the device starts again in its normal mode."""
 
-    def __init__(self, link: Path | None, responder: Responder) -> None:
+    def __init__(self, link: Path | None, responder: Responder, powered: Callable[[], bool] = lambda: True) -> None:
         super().__init__(link)
         self.inbox = bytearray()
-        self.responder = responder
+        self.responder, self.powered = responder, powered
         self.withheld = 0
         self._writing = threading.Lock()  # a reply never lands inside a frame
         self._stop = threading.Event()
@@ -125,6 +127,8 @@ class CommandedPty(PtyPort):
             with self._reading:
                 data = bytes(self.inbox)
                 self.inbox.clear()
+            if not self.powered():  # it hears nothing, and boots in its normal mode
+                self.responder.configuring, data = False, b""
             if not data:
                 self._stop.wait(WAIT_S / 10)  # a port nobody holds reads as ready at once
                 continue

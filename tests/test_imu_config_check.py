@@ -15,11 +15,12 @@ import yaml
 from lab_form import Emulator, emulated, lab_config
 
 from drivers.codec import RawChunk
-from drivers.kvh1750 import HEADER, Kvh1750Codec
+from drivers.config_query import Exchange, NoAnswer
+from drivers.kvh1750 import HEADER, Kvh1750Codec, reply_line
 from drivers.transport import SerialTransport
 from drivers.xbus import xbus_message, xbus_messages
 from drivers.xsens import XsensCodec
-from emulators.imu_commands import KvhResponder, XsensResponder
+from emulators.imu_commands import CommandedPty, KvhResponder, XsensResponder
 from emulators.in_process import EmulatorThread
 from hil.cli import main
 from hil.config import parse_config
@@ -171,6 +172,27 @@ def test_the_emulated_devices_answer_as_the_documents_say():
     assert mti.answer(GO_TO_CONFIG[:3]) == b"" and mti.answer(GO_TO_CONFIG[3:]) == GO_TO_CONFIG_ACK
     assert mti.answer(REQ_OUTPUT_CONFIGURATION) == OUTPUTS_200HZ and mti.configuring
     assert mti.answer(GO_TO_MEASUREMENT) == GO_TO_MEASUREMENT_ACK and not mti.configuring
+
+
+def test_an_unpowered_emulated_imu_answers_nothing_and_boots_in_its_normal_mode():
+    power = {"on": False}
+    port = CommandedPty(None, KvhResponder(Kvh1750Codec(200.0)), lambda: power["on"])
+    harness = SerialTransport(port.path, 921600, "imu")
+    harness.open()
+    try:
+        exchange = Exchange(harness, timeout_s=0.3)
+        with pytest.raises(NoAnswer):
+            exchange.ask(b"=CONFIG,1\r\n", lambda buf: reply_line(buf, "CONFIG"), "=CONFIG,1")
+        assert not port.responder.configuring
+        power["on"] = True
+        assert exchange.ask(b"=CONFIG,1\r\n", lambda buf: reply_line(buf, "CONFIG"), "=CONFIG,1") == "CONFIG,1"
+        assert port.responder.configuring
+        power["on"] = False
+        time.sleep(0.3)  # the device's thread sees the power go
+        assert not port.responder.configuring
+    finally:
+        harness.close()
+        port.close()
 
 
 def _harness(tmp_path, cfg: dict, ports: dict, **imu) -> str:

@@ -12,8 +12,6 @@ from drivers.config_query import Exchange, NoAnswer, UnreadableReply
 from drivers.transport import Transport
 from hil.inputs import InputError
 
-UNANSWERED = {"answered": False, "replies": {}, "settings": {}}  # record.imu_config of a device that did not answer
-
 
 class ConfigMismatch(InputError):
     """The IMU says it is set otherwise than the config, or answers what its codec cannot read."""
@@ -33,7 +31,7 @@ def check_imu_config(codec: Codec, transport: Transport, warn: Callable[[str], N
     except NoAnswer as exc:
         warn(f"imu: {exc} on {transport.address}: its configuration is not checked (a read-only line? "
              "imu.options.check_config: false skips the query)")
-        return dict(UNANSWERED)
+        return {"answered": False, "replies": {}, "settings": {}}
     except UnreadableReply as exc:
         raise ConfigMismatch(f"imu: {exc}; check imu.protocol and the IMU's output settings") from None
     finally:
