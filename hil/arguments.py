@@ -199,10 +199,10 @@ def build_parser() -> argparse.ArgumentParser:
     _config_argument(p)
     add_emulate_options(p)
 
-    p = sub.add_parser("report", help="rebuild a trial's report.html and junit.xml from its outputs (exit as its "
-                                      "verdict), or a noise characterisation's report.html")
-    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml) or hil noise's "
-                               "(noise.json)")
+    p = sub.add_parser("report", help="rebuild a trial's or a rate test's report.html and junit.xml from its outputs "
+                                      "(exit as its verdict), or a noise characterisation's report.html")
+    p.add_argument("dir", help="a trial's output directory (result.json, series.csv, config.yaml), hil ratetest's "
+                               "(scale_factor.json or frequency_response.json) or hil noise's (noise.json)")
 
     p = sub.add_parser("decode", help="decode a raw capture to CSV; counters (auto: and the protocol) as JSON on the "
                                       "last line")

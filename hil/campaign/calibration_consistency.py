@@ -20,7 +20,7 @@ from hil.campaign.campaign_report import (
     point_labels,
     table_html,
 )
-from hil.outputs.trial_report import figures_html
+from hil.outputs.html_page import figures_html
 from hil.campaign.runs import ERROR, TERM
 from hil.campaign.task import point_label
 

@@ -18,8 +18,8 @@ import numpy as np
 from hil.campaign.swing_summary import SIGMA, bias_error
 from hil.campaign.task import point_label
 from hil.outputs.page_header import page_header
-from hil.outputs.trial_report import figures_html, html_page
 from hil.outputs.figures import pyplot
+from hil.outputs.html_page import figures_html, html_page
 
 REPORT_NAME = "campaign.html"
 AXES = "xyz"

@@ -19,7 +19,7 @@ from hil.campaign.campaign_report import (
     point_labels,
     table_html,
 )
-from hil.outputs.trial_report import figures_html
+from hil.outputs.html_page import figures_html
 from hil.campaign.runs import ERROR, TRUTH
 
 AXIS_NAMES = "xyz"

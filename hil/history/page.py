@@ -14,10 +14,10 @@ import numpy as np
 from hil.history.entry import CALIBRATION, NOISE, SWING
 from hil.history.repeatability import left_out_because
 from hil.outputs.figures import pyplot
+from hil.outputs.html_page import figures_html, html_page
 from hil.outputs.measurements import format_value
 from hil.outputs.page_header import page_header
 from hil.outputs.record import source_commit
-from hil.outputs.trial_report import figures_html, html_page
 from hil.recording.recorder import package_version
 
 if TYPE_CHECKING:

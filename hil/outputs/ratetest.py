@@ -1,5 +1,6 @@
 """The rate-table tests' outputs: OUT/scale_factor.json or OUT/frequency_response.json, the residual figure or
-the Bode plot, report.html and junit.xml judged against ``output.limits`` (docs/ratetests.md)."""
+the Bode plot, report.html and junit.xml judged against ``output.limits`` (docs/ratetests.md); ``hil report``
+builds the page and junit.xml again from them (:func:`rebuild_ratetest`)."""
 
 from __future__ import annotations
 
@@ -9,16 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import ReportLimits
+from hil.config import ReportLimits, load_config
 from hil.outputs.figures import pyplot
+from hil.outputs.html_page import REPORT_NAME, ReportError, figures_html, html_page, measurement_table
 from hil.outputs.junit import write_junit
 from hil.outputs.measurements import overall, rate_test_measurements
 from hil.outputs.page_header import page_header
 from hil.outputs.result import trial_verdict
-from hil.outputs.trial_report import REPORT_NAME, figures_html, html_page, measurement_table
 
-RATETEST_OUTPUTS = ("scale_factor.json", "scale_factor.png", "frequency_response.json", "bode.png", REPORT_NAME,
-                    "junit.xml", "config.yaml", "recording.mcap", "ports.json", "emulator.json",
+FIGURES = {"scale_factor": "scale_factor.png", "frequency_response": "bode.png"}  # each test's figure
+RATETEST_OUTPUTS = (*(f"{test}.json" for test in FIGURES), *FIGURES.values(), REPORT_NAME, "junit.xml",
+                    "config.yaml", "recording.mcap", "ports.json", "emulator.json",
                     "emulator.log")  # the config's copy; live: the trial's
 TITLES = {"scale_factor": "Scale factor test", "frequency_response": "Frequency response test"}
 
@@ -26,14 +28,46 @@ TITLES = {"scale_factor": "Scale factor test", "frequency_response": "Frequency 
 def write_ratetest(out: Path, doc: dict, limits: ReportLimits, figures: bool = True) -> str:
     """Write the test's document, its figure (unless not ``figures``), report.html and junit.xml; its verdict."""
     out.mkdir(parents=True, exist_ok=True)
+    (out / f"{doc['test']}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return _write_report(out, doc, limits, _figure(out, doc) if figures else None)
+
+
+def ratetest_document(out: Path) -> Path | None:
+    """The rate test's document in the directory ``out`` (scale_factor.json or frequency_response.json), or None."""
+    return next((out / f"{test}.json" for test in FIGURES if (out / f"{test}.json").is_file()), None)
+
+
+def rebuild_ratetest(path: Path) -> tuple[Path, str]:
+    """``hil report`` of a rate test's directory: report.html and junit.xml again from its document ``path``
+    (:func:`ratetest_document`), its figure (drawn when missing) and the limits of its config.yaml (none without
+    one); the page and the verdict. ReportError naming the file for a document this version cannot read."""
+    out = path.parent
+    config = out / "config.yaml"
+    limits = load_config(config).limits if config.exists() else ReportLimits()
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        drawn = out / FIGURES[doc["test"]]
+        image = drawn.read_bytes() if drawn.exists() else _figure(out, doc)
+        return out / REPORT_NAME, _write_report(out, doc, limits, image)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # ValueError: JSON that does not parse
+        raise ReportError(f"{path}: not a rate test's document this version can read ({type(exc).__name__}: {exc}); "
+                          "run hil ratetest again") from None
+
+
+def _figure(out: Path, doc: dict) -> bytes | None:
+    """The test's figure, drawn and written beside its document (None: no step to draw)."""
+    if not any(a.get("steps") or a.get("frequencies_hz") for a in doc["axes"].values()):
+        return None
+    image = residual_figure(doc) if doc["test"] == "scale_factor" else bode_figure(doc)
+    (out / FIGURES[doc["test"]]).write_bytes(image)
+    return image
+
+
+def _write_report(out: Path, doc: dict, limits: ReportLimits, image: bytes | None) -> str:
+    """report.html and junit.xml of the test's document, with its figure (None: none); the verdict."""
     test = doc["test"]
-    (out / f"{test}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     results = rate_test_measurements(doc, limits)
     judged = trial_verdict(doc["ended"], overall(results))
-    image = None
-    if figures and any(a.get("steps") or a.get("frequencies_hz") for a in doc["axes"].values()):
-        image = residual_figure(doc) if test == "scale_factor" else bode_figure(doc)
-        (out / ("scale_factor.png" if test == "scale_factor" else "bode.png")).write_bytes(image)
     write_junit(out, {"trial": doc["trial"], "ended": doc["ended"], "record": doc.get("record")}, results)
     name = doc["trial"]["name"]
     header = page_header(TITLES[test], name, doc.get("record"), doc["ended"], judged)

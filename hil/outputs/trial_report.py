@@ -15,28 +15,21 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import InputError, ReportLimits, load_config
+from hil.config import ReportLimits, load_config
 from hil.outputs.calibration_section import RESIDUALS_PNG, calibration_lead
 from hil.outputs.figures import FIGURES, Draw, write_figures
 from hil.outputs.junit import write_junit
-from hil.outputs.measurements import (
-    FAIL,
-    NOT_JUDGED,
-    PASS,
-    Measurement,
-    format_value,
-    measurements,
-    overall,
-)
+from hil.outputs.html_page import REPORT_NAME, ReportError, html_page, measurement_table
+from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value, measurements, overall
 from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
 from hil.outputs.page_header import page_header
+from hil.outputs.ratetest import ratetest_document, rebuild_ratetest
 from hil.outputs.record import PROPERTIES
 from hil.outputs.result import COMPLETED, calibration_applied_text, trial_verdict
 from hil.outputs.result_schema import result_problem
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
-REPORT_NAME = "report.html"
 _CAPTIONS = {
     "bias.png": "Accelerometer bias estimate with its ±3σ band and the truth (cf. Liu 2019 Fig. 3)",
     "observability.png": "Rank and condition number of the scaled Gram matrix (cf. Liu 2019 Fig. 2)",
@@ -45,10 +38,6 @@ _CAPTIONS = {
     "allan.png": "Overlapping Allan deviation with its intervals, the fitted terms' slopes and read-off points",
     RESIDUALS_PNG: "Residual of each window's mean output against its reference, before and after calibration",
 }
-
-
-class ReportError(InputError, ValueError):
-    """A report that cannot be built from the directory given."""
 
 
 def write_report(out_dir: Path, limits: ReportLimits | None = None,
@@ -64,10 +53,14 @@ def write_report(out_dir: Path, limits: ReportLimits | None = None,
 
 
 def rebuild_report(out_dir: Path) -> tuple[Path, str | None]:
-    """``hil report``: the report of a trial's outputs (:func:`write_report`), or of a noise characterisation's
-    (:func:`write_noise_report`) when the directory holds noise.json without a trial's result.json; the page
-    and the trial's verdict (None for a noise characterisation, which has none)."""
+    """``hil report``: the report of a trial's outputs (:func:`write_report`), of a noise characterisation's
+    (:func:`write_noise_report`) when the directory holds noise.json without a trial's result.json, or of a rate
+    test's (:func:`~hil.outputs.ratetest.rebuild_ratetest`) when it holds the test's document without one; the
+    page and the verdict (None for a noise characterisation, which has none)."""
     out_dir = Path(out_dir)
+    document = ratetest_document(out_dir)
+    if document is not None and not (out_dir / "result.json").exists():
+        return rebuild_ratetest(document)
     if (out_dir / NOISE_JSON).exists() and not (out_dir / "result.json").exists():
         try:
             return write_noise_report(out_dir), None
@@ -172,32 +165,6 @@ def _history(series: dict[str, np.ndarray] | None) -> str:
     )
 
 
-_CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 60em;
-       color: #1b1b1b; padding: 0 1em; }
-h1 { margin-bottom: 0.2em; } h2 { margin-top: 1.6em; border-bottom: 1px solid #ddd; }
-.meta { color: #555; }
-header.run .kind { margin: 0; color: #555; text-transform: uppercase; letter-spacing: 0.06em; font-size: 0.85em; }
-header.run h1 { margin-top: 0.1em; } header.run .facts b { color: #1b1b1b; font-weight: 600; }
-.wide { overflow-x: auto; }
-.ended { font-weight: bold; } .ended.early { color: #a40000; }
-.verdict { display: inline-block; padding: 0.3em 1em; font-size: 1.6em; font-weight: bold; border-radius: 6px;
-           color: white; margin: 0.5em 0; }
-.verdict.PASS { background: #2e7d32; } .verdict.FAIL { background: #c62828; }
-.verdict.INTERRUPTED, .verdict.ENDED.EARLY { background: #5d4037; }
-table { border-collapse: collapse; width: 100%; font-size: 0.92em; }
-th, td { border-bottom: 1px solid #e2e2e2; padding: 0.3em 0.6em; text-align: left; }
-td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-td.outcome { font-weight: bold; } td.outcome.PASS { color: #2e7d32; }
-td.outcome.FAIL { color: #c62828; } td.outcome.none { color: #888; font-weight: normal; }
-tr.row-FAIL { background: #fdecea; }
-.note { background: #fff8e1; border-left: 4px solid #f9a825; padding: 0.4em 0.8em; }
-figure { margin: 1.5em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
-figcaption { color: #555; font-size: 0.9em; }
-@media print { .verdict { -webkit-print-color-adjust: exact; print-color-adjust: exact; } }
-"""
-
-
 def _render(result: dict, results: list[Measurement], verdict: str, figures: list[tuple[str, bytes]],
             series: dict[str, np.ndarray] | None, notes: list[str], noise: str = "") -> str:  # fmt: skip
     trial = result.get("trial", {})
@@ -242,21 +209,6 @@ def _render(result: dict, results: list[Measurement], verdict: str, figures: lis
     return html_page(header, f"{trial.get('name', 'trial')}: {verdict}", body)
 
 
-def measurement_table(results: list[Measurement]) -> str:
-    """The measurements as a table: name and description, value, unit, limit, outcome."""
-    e = html.escape
-    rows = []
-    for m in results:
-        outcome_class = m.outcome if m.outcome in (PASS, FAIL) else "none"
-        rows.append(
-            f"<tr class='row-{outcome_class}'><td><code>{e(m.name)}</code><br><small>{e(m.description)}</small></td>"
-            f"<td class='num'>{e(m.shown)}</td><td>{e(m.unit)}</td><td class='num'>{e(m.limit)}</td>"
-            f"<td class='outcome {outcome_class}'>{e(m.outcome)}</td></tr>"
-        )
-    return ("<table><thead><tr><th>measurement</th><th>value</th><th>unit</th><th>limit</th><th>outcome</th></tr>"
-            f"</thead><tbody>{''.join(rows)}</tbody></table>")
-
-
 def _record_table(record: dict | None) -> str:
     """The trial's record as a two-column table (who, which unit, where, which software, when)."""
     if not record:
@@ -274,23 +226,3 @@ def _figure_html(figures: list[tuple[str, bytes]]) -> str:
         f"<figcaption>{e(_CAPTIONS.get(name, name))}</figcaption></figure>"
         for name, data in figures
     )
-
-
-def figures_html(figures: list[tuple[str, bytes | None]]) -> str:
-    """The figures (caption, PNG; None: not drawn) as self-contained HTML."""
-    return "".join(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,"
-                   f"{base64.b64encode(image).decode()}'><figcaption>{html.escape(caption)}</figcaption></figure>"
-                   for caption, image in figures if image is not None)
-
-
-def html_page(header: str, title: str, body: str) -> str:
-    """One self-contained page: ``header`` (:func:`~hil.outputs.page_header.page_header`), inline style,
-    nothing fetched."""
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{html.escape(title)}</title><style>{_CSS}</style></head>
-<body>
-{header}
-{body}
-</body></html>
-"""
