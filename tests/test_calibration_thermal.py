@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from pages import clipped_columns, layout_width, needs_chromium
 
 from drivers.watlow_f4 import ChamberError
 from emulators.chamber import ChamberModel
@@ -37,8 +38,7 @@ def _config(tmp_path: Path, name: str, change) -> Path:
 def calibrated(tmp_path_factory) -> Path:
     """``hil calibrate configs/calibration_thermal.yaml --simulate``: its output directory."""
     out = tmp_path_factory.mktemp("thermal") / "out"
-    assert main(["calibrate", str(THERMAL), "--simulate", "--out", str(out), "--viewer", "none",
-                 "--no-figures"]) == 0
+    assert main(["calibrate", str(THERMAL), "--simulate", "--out", str(out), "--viewer", "none"]) == 0
     return out
 
 
@@ -57,6 +57,19 @@ def test_a_calibration_over_three_temperatures_fits_every_thermal_term_within_4_
     assert doc["accel"]["bias_ug"][0] == thermal["terms"]["accel.bias_ug.0"]["coefficients"][0]
     assert len(doc["positions"]) == 18 and {p["temperature_c"] for p in doc["positions"]} == {
         t["imu_c"] for t in thermal["temperatures"]}
+
+
+def test_calibration_html_shows_every_thermal_term_with_its_fit(calibrated):
+    page = (calibrated / "calibration.html").read_text()
+    section = page[page.index("<h2>Over temperature</h2>"):]
+    assert section.count("<tr><td>accel.bias_ug.") == 3 and section.count("<tr><td>gyro.scale_ppm.") == 3
+    assert 'alt="terms against temperature" src="data:image/png;base64,' in section
+
+
+@needs_chromium
+def test_calibration_html_over_temperature_stays_within_a_lab_window(calibrated, tmp_path):
+    assert layout_width(calibrated / "calibration.html", tmp_path) <= 1400
+    assert not clipped_columns(calibrated / "calibration.html", tmp_path)
 
 
 def _swing(tmp_path: Path, calibration: Path | None) -> dict:

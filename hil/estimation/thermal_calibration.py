@@ -21,20 +21,33 @@ from hil.estimation.calibration_model import BIAS, MIS, MISALIGNMENT_ENTRIES, NO
 SIGMA_FLOOR = 1e-150  # a noise-free estimate's zero sigma, as a weight whose square stays finite
 
 
-def fit_polynomial(temperature_c: np.ndarray, values: np.ndarray, sigmas: np.ndarray, order: int,
+def polynomial_fit(temperature_c: np.ndarray, values: np.ndarray, sigmas: np.ndarray, order: int,
                    reference_c: float) -> tuple[np.ndarray, np.ndarray]:
-    """(coefficients (order + 1,), their 1-sigma) of the polynomial in T - reference_c through ``values`` (K,)
+    """(coefficients (order + 1,), their covariance) of the polynomial in T - reference_c through ``values`` (K,)
     with 1-sigma ``sigmas`` (K,) at the temperatures (K,), lowest order first (module docstring)."""
     design = np.vander(np.asarray(temperature_c, float) - reference_c, order + 1, increasing=True)
     weights = 1.0 / np.maximum(np.asarray(sigmas, float), SIGMA_FLOOR) ** 2
-    normal = design.T @ (weights[:, None] * design)
-    covariance = np.linalg.inv(normal)
+    covariance = np.linalg.inv(design.T @ (weights[:, None] * design))
     coefficients = covariance @ design.T @ (weights * values)
     dof = len(values) - (order + 1)
     if dof > 0:
         chi2 = float(np.sum(weights * (values - design @ coefficients) ** 2))
         covariance = covariance * max(1.0, chi2 / dof)
+    return coefficients, covariance
+
+
+def fit_polynomial(temperature_c: np.ndarray, values: np.ndarray, sigmas: np.ndarray, order: int,
+                   reference_c: float) -> tuple[np.ndarray, np.ndarray]:
+    """(coefficients, their 1-sigma) of :func:`polynomial_fit`."""
+    coefficients, covariance = polynomial_fit(temperature_c, values, sigmas, order, reference_c)
     return coefficients, np.sqrt(np.maximum(np.diag(covariance), 0.0))
+
+
+def polynomial_at(coefficients: np.ndarray, covariance: np.ndarray, reference_c: float,
+                  at_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The polynomial's value and 1-sigma at the temperatures ``at_c`` (M,) deg C."""
+    powers = np.vander(np.asarray(at_c, float) - reference_c, len(coefficients), increasing=True)
+    return powers @ coefficients, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", powers, covariance, powers), 0.0))
 
 
 class ThermalTerms:

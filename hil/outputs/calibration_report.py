@@ -142,9 +142,11 @@ def write_residual_figure(out: Path, residuals: Residuals) -> bytes:
     return png
 
 
-def write_calibration_report(out: Path, doc: dict, result: dict, verdict: str, image: bytes | None = None) -> Path:
+def write_calibration_report(out: Path, doc: dict, result: dict, verdict: str, image: bytes | None = None,
+                             extra: str = "") -> Path:
     """``out/calibration.html`` (self-contained: the residual figure ``image``, a PNG, inline), headed by the trial's
-    name, record, end and ``verdict`` from its ``result`` (result.json's document)."""
+    name, record, end and ``verdict`` from its ``result`` (result.json's document); ``extra`` HTML after the rest
+    (a calibration over temperature's section)."""
     rows = "".join(
         f"<tr><td>{html.escape(r['term'])}</td><td class='num'>{_fmt(r['estimate'])}</td>"
         f"<td class='num'>{_fmt(r['sigma'])}</td><td class='num'>{_fmt(r['truth'])}</td>"
@@ -161,7 +163,7 @@ def write_calibration_report(out: Path, doc: dict, result: dict, verdict: str, i
             "trials); error / σ with an angle's σ combined with the encoder resolution (1e-6°). A term without an "
             "estimate is null in calibration.json and never applied by imu.calibration.</p>"
             "<table><thead><tr><th>term</th><th>estimate</th><th>1σ</th><th>truth</th><th>error / σ</th>"
-            f"<th>why no estimate</th></tr></thead><tbody>{rows}</tbody></table>{figure}")
+            f"<th>why no estimate</th></tr></thead><tbody>{rows}</tbody></table>{figure}{extra}")
     name = str(result["trial"]["name"])
     header = page_header("Calibration", name, result.get("record"), result.get("ended"), verdict)
     path = out / "calibration.html"

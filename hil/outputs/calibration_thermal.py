@@ -9,18 +9,23 @@ their sigmas, so that a reader without ``thermal`` still applies the calibration
 null at some temperature is null, its reasons under ``unobservable`` with the temperatures. ``positions`` lists
 every temperature's, each with the IMU's ``temperature_c``; the table's zero offsets are the weighted mean of the
 temperatures'. An emulated IMU's truth gains ``thermal.terms`` (its ``imu.errors.thermal`` about ``reference_c``)
-and ``as_observed`` at ``reference_c``.
+and ``as_observed`` at ``reference_c``. calibration.html shows every polynomial's coefficients and, per key, each term
+against the IMU's temperature with its fit and the fit's 1-sigma band (:func:`thermal_section`).
 """
 
 from __future__ import annotations
 
+import base64
+import html
+import io
 import math
 
 import numpy as np
 
 from hil.config import ImuErrors
-from hil.estimation.thermal_calibration import SIGMA_FLOOR, fit_polynomial
+from hil.estimation.thermal_calibration import SIGMA_FLOOR, fit_polynomial, polynomial_at, polynomial_fit
 from hil.outputs.calibration_report import BLOCKS, observed_truth
+from hil.outputs.figures import pyplot
 
 # term key -> (the errors.thermal fields of its polynomial's first and second order coefficients)
 THERMAL_TRUTH = {("accel", "bias_ug"): ("accel_bias_ug_per_c", "accel_bias_ug_per_c2"),
@@ -122,3 +127,67 @@ def thermal_truth(errors: ImuErrors, zero_offset_arcsec, reference_c: float, ord
                 observed[block][key][i] = poly[0]
                 terms[f"{block}.{key}.{i}"] = poly[:order + 1]
     return observed, {"reference_c": reference_c, "terms": terms}
+
+
+UNITS = {"bias_ug": "µg", "scale_ppm": "ppm", "misalignment_arcsec": "arcsec", "nonlinearity_ug_per_g2": "µg/g²",
+         "bias_dph": "°/h"}
+
+
+def thermal_section(doc: dict, figure: bool = True) -> str:
+    """calibration.html's part of a calibration over temperature: the coefficients with their sigmas (and the
+    truth's, emulated) and, with ``figure``, every term against the IMU's temperature (:func:`thermal_figure`)."""
+    thermal = doc["thermal"]
+    truth = ((doc.get("truth") or {}).get("thermal") or {}).get("terms") or {}
+
+    def listed(values) -> str:
+        return ", ".join("—" if v is None else f"{v + 0.0:.4g}" for v in values)
+
+    rows = "".join(f"<tr><td>{html.escape(name)}</td><td class='num'>{listed(term['coefficients'])}</td>"
+                   f"<td class='num'>{listed(term['sigma'])}</td><td class='num'>{listed(truth.get(name, []))}</td></tr>"
+                   for name, term in thermal["terms"].items())
+    image = ""
+    if figure and thermal["terms"]:
+        image = (f'<figure><img alt="terms against temperature" src="data:image/png;base64,'
+                 f'{base64.b64encode(thermal_figure(doc)).decode()}"><figcaption>Each term at each temperature (its '
+                 "calibration there, 1σ bars), its polynomial and the polynomial's 1σ band.</figcaption></figure>")
+    return (f"<h2>Over temperature</h2><p class='meta'>Each term a polynomial of order {thermal['order']} in T − "
+            f"{thermal['reference_c']:g} °C, T the IMU's own temperature; coefficients lowest order first, in the "
+            "term's unit per °C^j.</p><table><thead><tr><th>term</th><th>coefficients</th><th>1σ</th><th>truth</th>"
+            f"</tr></thead><tbody>{rows}</tbody></table>{image}")
+
+
+def thermal_figure(doc: dict) -> bytes:
+    """PNG: a panel per key (``block.key``) with a polynomial, two a row: each axis's term at each temperature, its
+    fit and the fit's 1-sigma band."""
+    plt = pyplot()
+    thermal = doc["thermal"]
+    points = thermal["temperatures"]
+    temperatures = np.array([p["imu_c"] for p in points])
+    keys = list(dict.fromkeys(name.rsplit(".", 1)[0] for name in thermal["terms"]))
+    grid = np.linspace(temperatures.min() - 5.0, temperatures.max() + 5.0, 200)
+    rows = (len(keys) + 1) // 2
+    fig, axes = plt.subplots(rows, 2, figsize=(10, 3.4 * rows), squeeze=False)
+    for ax in axes.flat[len(keys):]:
+        ax.set_visible(False)
+    for ax, key in zip(axes.flat, keys):
+        block, name = key.split(".")
+        for i, axis in enumerate("xyz"):
+            if f"{key}.{i}" not in thermal["terms"]:
+                continue
+            values = np.array([p[block][name][i] for p in points])
+            sigmas = np.array([p["sigma"][block][name][i] for p in points])
+            fit, band = polynomial_at(*polynomial_fit(temperatures, values, sigmas, thermal["order"],
+                                                      thermal["reference_c"]), thermal["reference_c"], grid)
+            line = ax.plot(grid, fit, label=axis)[0]
+            ax.fill_between(grid, fit - band, fit + band, color=line.get_color(), alpha=0.25)
+            ax.errorbar(temperatures, values, yerr=sigmas, fmt="o", color=line.get_color(), ms=4)
+        ax.set_title(key, fontsize=9)
+        ax.set_xlabel("IMU temperature (°C)")
+        ax.set_ylabel(UNITS.get(name, name))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return buf.getvalue()

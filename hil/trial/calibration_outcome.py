@@ -19,7 +19,7 @@ from hil.estimation.calibration_schedule import Schedule, check_limits, schedule
 from hil.estimation.gyro_calibration import calibrate_gyros
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import calibration_document, write_calibration
-from hil.outputs.calibration_thermal import thermal_document
+from hil.outputs.calibration_thermal import thermal_document, thermal_section
 from hil.outputs.calibration_report import (
     Residuals,
     calibration_summary,
@@ -112,7 +112,9 @@ class CalibrationOutcome(TrialOutcome):
             if "record" in self.result:
                 self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
-            write_calibration_report(self.out, self.calibration, self.result, verdict, image)
+            thermal = "thermal" in self.calibration
+            extra = thermal_section(self.calibration, figures and self.cfg.output.figures) if thermal else ""
+            write_calibration_report(self.out, self.calibration, self.result, verdict, image, extra)
         return verdict
 
 
