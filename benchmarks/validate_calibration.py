@@ -42,6 +42,7 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from hil.estimation.thermal_calibration import polynomial_at, polynomial_fit
 from hil.outputs.calibration_report import comparison
 
 THERMAL = ROOT / "configs" / "calibration_thermal.yaml"
@@ -119,15 +120,15 @@ def thermal_run(seed: int, work: Path, simulate: bool) -> tuple[dict[str, list[f
 
 
 def calibration_sigma(doc: dict, axis: int, at_c: float) -> float:
-    """The 1-sigma (ug) of the calibration's accelerometer bias on ``axis`` at ``at_c`` deg C: its polynomial's,
-    propagated from the temperatures' sigmas (the weighted least squares of hil.estimation.thermal_calibration)."""
+    """The 1-sigma (ug) of the calibration's accelerometer bias on ``axis`` at ``at_c`` deg C: its polynomial's, from
+    the temperatures' estimates and sigmas as the calibration fitted it."""
     thermal = doc["thermal"]
     points = thermal["temperatures"]
-    d = np.array([p["imu_c"] for p in points]) - thermal["reference_c"]
-    design = np.vander(d, thermal["order"] + 1, increasing=True)
-    weights = np.array([p["sigma"]["accel"]["bias_ug"][axis] for p in points]) ** -2.0
-    x = (at_c - thermal["reference_c"]) ** np.arange(thermal["order"] + 1)
-    return float(np.sqrt(x @ np.linalg.inv(design.T @ (weights[:, None] * design)) @ x))
+    values = np.array([p["accel"]["bias_ug"][axis] for p in points])
+    sigmas = np.array([p["sigma"]["accel"]["bias_ug"][axis] for p in points])
+    fit = polynomial_fit(np.array([p["imu_c"] for p in points]), values, sigmas, thermal["order"],
+                         thermal["reference_c"])
+    return float(polynomial_at(*fit, thermal["reference_c"], np.array([at_c]))[1][0])
 
 
 def validate_thermal(seeds: int, simulate: bool) -> int:

@@ -143,7 +143,8 @@ def thermal_section(doc: dict, figure: bool = True) -> str:
         return ", ".join("—" if v is None else f"{v + 0.0:.4g}" for v in values)
 
     rows = "".join(f"<tr><td>{html.escape(name)}</td><td class='num'>{listed(term['coefficients'])}</td>"
-                   f"<td class='num'>{listed(term['sigma'])}</td><td class='num'>{listed(truth.get(name, []))}</td></tr>"
+                   f"<td class='num'>{listed(term['sigma'])}</td>"
+                   f"<td class='num'>{listed(truth.get(name, []))}</td></tr>"
                    for name, term in thermal["terms"].items())
     image = ""
     if figure and thermal["terms"]:

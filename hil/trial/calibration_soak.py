@@ -101,9 +101,10 @@ class Soak:
         values = [c for _, c in self.chamber_readings]
         if t - self.t0 >= s.stalled_s and t - first_t >= s.stalled_s - POLL_S and np.ptp(values) < HELD_C \
                 and abs(reading - self.set_point_c) > FAR_C:
+            far = abs(reading - self.set_point_c)
             self.failure = (f"soak at {self.set_point_c:g} deg C: the chamber's reading held at {reading:.1f} deg C "
-                            f"for {s.stalled_s:g} s (calibration.soak.stalled_s), {abs(reading - self.set_point_c):.1f} "
-                            "deg C from its set point: a heater or cooling fault of environment.chamber")
+                            f"for {s.stalled_s:g} s (calibration.soak.stalled_s), {far:.1f} deg C from its set point: "
+                            "a heater or cooling fault of environment.chamber")
 
     def _imu_steady(self, t: float) -> bool:
         """The IMU's readings cover the last ``for_s`` and lie within ``stable_within_c`` of the latest."""
