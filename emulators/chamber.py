@@ -184,7 +184,6 @@ class SimulatedChamber:
         return self.model.set_point_c
 
     def set_set_point_c(self, value_c: float) -> None:
-        self.model.advance(self.model.t)
         self.model.set_point_c = round(value_c, 1)
 
     def close(self) -> None:

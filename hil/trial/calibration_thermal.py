@@ -50,7 +50,6 @@ class ThermalSequence:
         self.sequence: CalibrationSequence | None = None
         self.soak_failure: str | None = None
         self._temperatures: list[float] = []  # the IMU's over the current schedule
-        self._t = 0.0
 
     @property
     def done(self) -> bool:
@@ -79,7 +78,6 @@ class ThermalSequence:
         """A listener of the pipeline: the soak, then the schedule, of the current temperature."""
         if self.done or self.soak_failure is not None:
             return
-        self._t = progress.trial_time
         if self.sequence is None:
             self.soak.update(progress.trial_time, progress.temperature_c)
             self.soak_failure = self.soak.failure
