@@ -31,6 +31,22 @@ class Stream(StrEnum):
     TABLE = "table"
 
 
+class PairedBy(StrEnum):
+    """What confirmed the sync pairing (result.json ``streams.sync.paired_by``)."""
+
+    RECEIVE_TIME = "receive_time"
+    MOTION = "motion"
+
+
+class CalibrationPhase(StrEnum):
+    """Where a calibration step is: not started, moving to its angles, ramping to its rates, in its window."""
+
+    IDLE = ""
+    MOVING = "moving"
+    RAMPING = "ramping"
+    WINDOW = "window"
+
+
 class StreamEventKind(StrEnum):
     """What happened to a stream's transport (:class:`drivers.codec.StreamEvent`)."""
 

@@ -45,6 +45,7 @@ from hil.pipeline.motion_match import MIN_INTERVALS, PairedMotion, TableRotation
 from hil.pipeline.pairing_streams import Samples, StreamPairing, joined, part, shifted
 from hil.pipeline.receive_times import STILL_S, ReceiveTimes
 from hil.samples import ImuSamples, TableSamples
+from hil.vocabulary import PairedBy
 
 WINDOW_S = 10.0  # host seconds of reads behind a stream's receive-time baseline
 SUSPECT_READS = 4  # late reads in a row that break a pairing
@@ -55,14 +56,14 @@ SEARCH_S = 0.02  # at least this much of either side of the coarse offset is sea
 UNPACED_SEARCH_S = HOLD_S  # a reader's flush on opening may take up to this much of a stream's first frames
 RETRY_S = 0.2  # of new table data before a waiting IMU is searched by motion again
 RECEIVE_S = 4.0  # of the IMU's reads held before their receive times alone pair it (one second's can be a pulse off)
-MOTION, RECEIVE_TIME = "motion", "receive_time"
+MOTION, RECEIVE_TIME = PairedBy.MOTION, PairedBy.RECEIVE_TIME
 
 
 @dataclass
 class SyncReport:
     """result.json ``streams.sync``."""
 
-    paired_by: str | None = None
+    paired_by: PairedBy | None = None
     offset_pulses: int | None = None  # the IMU's pulse minus its unwrapped counter, in the table's count
     confirmed_at_s: float | None = None  # trial time of the newest sample when the motion confirmed the pairing
     accuracy_ms: float | None = None  # receive-time pairing: the reads' jitter it is good to
@@ -72,7 +73,7 @@ class SyncReport:
     def as_dict(self) -> dict:
         return dict(self.__dict__)
 
-    def paired(self, by: str, at: float, accuracy_ms: float | None) -> None:
+    def paired(self, by: PairedBy, at: float, accuracy_ms: float | None) -> None:
         """Paired ``by`` motion or receive time, at trial time ``at`` (s), good to ``accuracy_ms`` (receive time)."""
         self.paired_by = by
         self.confirmed_at_s = round(at, 6) if by == MOTION else None
@@ -222,7 +223,7 @@ class SyncPairing:
             return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
         return None
 
-    def _paired(self, s: StreamPairing, offset: int, by: str) -> Samples | None:
+    def _paired(self, s: StreamPairing, offset: int, by: PairedBy) -> Samples | None:
         """Settle ``s`` at ``offset``: its held samples go out on the pulse line."""
         first = self.report.paired_by is None and s is self.imu
         changed = s.cause is not None and offset != s.offset_before
@@ -248,7 +249,7 @@ class SyncPairing:
         self._checked = int(released.sync_index[-1]) if s is self.imu and len(released) else self._checked
         return released if len(released) else None
 
-    def _set_by(self, by: str, at: float) -> None:
+    def _set_by(self, by: PairedBy, at: float) -> None:
         accuracy = None if by == MOTION or self.host_rate is None else 1e3 * self.receive.tolerance() / self.host_rate
         self.report.paired(by, at, accuracy)
 

@@ -33,6 +33,7 @@ from hil.frames import wrapped
 from hil.pipeline.progress import Progress
 from hil.samples import GIMBAL_AXES
 from hil.units import DEG
+from hil.vocabulary import CalibrationPhase
 
 POSITION_TOLERANCE = 0.05 * DEG  # arrived: within this of the demand (encoder zero errors are far smaller)
 STILL_RATE = 0.01 * DEG  # rad/s: below this an axis is at rest (the encoder's 1e-6 deg over 5 ms is 2e-4 deg/s)
@@ -69,7 +70,7 @@ class CalibrationSequence:
         self.windows_found: list[StepWindow] = []
         self.failure: str | None = None
         self._index = -1
-        self._phase = ""
+        self._phase = CalibrationPhase.IDLE
         self._since: float | None = None  # when the current condition started to hold
         self._window_start = 0.0
         self._last: tuple[float, np.ndarray] | None = None
@@ -149,20 +150,20 @@ class CalibrationSequence:
         still)."""
         step = self.steps[self._index]
         plateau = isinstance(step, Plateau)
-        if self._phase in ("moving", "ramping"):
-            if not (there if self._phase == "moving" else at_rate):
+        if self._phase in (CalibrationPhase.MOVING, CalibrationPhase.RAMPING):
+            if not (there if self._phase == CalibrationPhase.MOVING else at_rate):
                 self._since = None
                 return
             self._since = t if self._since is None else self._since
             if t - self._since < ARRIVED_S:
                 return
-            if self._phase == "moving" and plateau:
+            if self._phase == CalibrationPhase.MOVING and plateau:
                 gimbal = GIMBAL_AXES[step.axis]
                 self.client.set_mode(gimbal, "rate")
                 self.client.demand_rate(gimbal, step.rate / DEG)
-                self._phase, self._since = "ramping", None
+                self._phase, self._since = CalibrationPhase.RAMPING, None
                 return
-            self._phase, self._window_start = "window", t + step.settle_s
+            self._phase, self._window_start = CalibrationPhase.WINDOW, t + step.settle_s
             return
         length = step.duration_s if plateau else step.dwell_s
         if t < self._window_start:
@@ -188,7 +189,7 @@ class CalibrationSequence:
 
     def _next(self, t: float) -> None:
         self._index += 1
-        self._phase, self._since = "moving", None
+        self._phase, self._since = CalibrationPhase.MOVING, None
         if self.done:
             return
         step = self.steps[self._index]
