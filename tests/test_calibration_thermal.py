@@ -219,3 +219,22 @@ def test_a_chamber_that_stops_answering_during_a_soak_ends_it_naming_the_chamber
     soak.update(1.0, 25.0)
     assert soak.failure == ("soak at 40 deg C: environment.chamber: chamber at /dev/ttyUSB1: read register 100: "
                             "no response") and not soak.done
+
+
+def test_an_emulated_calibration_over_temperature_at_full_speed_sets_the_emulated_chamber_over_modbus(tmp_path):
+    """The live path: hil emulate's chamber (an F4 on a pty) set through the watlow-f4 driver at each temperature."""
+    from test_lab_thermal import quick_config
+
+    cfg = quick_config()
+    path = tmp_path / "quick.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "out"
+    assert main(["calibrate", str(path), "--speed", "max", "--out", str(out), "--viewer", "none", "--quiet",
+                 "--no-figures"]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    temperatures = doc["thermal"]["temperatures"]
+    assert [(t["set_point_c"], t["chamber_c"]) for t in temperatures] == [(20, 20.0), (25, 25.0), (30, 30.0)]
+    assert [round(t["imu_c"]) for t in temperatures] == [22, 27, 32]  # the KVH's whole degrees, self-heated
+    truth = doc["truth"]["thermal"]["terms"]
+    assert all(abs(c - t) <= 4.0 * s for name, term in doc["thermal"]["terms"].items()
+               for c, s, t in zip(term["coefficients"], term["sigma"], truth[name], strict=True))

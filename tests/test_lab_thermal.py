@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.xdist_group("lab"),
               pytest.mark.skipif(not os.environ.get("HIL_LAB_TESTS"), reason="lab form: set HIL_LAB_TESTS=1")]
 
 
-def _quick() -> dict:
+def quick_config() -> dict:
     """configs/calibration_thermal.yaml with seconds-long soaks and schedules."""
     cfg = yaml.safe_load((ROOT / "configs" / "calibration_thermal.yaml").read_text())
     # a KVH 1750 (its counter turns over every 0.64 s at 200 Hz, and pairs on a loaded host where a STIM300's, every
@@ -42,7 +42,7 @@ def _quick() -> dict:
 
 def test_a_calibration_over_three_temperatures_of_a_running_emulator_finds_its_thermal_terms_within_4_sigma(
         tmp_path):
-    cfg = _quick()
+    cfg = quick_config()
     with Emulator(tmp_path, cfg, duration=400.0) as emulator:
         lab = lab_config(cfg, emulator.ports, tmp_path, commanded=True)
         doc = yaml.safe_load(lab.read_text())
