@@ -46,3 +46,13 @@ def trial_row(kind: str, out: Path, result: dict, verdict: str | None, figures: 
             "verdict": verdict, "out_dir": str(out.resolve()), "git_commit": record.get("commit"),
             **{key: record.get(key) for key in RECORD_KEYS}, "figures": figures,
             "replay_of": None if replay_of is None else str(replay_of.resolve())}
+
+
+FIGURES = {SWING: swing_figures, CALIBRATION: calibration_figures, NOISE: noise_figures}  # the figures of each kind
+
+
+def outcome_row(out: Path, result: dict, verdict: str | None, kind: str, document: dict,
+                replay_of: Path | None) -> dict[str, Any]:
+    """The row of a trial command's outcome, filed as ``kind`` with the figures of that kind read from
+    ``document`` (:meth:`hil.trial.outcome.TrialOutcome.filed_as`)."""
+    return trial_row(kind, out, result, verdict, FIGURES[kind](document), replay_of)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -78,6 +79,9 @@ class CalibrationOutcome(TrialOutcome):
 
     calibration: dict | None = None
     residuals: Residuals | None = None
+
+    def filed_as(self) -> tuple[str, dict, Path | None]:
+        return "calibration", self.calibration or {}, None
 
     @classmethod
     def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool, unfinished: str = UNFINISHED

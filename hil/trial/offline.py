@@ -32,6 +32,9 @@ class ReplayOutcome(TrialOutcome):
 
     replay_of: Path | None = None
 
+    def filed_as(self) -> tuple[str, dict, Path | None]:
+        return "swing", self.result, self.replay_of
+
 
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
                ) -> tuple[ReplayOutcome, Viewer | None]:

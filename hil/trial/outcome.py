@@ -78,6 +78,11 @@ class TrialOutcome:
                   **{k: v for k, v in result.items() if k != "trial"}}
         return cls(cfg, config_text, out, result, finished.snapshots, finished.temperatures)
 
+    def filed_as(self) -> tuple[str, dict, Path | None]:
+        """How the history files this trial (docs/history.md): its kind, the document its figures are read from,
+        and the run directory of the trial it re-processed (a replay's; else None)."""
+        return "swing", self.result, None
+
     def exit_code(self, verdict: str) -> int:
         """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that
         completed but FAILs its limits, 0 otherwise."""

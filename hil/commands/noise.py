@@ -1,0 +1,42 @@
+"""``hil noise``: an acquisition (or a file) analysed for its Allan deviation into its claimed directory."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+from hil.commands.trial_outputs import claimed
+
+
+def cmd_noise(args: argparse.Namespace) -> int:
+    out = Path(args.out) if args.out else Path("runs") / f"noise-{Path(args.source).stem}"
+    with claimed(args, out, args.source, args.config, noise=True):
+        return _noise(args, out)
+
+
+def _noise(args: argparse.Namespace, out: Path) -> int:
+    """``hil noise`` into its claimed directory ``out``."""
+    from hil.outputs.noise import noise_summary
+    from hil.outputs.record import noise_record
+    from hil.trial.noise_acquisition import AcquisitionFailed
+    from hil.trial.noise_runner import run_noise
+
+    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
+    try:
+        doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
+                        rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet,
+                        record=lambda cfg: noise_record(given, args.source, cfg, args.started,
+                                                        datetime.now(timezone.utc)), detrend=args.detrend)
+    except AcquisitionFailed as exc:
+        print(f"hil: noise: {exc}", file=sys.stderr)
+        return exc.exit_code
+    print(noise_summary(doc, out))
+    if not args.no_history:
+        from hil.history.entry import NOISE, noise_figures, trial_row
+        from hil.history.filing import file_trial
+
+        result = {"trial": doc["trial"], "ended": "completed", "record": doc["record"]}
+        file_trial(args.history, trial_row(NOISE, out, result, None, noise_figures(doc)))
+    return 0

@@ -1,0 +1,74 @@
+"""What every trial command shares: its config with the record options of the command line, its claimed output
+directory, its viewer, and its end (outputs written, verdict shown, the trial filed in the history)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import datetime, timezone
+from pathlib import Path
+
+
+def viewer_options(args: argparse.Namespace):
+    """The live viewer the arguments ask for."""
+    from hil.trial.viewer_feed import ViewerOptions
+
+    return ViewerOptions(args.viewer, args.bind)
+
+
+def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
+    """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
+    when given), show its verdict in the viewer, file the trial in the history as the outcome says it is filed
+    (:meth:`~hil.trial.outcome.TrialOutcome.filed_as`), close the viewer of a completed trial; the exit code."""
+    from hil.outputs.figures import write_figures
+    from hil.outputs.record import trial_record
+    from hil.trial.viewer_feed import finish_viewer, show_verdict
+
+    draw = write_figures if figures is None else figures.draw
+    outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
+                                            outcome.out)
+    verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    show_verdict(viewer, outcome.result, outcome.cfg.limits)
+    if not args.no_history:
+        from hil.history.entry import outcome_row
+        from hil.history.filing import file_trial
+
+        file_trial(args.history, outcome_row(outcome.out, outcome.result, verdict, *outcome.filed_as()))
+    code = outcome.exit_code(verdict)
+    if code == 1:
+        print(f"hil: trial {outcome.ended}", file=sys.stderr)
+    else:
+        finish_viewer(viewer)
+    return code
+
+
+def trial_config(args: argparse.Namespace):
+    """The trial config the arguments name, and the trial's output directory."""
+    from hil.config import load_config
+    from hil.trial.outcome import output_dir
+
+    cfg = load_config(args.config)
+    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}  # _record_options
+    record = {key: value for key, value in given.items() if value is not None}
+    if record:
+        cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record)})
+    return cfg, output_dir(args.out, cfg)
+
+
+@contextmanager
+def claimed(args: argparse.Namespace, out: Path, *inputs: str | Path | None, noise: bool = False) -> Iterator[None]:
+    """The command's output directory, claimed for the ``with`` block (:func:`hil.outputs.output_dir.claimed`;
+    its ``inputs`` are never removed); a history's rows that pointed at outputs ``--overwrite`` replaced point
+    nowhere."""
+    from hil.outputs.output_dir import NOISE_OUTPUTS, TRIAL_OUTPUTS
+    from hil.outputs.output_dir import claimed as claim
+
+    given = tuple(Path(path) for path in inputs if path is not None)
+    with claim(out, NOISE_OUTPUTS if noise else TRIAL_OUTPUTS, args.overwrite, given) as replaced:
+        if replaced:
+            from hil.history.filing import forget_outputs
+
+            forget_outputs(args.history, out)
+        yield
