@@ -104,9 +104,11 @@ class Registry:
         return load(spec) if spec else None
 
     def name_check(self) -> AfterValidator:
-        """The config's validator of a plug-in name field: the name, if registered (the error as :meth:`get`)."""
+        """The config's validator of a plug-in name field: the name, if registered (the error as :meth:`get`). A
+        registered name of a kind without ``kind`` is not loaded: a config names its controller without importing
+        its driver."""
         def check(name: str | None) -> str | None:
-            if name is not None:
+            if name is not None and not (self.kind is None and (name in self.built_in or name in self._entry_points())):
                 self.get(name)
             return name
 
@@ -114,10 +116,11 @@ class Registry:
 
     def options_check(self, name_field: str, fill: bool = True) -> AfterValidator:
         """The config's validator of an options field, checked by the model of the plug-in that ``name_field``
-        (a field before it) names: the options with their defaults filled in (``fill``) or as given."""
+        (a field before it) names: the options with their defaults filled in (``fill``) or as given (then no options
+        are taken as the defaults, without loading the plug-in)."""
         def check(values: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
             name = info.data.get(name_field)  # None: no plug-in, or its name failed its own check
-            if name is None:
+            if name is None or not (fill or values):
                 return values
             options = self.options(name, values)
             return options.model_dump() if fill else values
@@ -132,7 +135,8 @@ TABLE_CONTROLLERS = Registry("table controllers", ("turntable_hil.table_controll
     "acutrol": "drivers.acutrol_controller:AcutrolController",
     "aerosmith": "drivers.aerosmith_controller:AerosmithController"})
 CHAMBERS = Registry("chamber controllers", ("turntable_hil.chambers",), {"watlow-f4": "drivers.watlow_f4:WatlowF4"})
-POWER_SUPPLIES = Registry("power supplies", ("turntable_hil.power_supplies",), {"scpi": "drivers.scpi_supply:ScpiSupply"})
+POWER_SUPPLIES = Registry("power supplies", ("turntable_hil.power_supplies",),
+                          {"scpi": "drivers.scpi_supply:ScpiSupply"})
 
 
 def make_codec(name: str, **options: Any) -> Any:

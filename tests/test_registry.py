@@ -83,6 +83,16 @@ def test_each_kind_has_its_entry_point_group_and_its_built_ins():
     assert TABLE_CONTROLLERS.options("aerosmith", {}).axis == "outer"
 
 
+def test_a_config_names_its_controller_without_importing_a_driver():
+    """Loading a config (every trial command does, ``hil simulate`` too) imports no controller and no transport."""
+    check = ("import sys; from hil.config import parse_config; parse_config({'trial': {'duration_s': 1}, "
+             "'site': {'latitude_deg': 32}, 'turntable': {'controller': 'aerosmith', 'controller_options': {}}}); "
+             "print(sorted(m for m in sys.modules if m.split('.')[-1] in "
+             "('acutrol_controller', 'aerosmith_controller', 'transport', 'serial', 'can')))")
+    run = subprocess.run([sys.executable, "-c", check], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]"
+
+
 CHAMBER = '''
 from pydantic import BaseModel, ConfigDict
 
