@@ -11,7 +11,7 @@ Its counter at tick k is ``counter_start + n k``, each device counting from its 
 (:func:`counter_starts`). A power cycle (``faults.power_cycle_at_s``) silences the ticks inside its window;
 the first tick after it carries counter 0, the next n, 2n ... A device fed by the emulated supply
 (:class:`PowerLine`, ``environment.power``) is silent while the supply's output is off and boots when it comes
-back on: the first tick after carries its own ``counter_start`` again, the start-up flags and the warm-up run
+back on: as after a power cycle its first tick carries counter 0, the start-up flags and the warm-up run
 from it, and it has a new turn-on bias (:func:`turn_on_offset_ug`).
 """
 
@@ -125,7 +125,7 @@ class DeviceClock:
 
     def _boot(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The tick each tick k counts from (0, a power cycle's end, the supply's last power-on) and the
-        counter at that tick (``counter_start``, 0, ``counter_start``)."""
+        counter at that tick (``counter_start``, else 0: a booted device counts from zero)."""
         k = np.asarray(k)
         tick, counter = np.zeros(k.shape, dtype=int), np.full(k.shape, self.counter_start)
         if self.power_cycle is not None:
@@ -134,7 +134,7 @@ class DeviceClock:
         if self.supply is not None:
             boot, _ = self.supply.boots(k)
             later = boot > tick
-            tick, counter = np.where(later, boot, tick), np.where(later, self.counter_start, counter)
+            tick, counter = np.where(later, boot, tick), np.where(later, 0, counter)
         return tick, counter
 
     def counters(self, k: np.ndarray) -> np.ndarray:

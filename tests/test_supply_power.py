@@ -1,6 +1,6 @@
 """The emulated supply powering the emulated IMU, in process: ``hil emulate``'s supply (configs/emulated_power.yaml)
-switched over SCPI between frames. Output off: the IMU sends nothing; on again: it boots, its counter from its own
-start, its start-up flags raised, its self-heating from zero and a new turn-on bias drawn from
+switched over SCPI between frames. Output off: the IMU sends nothing; on again: it boots, its counter from zero
+(as a device's after a power cycle), its start-up flags raised, its self-heating from zero and a new turn-on bias drawn from
 ``imu.errors.turn_on_bias_ug``; the frames already sent are never changed."""
 
 from __future__ import annotations
@@ -68,14 +68,15 @@ def decoded(frames: list) -> list:
     return [codec.decode(e.payload) for e in frames]
 
 
-def test_output_off_silences_the_imu_and_on_boots_it_from_its_counter_start_with_its_start_up_flags(powered):
+def test_output_off_silences_the_imu_and_on_boots_it_from_counter_zero_with_its_start_up_flags(powered):
     before = powered.frames(100)  # ticks 1..100
     powered.driver.output(False)
     off = powered.frames(50)  # ticks 101..150
     powered.driver.output(True)
     after = powered.frames(100)  # ticks 151..250
     assert all(e.powered for e in before) and not any(e.powered for e in off) and all(e.powered for e in after)
-    assert [f.sequence for f in decoded(after)] == [(START + k) % 128 for k in range(100)]
+    assert [f.sequence for f in decoded(before)][:3] == [(START + k) % 128 for k in range(1, 4)]  # from its own start
+    assert [f.sequence for f in decoded(after)] == [k % 128 for k in range(100)]
     assert [e.invalid for e in after] == [True] * 10 + [False] * 90  # start_up_s 0.05 s at 200 Hz
     assert [e.invalid for e in before] == [True] * 9 + [False] * 91  # the trial's start: ticks 1..9
     assert decoded(after)[0].status == Kvh1750Codec(RATE_HZ).flagged_status(Kvh1750Codec.start_up_flags)
