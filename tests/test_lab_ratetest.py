@@ -78,3 +78,17 @@ def test_the_frequency_response_of_a_running_emulated_acutrol_table_finds_its_ba
     assert z["delay_ms"] == pytest.approx(stats["config"]["imu"]["errors"]["delay_ms"], abs=0.2)
     assert z["latch_check"].startswith("disagrees: the gyro lags the encoder by 2.0")  # not stated in the config
     assert stats["table_modes"] == "Off,Off,Off"
+
+
+def test_a_running_emulated_xsens_whose_gyro_clips_on_a_step_has_that_step_left_out_and_named(tmp_path):
+    errors = {**yaml.safe_load((ROOT / "configs" / "ratetest_acutrol.yaml").read_text())["imu"]["errors"],
+              "gyro_range_dps": 150.0}
+    code, doc, stats = _lab_scale_factor(tmp_path, "ratetest_acutrol.yaml",
+                                         {"rates_dps": [90, 120, 180], "dwell_s": 1, "settle_s": 0.3, "axes": ["x"]},
+                                         protocol="xsens-mtdata2", errors=errors)
+    assert code == 0 and doc["ended"] == "completed"  # the scale_factor block does not know the range: the flags do
+    x = doc["axes"]["x"]
+    left = {s["rate_dps"] for s in x["steps"] if s["saturated"] and "flagged invalid by the IMU" in s["left_out"]}
+    assert left == {180.0, -180.0}
+    assert abs(x["scale_factor_ppm"] - errors["gyro_scale_ppm"][0]) <= 3.0 * x["scale_factor_sigma_ppm"]
+    assert stats["table_modes"] == "Off,Off,Off"

@@ -7,8 +7,10 @@ or oscillates it. :class:`RateSequence` follows the reported angles sample by sa
 placement, waits until the table is there and still (``ARRIVED_S``), commands the motion, waits until the
 table is at the rate for ``ARRIVED_S`` (an oscillation: until it has started), lets it settle and keeps the
 window: the whole turns (cycles) of the step's length. Nothing here looks at the IMU: the windows come from
-the table alone. :meth:`RateSequence.windows` cuts them from the samples kept: each IMU interval's gyro
-increment and encoder turn (the difference of the readings at its two ends, across the +-180 deg seam).
+the table alone, whose angles at every sample aligned advance the steps, those the IMU flagged invalid (a gyro
+clipping at its range) too. :meth:`RateSequence.windows` cuts them from the samples kept (the pipeline's good
+ones): each IMU interval's gyro increment and encoder turn (the difference of the readings at its two ends,
+across the +-180 deg seam).
 """
 
 from __future__ import annotations
@@ -77,6 +79,13 @@ def placements(gimbals: tuple[str, ...], geometry: TableGeometry, axes: list[str
     return [(gyro, (0.0, 0.0, 0.0), axis)]
 
 
+def _since(before: tuple[float, np.ndarray], t: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's encoder turn (N, 3) and time (N,) since the one before (``before``: the last of the previous
+    call), across the +-180 deg seam."""
+    turn = wrapped(np.diff(np.vstack([before[1], angles]), axis=0))
+    return turn, np.diff(np.concatenate([[before[0]], t]))
+
+
 def axis_in_body(geometry: TableGeometry, angles: tuple[float, float, float], axis: int) -> np.ndarray:
     """The unit vector of gimbal ``axis`` in the body frame at ``angles`` (the same whatever that gimbal's angle)."""
     _, middle_inner, inner = geometry.attitude_matrix(np.array(angles))
@@ -97,7 +106,8 @@ class RateSequence:
         self._phase = ""
         self._since: float | None = None
         self._window_start = 0.0
-        self._last: tuple[float, np.ndarray] | None = None
+        self._last: tuple[float, np.ndarray] | None = None  # the last sample kept: (t, angles)
+        self._table: tuple[float, np.ndarray] | None = None  # the last table reading the steps advanced on
         self._kept: list[tuple[np.ndarray, ...]] = []
 
     @property
@@ -113,19 +123,33 @@ class RateSequence:
         self._next()
 
     def on_progress(self, progress) -> None:
-        """A listener of the pipeline (a :class:`~hil.pipeline.progress.Progress`): the samples it took."""
-        for run in progress.samples():
-            self.feed(run.t, run.dtheta, run.angles)
+        """A listener of the pipeline (a :class:`~hil.pipeline.progress.Progress`): the samples it took are kept,
+        and the steps advance on the table's angles of each block, the samples it did not take included."""
+        for block in progress.taken:
+            for run in block.samples:
+                self._keep(run.t, run.dtheta, run.angles)
+            self._advance_on(block.table_t, block.table_angles)
 
     def feed(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
         """Aligned samples (times (N,), gyro increments and encoder angles (N, 3)): kept, and the steps advanced."""
+        self._keep(t, dtheta, angles)
+        self._advance_on(t, angles)
+
+    def _keep(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
+        """Samples kept for the windows, each with the encoder's turn and time since the sample kept before."""
         if not len(t):
             return
         before = (t[0] - self.period, angles[0]) if self._last is None else self._last
-        turn = wrapped(np.diff(np.vstack([before[1], angles]), axis=0))
-        dt = np.diff(np.concatenate([[before[0]], t]))
         self._last = (float(t[-1]), angles[-1])
-        self._kept.append((t, dtheta, turn, dt))
+        self._kept.append((t, dtheta, *_since(before, t, angles)))
+
+    def _advance_on(self, t: np.ndarray, angles: np.ndarray) -> None:
+        """The steps advanced on the table's readings ``angles`` (N, 3) at ``t`` (N,)."""
+        if not len(t):
+            return
+        before = (t[0] - self.period, angles[0]) if self._table is None else self._table
+        self._table = (float(t[-1]), angles[-1])
+        turn, dt = _since(before, t, angles)
         rates = turn / dt[:, None]
         for k in range(len(t)):
             if self.done or self.failure is not None:

@@ -39,12 +39,12 @@ TABLE_SAMPLES_PER_CYCLE = 5  # the encoder's readings a cycle needs at least to 
 MIN_CYCLES = 10  # a frequency's window holds at least this many cycles
 MARGIN = 0.95  # of the table's rate and acceleration limits an oscillation may use
 ARRIVE_S = 5.0  # a step's nominal time to move and reach its motion, for the simulation's bound
-BOUND_FACTOR, BOUND_S = 4.0, 60.0
+BOUND_FACTOR, BOUND_S = 4.0, 60.0  # the simulation ends at this many times the steps' nominal length (+ s)
 SCALE_FACTOR_KEYS = ("scale_factor_ppm", "scale_factor_sigma_ppm", "bias_dph", "bias_sigma_dph", "nonlinearity_ppm",
                      "nonlinearity_sigma_ppm", "asymmetry_ppm", "asymmetry_sigma_ppm", "asymmetry_signed_ppm",
                      "full_scale_dps")
 LATCH_TOLERANCE = 0.05  # of an IMU period: a fitted delay within it (and 3 sigma) agrees with the stated latches
-LACKING_MAX = 0.01  # a rate step's window lacking more of its samples is left out of the fit  # the simulation ends at this many times the steps' nominal length (+ s)
+LACKING_MAX = 0.01  # a rate step's window lacking more of its samples is left out of the fit
 
 
 def scale_factor_steps(cfg: Config, settings: ScaleFactorSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
@@ -139,15 +139,18 @@ def _input_geometry(cfg: Config, step: RateStep) -> tuple[np.ndarray, float]:
 
 def rate_point(cfg: Config, window: StepWindow, period: float) -> RatePoint:
     """A rate step's input (the encoder's whole turns over the window and the earth's rate about the axis, on
-    the gyro) and the gyro's mean output with its 1-sigma; saturated (:func:`saturation`) or not."""
+    the gyro) and the gyro's mean output with its 1-sigma (NaN for a window the pipeline took fewer than two
+    samples of); saturated (:func:`saturation`) or not."""
     step = window.step
-    direction, earth = _input_geometry(cfg, step)
-    n = len(window.t)
-    table = float(np.sum(window.turn[:, step.axis]) / np.sum(window.dt))
     gyro = window.dtheta[:, step.gyro] / period
+    saturated = saturation(window, gyro, period, cfg.scale_factor.gyro_range_dps)
+    n = len(window.t)
+    if n < 2:
+        return RatePoint(step.rate, math.nan, math.nan, math.nan, saturated)
+    direction, earth = _input_geometry(cfg, step)
+    table = float(np.sum(window.turn[:, step.axis]) / np.sum(window.dt))
     return RatePoint(step.rate, direction[step.gyro] * (table + earth), float(np.mean(gyro)),
-                     float(np.std(gyro, ddof=1) / math.sqrt(n)), saturation(window, gyro, period,
-                                                                          cfg.scale_factor.gyro_range_dps))
+                     float(np.std(gyro, ddof=1) / math.sqrt(n)), saturated)
 
 
 def saturation(window: StepWindow, gyro: np.ndarray, period: float, range_dps: float | None) -> str | None:
@@ -157,7 +160,7 @@ def saturation(window: StepWindow, gyro: np.ndarray, period: float, range_dps: f
     expected = round(window.step.window_s / period)
     lacking = expected - len(window.t)
     if lacking > max(1.0, LACKING_MAX * expected):
-        return f"{lacking} of its {expected} samples flagged invalid by the IMU or lost"
+        return f"{lacking} of its {expected} samples flagged invalid by the IMU (a gyro clipping at its range) or lost"
     if range_dps is not None and np.max(np.abs(gyro)) >= (1.0 - 1e-6) * range_dps * DEG:
         return f"the gyro reads its range, {range_dps:g} deg/s (scale_factor.gyro_range_dps)"
     return None
@@ -184,9 +187,9 @@ def scale_factor_document(cfg: Config, windows: list[StepWindow], ended: str) ->
 def _scale_factor_axis(points: list[RatePoint]) -> dict:
     """One gyro's block of scale_factor.json: its fit (every figure null, ``unfitted`` saying why, when too few
     steps are left) and its steps, those left out named with the reason."""
-    steps = [{"rate_dps": round(p.commanded / DEG, 9), "input_dps": float(p.input / DEG), "output_dps": p.output / DEG,
-              "sigma_dph": p.sigma / DEG_PER_H, "saturated": p.saturated is not None, "left_out": p.saturated,
-              "residual_ppm": None} for p in points]
+    steps = [{"rate_dps": round(p.commanded / DEG, 9), "input_dps": _finite(p.input / DEG),
+              "output_dps": _finite(p.output / DEG), "sigma_dph": _finite(p.sigma / DEG_PER_H),
+              "saturated": p.saturated is not None, "left_out": p.saturated, "residual_ppm": None} for p in points]
     try:
         fit = fit_scale_factor(points)
     except ValueError as exc:
@@ -197,6 +200,11 @@ def _scale_factor_axis(points: list[RatePoint]) -> dict:
                fit.nonlinearity / PPM, fit.nonlinearity_sigma / PPM, abs(fit.asymmetry) / PPM,
                fit.asymmetry_sigma / PPM, fit.asymmetry / PPM, fit.full_scale / DEG)
     return {**{key: float(value) for key, value in zip(SCALE_FACTOR_KEYS, figures)}, "unfitted": None, "steps": steps}
+
+
+def _finite(value: float) -> float | None:
+    """``value``, or None where it is not a number (a step's window without samples)."""
+    return float(value) if math.isfinite(value) else None
 
 
 def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
