@@ -238,3 +238,10 @@ def test_an_emulated_calibration_over_temperature_at_full_speed_sets_the_emulate
     truth = doc["truth"]["thermal"]["terms"]
     assert all(abs(c - t) <= 4.0 * s for name, term in doc["thermal"]["terms"].items()
                for c, s, t in zip(term["coefficients"], term["sigma"], truth[name], strict=True))
+
+
+def test_a_calibration_over_temperature_without_a_chamber_is_refused_naming_the_key(tmp_path, capsys):
+    path = _config(tmp_path, "no-chamber", lambda cfg: cfg.pop("environment"))
+    assert main(["calibrate", str(path), "--simulate", "--out", str(tmp_path / "out"), "--viewer", "none"]) == 2
+    assert "calibration.temperatures_c: a calibration over temperature needs environment.chamber" in \
+        capsys.readouterr().err
