@@ -245,3 +245,11 @@ def test_a_calibration_over_temperature_without_a_chamber_is_refused_naming_the_
     assert main(["calibrate", str(path), "--simulate", "--out", str(tmp_path / "out"), "--viewer", "none"]) == 2
     assert "calibration.temperatures_c: a calibration over temperature needs environment.chamber" in \
         capsys.readouterr().err
+
+
+def test_a_soak_on_an_imu_that_reports_no_temperature_ends_naming_it_not_at_the_timeout():
+    settings = SoakSettings(stable_within_c=0.05, for_s=5, timeout_s=3600, stalled_s=20)
+    soak = _soak(ChamberModel(1.0, 100.0, 40.0), lambda t: None, 3600.0, settings)
+    assert soak.failure == ("soak at 40 deg C: the IMU reported no temperature in the last 5 s (calibration.soak."
+                            "for_s): a calibration over temperature needs an IMU whose frames carry it")
+    assert soak.chamber_readings[-1][0] < 7.0

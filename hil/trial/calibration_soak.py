@@ -7,7 +7,8 @@ every reading of the last ``for_s`` lies within ``stable_within_c`` of the lates
 long before the sensor inside the table does (the case's lag, the electronics' self-heating), so a soak on the
 chamber's reading alone would calibrate a sensor still on its way.
 
-It fails (:attr:`Soak.failure`) when ``timeout_s`` passes first, naming the temperatures seen, or at once when
+It fails (:attr:`Soak.failure`) when ``timeout_s`` passes first, naming the temperatures seen, when the IMU reports
+no temperature for ``for_s`` once the chamber is there, or at once when
 the chamber's reading holds still (changes less than ``HELD_C`` over ``stalled_s``) while it is more than
 ``FAR_C`` from its set point: a heater or cooling fault, which waiting would not mend.
 """
@@ -73,6 +74,10 @@ class Soak:
             self.reached_at = t
         if self.reached_at is None:
             self._check_heater(t, reading)
+        elif t - self.reached_at >= s.for_s and not self.imu:
+            self.failure = (f"soak at {self.set_point_c:g} deg C: the IMU reported no temperature in the last "
+                            f"{s.for_s:g} s (calibration.soak.for_s): a calibration over temperature needs an IMU "
+                            "whose frames carry it")
         elif t - self.reached_at >= s.for_s and self._imu_steady(t):
             self.done, self.took_s = True, t - self.t0
             return
