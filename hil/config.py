@@ -22,6 +22,7 @@ from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultCo
 from hil.config_environment import EnvironmentConfig, SoakSettings
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
+from hil.config_units import UNIT_NAME, check_units, one_unit_only, unit_update
 from hil.inputs import ConfigError, InputError  # noqa: F401 (InputError: for the config's users)
 
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
@@ -246,6 +247,15 @@ class RecordConfig(Model):
     notes: str | None = None
 
 
+class UnitConfig(Model):
+    """One IMU of several on the table (``units``, docs/units.md)."""
+
+    name: str = Field(pattern=UNIT_NAME)
+    record: RecordConfig = RecordConfig()
+    mounting_deg: Vec3 = ZERO3  # as turntable.mounting_deg, this unit's
+    imu: ImuConfig
+
+
 class Config(Model):
     trial: TrialConfig
     site: SiteConfig
@@ -258,15 +268,24 @@ class Config(Model):
     output: OutputConfig = OutputConfig()
     record: RecordConfig = RecordConfig()
     environment: EnvironmentConfig = EnvironmentConfig()
+    units: list[UnitConfig] | None = Field(None, min_length=1)  # several IMUs in place of imu (hil.config_units)
 
     @model_validator(mode="after")
-    def _imu_rate_divides_into_table_latches(self) -> Config:
-        ratio = self.imu_rate_hz / self.trial.rate_hz
-        if round(ratio) < 1 or abs(ratio - round(ratio)) > RATE_RATIO_TOLERANCE * ratio:
-            raise ValueError(f"imu.rate_hz: {self.imu_rate_hz:g} Hz is not an integer multiple of trial.rate_hz "
-                             f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
-                             "table latches every n-th pulse")
+    def _units_apart_and_imu_rates_divide_into_table_latches(self) -> Config:
+        check_units(self.units, "imu" in self.model_fields_set)
+        for key, imu in self.imus.items():
+            rate = imu.rate_hz or self.trial.rate_hz
+            ratio = rate / self.trial.rate_hz
+            if round(ratio) < 1 or abs(ratio - round(ratio)) > RATE_RATIO_TOLERANCE * ratio:
+                raise ValueError(f"{key}.rate_hz: {rate:g} Hz is not an integer multiple of trial.rate_hz "
+                                 f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
+                                 "table latches every n-th pulse")
         return self
+
+    def unit_configs(self) -> dict[str, Config]:
+        """Each unit's one-unit config by its name (:func:`hil.config_units.unit_update`); empty with ``imu``."""
+        data = self.model_dump()
+        return {unit.name: Config.model_validate(unit_update(data, unit)) for unit in self.units or ()}
 
     @model_validator(mode="after")
     def _temperatures_within_the_chamber(self) -> Config:
@@ -289,13 +308,19 @@ class Config(Model):
         return self
 
     @property
+    def imus(self) -> dict[str, ImuConfig]:
+        """Each IMU by its key: ``imu``, or ``units[k].imu`` of each unit."""
+        return {f"units[{k}].imu": unit.imu for k, unit in enumerate(self.units or ())} or {"imu": self.imu}
+
+    @property
     def imu_rate_hz(self) -> float:
         """The rate of the sync pulse train (and of the IMU's samples)."""
         return self.imu.rate_hz or self.trial.rate_hz
 
     def emulated_only(self, source: str, command: str) -> None:
         """Raise :class:`ConfigError` when a device is read from a port (``command`` would simulate it)."""
-        for key, value in (("imu.source", self.imu.source), ("turntable.source", self.turntable.source)):
+        sources = {f"{key}.source": imu.source for key, imu in self.imus.items()}
+        for key, value in (*sources.items(), ("turntable.source", self.turntable.source)):
             if value != "emulator":
                 raise ConfigError(f"{source}: {key}: {value}: {command} emulates the devices; a config that reads "
                                   f"devices runs with hil run, hil calibrate or hil noise")
@@ -343,18 +368,20 @@ class Config(Model):
         return self.trial.rate_hz if self.turntable.timing.free_running else self.imu_rate_hz
 
 
-def parse_config(data: Any, source: str = "config") -> Config:
-    """Validate a mapping (already parsed YAML) into a :class:`Config`."""
+def parse_config(data: Any, source: str = "config", units: bool = False) -> Config:
+    """Validate a mapping (already parsed YAML) into a :class:`Config`; one with ``units`` only for a caller that
+    takes several units (``units``)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
     try:
-        return Config.model_validate(data)
+        cfg = Config.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(f"{source}: {describe_validation(exc)}") from None
+    return cfg if units else one_unit_only(cfg, source)
 
 
-def load_config(path: str | Path) -> Config:
-    """Read and validate a YAML trial configuration (safe loader only)."""
+def load_config(path: str | Path, units: bool = False) -> Config:
+    """Read and validate a YAML trial configuration (safe loader only); ``units`` as :func:`parse_config`'s."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -366,4 +393,4 @@ def load_config(path: str | Path) -> Config:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
         raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
-    return parse_config(data, str(path))
+    return parse_config(data, str(path), units)

@@ -38,7 +38,7 @@ class Model(BaseModel):
 def describe_validation(error: ValidationError) -> str:
     lines = []
     for item in error.errors():
-        path = ".".join(str(p) for p in item["loc"])
+        path = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in item["loc"]).lstrip(".")
         msg = {"extra_forbidden": "unknown key", "missing": "required key is missing"}.get(
             item["type"], item["msg"].removeprefix("Value error, "))
         lines.append(f"{path}: {msg}" if path else msg)

@@ -13,7 +13,8 @@ MAX_LINES = 400
 LAYERS = (
     ("hil.config_types", "hil.inputs", "hil.units", "hil.samples", "hil.vocabulary"),
     ("drivers",),
-    ("hil.config", "hil.config_emulated", "hil.config_environment", "hil.config_ratetests", "hil.frames"),
+    ("hil.config", "hil.config_emulated", "hil.config_environment", "hil.config_ratetests", "hil.config_units",
+     "hil.frames"),
     ("hil.estimation",),
     ("emulators",),
     ("hil.pipeline", "hil.recording"),

@@ -29,14 +29,18 @@ def code_words(text: str) -> set[str]:
     return {w for span in re.findall(r"`([^`]+)`", text) for w in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", span)}
 
 
+def _types(annotation) -> list:
+    """An annotation and the types inside it (``list[X] | None``: the list, X and None)."""
+    return [annotation, *(t for arg in getattr(annotation, "__args__", ()) for t in _types(arg))]
+
+
 def config_keys(model: type[BaseModel] = Config, prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
     """The key path of every field of the configuration, blocks and leaves."""
     keys = []
     for name, field in model.model_fields.items():
         path = (*prefix, name)
         keys.append(path)
-        nested = [a for a in (field.annotation, *getattr(field.annotation, "__args__", ()))
-                  if isinstance(a, type) and issubclass(a, BaseModel)]
+        nested = [a for a in _types(field.annotation) if isinstance(a, type) and issubclass(a, BaseModel)]
         for sub in nested:
             keys += config_keys(sub, path)
     return keys

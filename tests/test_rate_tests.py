@@ -249,7 +249,7 @@ def test_the_scale_factor_report_fits_1400_px_without_a_clipped_column(tmp_path)
 def test_a_negative_rate_in_the_settings_is_refused_naming_its_key(tmp_path, capsys):
     path = _config(tmp_path, scale_factor={"rates_dps": [30, -90]})
     assert main(["ratetest", "scale-factor", str(path), "--simulate", "--out", str(tmp_path / "out")]) == 2
-    assert capsys.readouterr().err.strip().endswith("scale_factor.rates_dps.1: Input should be greater than 0")
+    assert capsys.readouterr().err.strip().endswith("scale_factor.rates_dps[1]: Input should be greater than 0")
 
 
 def test_simulating_a_config_that_reads_devices_is_refused_naming_the_key(tmp_path, capsys):

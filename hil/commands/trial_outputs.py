@@ -20,22 +20,12 @@ def viewer_options(args: argparse.Namespace):
 
 def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
-    when given), show its verdict in the viewer, file the trial in the history as the outcome says it is filed
-    (:meth:`~hil.trial.outcome.TrialOutcome.filed_as`), close the viewer of a completed trial; the exit code."""
-    from hil.outputs.figures import write_figures
-    from hil.outputs.record import trial_record
+    when given), show its verdict in the viewer, file the trial in the history, close the viewer of a completed
+    trial; the exit code."""
     from hil.trial.viewer_feed import finish_viewer, show_verdict
 
-    draw = write_figures if figures is None else figures.draw
-    outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
-                                            outcome.out)
-    verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    verdict = written(args, outcome, figures)
     show_verdict(viewer, outcome.result, outcome.cfg.limits)
-    if not args.no_history:
-        from hil.history.entry import outcome_row
-        from hil.history.filing import file_trial
-
-        file_trial(args.history, outcome_row(outcome.out, outcome.result, verdict, *outcome.filed_as()))
     code = outcome.exit_code(verdict)
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
@@ -44,12 +34,45 @@ def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     return code
 
 
-def trial_config(args: argparse.Namespace):
-    """The trial config the arguments name, and the trial's output directory."""
+def written(args: argparse.Namespace, outcome, figures=None) -> str:
+    """Write one trial's outputs with its record (the figures drawn by ``figures`` when given) and file it in the
+    history as the outcome says it is filed (:meth:`~hil.trial.outcome.TrialOutcome.filed_as`); its verdict."""
+    from hil.outputs.figures import write_figures
+    from hil.outputs.record import trial_record
+
+    draw = write_figures if figures is None else figures.draw
+    outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
+                                            outcome.out)
+    verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    if not args.no_history:
+        from hil.history.entry import outcome_row
+        from hil.history.filing import file_trial
+
+        file_trial(args.history, outcome_row(outcome.out, outcome.result, verdict, *outcome.filed_as()))
+    return verdict
+
+
+def finish_units(args: argparse.Namespace, fixture) -> int:
+    """Write and file every unit's trial of a :class:`~hil.trial.units.FixtureOutcome` (:func:`written`), then the
+    trial's index (result.json, report.html, junit.xml); the exit code of the worst unit."""
+    verdicts = {name: written(args, outcome) for name, outcome in fixture.units.items()}
+    for name, outcome in fixture.units.items():
+        if outcome.exit_code(verdicts[name]) == 1:
+            print(f"hil: unit {name}: trial {outcome.ended}", file=sys.stderr)
+    return fixture.write_index()
+
+
+def trial_config(args: argparse.Namespace, units: bool = False):
+    """The trial config the arguments name, and the trial's output directory; a ``units`` config only where the
+    command takes one (``units``), and then without ``--dut`` (each unit names its own)."""
     from hil.config import load_config
+    from hil.inputs import InputError
     from hil.trial.outcome import output_dir
 
-    cfg = load_config(args.config)
+    cfg = load_config(args.config, units)
+    if cfg.units and args.dut:
+        raise InputError(f"--dut {args.dut}: {args.config} has several units; each names its serial in "
+                         "units[i].record.dut_serial")
     given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}  # _record_options
     record = {key: value for key, value in given.items() if value is not None}
     if record:

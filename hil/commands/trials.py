@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hil.commands.trial_outputs import claimed, finish, trial_config, viewer_options
+from hil.commands.trial_outputs import claimed, finish, finish_units, trial_config, viewer_options
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -57,11 +57,27 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     with SimulationProcess() as simulation, FigureProcess() as figures:
         from hil.trial.offline import run_simulation
 
-        cfg, out = trial_config(args)
+        cfg, out = trial_config(args, units=True)
         cfg.emulated_only(args.config, "hil simulate")
         with claimed(args, out, args.config):
+            if cfg.units:
+                return _simulate_units(args, cfg, out)
             outcome = run_simulation(cfg, Path(args.config).read_text(), out, viewer_options(args), simulation)
             return finish(args, *outcome, figures)
+
+
+def _simulate_units(args: argparse.Namespace, cfg, out: Path) -> int:
+    """``hil simulate`` of a units config: each unit simulated and estimated in this process, one after the other
+    (docs/units.md); no live view."""
+    from hil.inputs import InputError
+    from hil.trial.offline import run_simulation
+    from hil.trial.units import run_units
+    from hil.trial.viewer_feed import ViewerOptions
+
+    if args.viewer != ViewerOptions.mode:
+        raise InputError(f"--viewer {args.viewer}: a units config is simulated without a live view so far")
+    return finish_units(args, run_units(cfg, out, lambda unit, text, unit_out: run_simulation(
+        unit, text, unit_out, ViewerOptions())[0]))
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:

@@ -20,7 +20,7 @@ LOCK_NAME = ".hil.lock"
 # what a trial writes (docs/contracts.md, "Output files"), and a noise characterisation
 TRIAL_OUTPUTS = ("result.json", "series.csv", "report.html", "junit.xml", "config.yaml", *FIGURES, "recording.mcap",
                  "recording.rrd", "emulator.json", "emulator.log", "ports.json", "calibration.json",
-                 "calibration.html", "calibration_residuals.png")
+                 "calibration.html", "calibration_residuals.png", "units")
 NOISE_OUTPUTS = ("noise.json", "allan.png", "report.html", "noise.rrd", "acquisition")
 RECORDS = ("result.json", "recording.mcap", "noise.json")  # what another command could take for a trial's
 

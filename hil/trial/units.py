@@ -1,0 +1,48 @@
+"""A trial of several units on one table (docs/units.md): each unit's one-unit trial run by the one-unit runner
+on its own config (:meth:`hil.config.Config.unit_configs`) into ``OUT/units/<name>/``, and the trial's index."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from hil.config import Config
+from hil.outputs.units_index import UNITS_DIR, unit_entry, units_exit_code, write_units_index
+from hil.trial.outcome import TrialOutcome
+
+# runs one unit's trial: its one-unit config, that config's text (its config.yaml) and its output directory
+RunUnit = Callable[[Config, str, Path], TrialOutcome]
+
+
+@dataclass
+class FixtureOutcome:
+    """A finished trial of several units: the units config, the trial's directory, each unit's outcome by name."""
+
+    cfg: Config
+    out: Path
+    units: dict[str, TrialOutcome]
+
+    def write_index(self) -> int:
+        """Write OUT/result.json, report.html and junit.xml over the units' written outputs; the exit code
+        (:func:`~hil.outputs.units_index.units_exit_code`)."""
+        doc = write_units_index(self.out, self.cfg.trial.name, [unit_entry(name, outcome.result)
+                                                                 for name, outcome in self.units.items()])
+        return units_exit_code(unit["verdict"] for unit in doc["units"])
+
+
+def run_units(cfg: Config, out: Path, run_unit: RunUnit) -> FixtureOutcome:
+    """Every unit's trial by ``run_unit``, in the order of ``units``, each in ``OUT/units/<name>/`` with its
+    one-unit config as its config.yaml (that config alone reproduces the unit's trial)."""
+    units = {}
+    for name, unit_cfg in cfg.unit_configs().items():
+        units[name] = run_unit(unit_cfg, unit_config_text(name, unit_cfg), out / UNITS_DIR / name)
+    return FixtureOutcome(cfg, out, units)
+
+
+def unit_config_text(name: str, cfg: Config) -> str:
+    """A unit's one-unit config as YAML (what it sets beyond the defaults)."""
+    body = yaml.safe_dump(cfg.model_dump(mode="json", exclude_defaults=True), sort_keys=False)
+    return f"# unit {name} of a units config, as a one-unit config (docs/units.md)\n{body}"
