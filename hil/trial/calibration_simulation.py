@@ -54,7 +54,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         client.apply_limits()
         sequence.start()
         client.sync_output(True)
-        while not sequence.done and sequence.failure is None and soak_failure(sequence) is None and sim.samples < end:
+        while not sequence.done and stopped(sequence) is None and sim.samples < end:
             processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
     except (TableError, LimitError, InterlockError) as exc:
         if viewer is not None:
@@ -68,9 +68,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     finished = processor.finish()
     if viewer is not None and finished.estimator is not None:
         viewer.log_snapshots(finished.snapshots)
-    ended = str(TrialEnd.early(soak_failure(sequence)) if soak_failure(sequence) is not None
-                else TrialEnd(COMPLETED) if sequence.failure is None
-                else TrialEnd.early(f"turntable is not moving as commanded: {sequence.failure}"))
+    ended = str(TrialEnd(COMPLETED) if stopped(sequence) is None else TrialEnd.early(stopped(sequence)))
     outcome = TrialOutcome.of(finished, cfg, config_text, out, ended, emulated_truth(cfg))
     unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
     return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
@@ -92,6 +90,9 @@ def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, cl
     return ThermalSequence(cfg, schedule, client, SimulatedChamber(model), sequence)
 
 
-def soak_failure(sequence) -> str | None:
-    """Why a calibration over temperature's soak ended it (None: it did not, or there is no soak)."""
-    return sequence.soak_failure if isinstance(sequence, ThermalSequence) else None
+def stopped(sequence) -> str | None:
+    """Why the sequence ends the trial early: a calibration over temperature's soak that failed, or a table that did
+    not move as commanded; None while neither."""
+    if isinstance(sequence, ThermalSequence) and sequence.soak_failure is not None:
+        return sequence.soak_failure
+    return None if sequence.failure is None else f"turntable is not moving as commanded: {sequence.failure}"

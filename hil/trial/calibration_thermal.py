@@ -65,10 +65,11 @@ class ThermalSequence:
         """Where the calibration is, for the console and an early end's reason."""
         if self.done:
             return f"all {len(self.temperatures)} temperatures done"
-        where = f"temperature {len(self.points) + 1} of {len(self.temperatures)}"
-        step = self.soak.state if self.sequence is None and self.soak is not None else \
-            self.sequence.progress if self.sequence is not None else "not started"
-        return f"{where}, {step}"
+        if self.sequence is not None:
+            step = self.sequence.progress
+        else:
+            step = self.soak.state if self.soak is not None else "not started"
+        return f"temperature {len(self.points) + 1} of {len(self.temperatures)}, {step}"
 
     def start(self) -> None:
         """The first soak."""
