@@ -15,6 +15,7 @@ from hil.cli import main
 from hil.config import load_config
 from hil.history.store import History
 from hil.outputs.units_index import units_exit_code
+from tests.pages import clipped_columns, layout_width, needs_chromium
 
 ROOT = Path(__file__).resolve().parent.parent
 UNITS_CONFIG = ROOT / "configs" / "emulated_units.yaml"
@@ -90,11 +91,14 @@ def test_a_units_trial_exits_1_if_any_unit_ended_early_else_3_if_any_fails(verdi
     assert units_exit_code(verdicts) == code
 
 
+@needs_chromium
 def test_simulating_three_units_estimates_each_against_its_own_truth_and_files_each(tmp_path):
+    """... its index page fitting the window, and --station over every unit's record."""
     path = _config(tmp_path, trial={"name": "units", "duration_s": 150, "rate_hz": 200, "seed": 11},
-                   output={"figures": False})
+                   output={"figures": False},
+                   units=lambda u: [{**u[0], "record": {**u[0]["record"], "station": "bench-2"}}, *u[1:]])
     out, history = tmp_path / "out", tmp_path / "h.sqlite"
-    assert main(["simulate", str(path), "--out", str(out), "--history", str(history)]) == 0
+    assert main(["simulate", str(path), "--out", str(out), "--history", str(history), "--station", "lab-9"]) == 0
     index = json.loads((out / "result.json").read_text())
     assert [u["name"] for u in index["units"]] == NAMES and index["verdict"] == "PASS"
     for unit in index["units"]:
@@ -111,6 +115,9 @@ def test_simulating_three_units_estimates_each_against_its_own_truth_and_files_e
     assert [s.get("name") for s in suites] == [f"units/{name}" for name in NAMES]
     assert all(f"units/{name}/report.html" in (out / "report.html").read_text() for name in NAMES)
     assert sorted(row["dut_serial"] for row in History(str(history)).trials()) == ["KVH-0001", "KVH-0002", "XS-0100"]
+    assert {json.loads((out / u["out_dir"] / "result.json").read_text())["record"]["station"]
+            for u in index["units"]} == {"lab-9"}
+    assert layout_width(out / "report.html", tmp_path) <= 1400 and clipped_columns(out / "report.html", tmp_path) == []
 
 
 def test_a_units_config_yaml_alone_reproduces_its_unit_bit_for_bit(tmp_path):

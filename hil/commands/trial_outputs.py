@@ -64,7 +64,8 @@ def finish_units(args: argparse.Namespace, fixture) -> int:
 
 def trial_config(args: argparse.Namespace, units: bool = False):
     """The trial config the arguments name, and the trial's output directory; a ``units`` config only where the
-    command takes one (``units``), and then without ``--dut`` (each unit names its own)."""
+    command takes one (``units``), and then without ``--dut`` (each unit names its own), ``--operator`` and
+    ``--station`` over every unit's record."""
     from hil.config import load_config
     from hil.inputs import InputError
     from hil.trial.outcome import output_dir
@@ -76,7 +77,8 @@ def trial_config(args: argparse.Namespace, units: bool = False):
     given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}  # _record_options
     record = {key: value for key, value in given.items() if value is not None}
     if record:
-        cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record)})
+        units = [unit.model_copy(update={"record": unit.record.model_copy(update=record)}) for unit in cfg.units or ()]
+        cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record), "units": units or None})
     return cfg, output_dir(args.out, cfg)
 
 

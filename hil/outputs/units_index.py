@@ -56,7 +56,8 @@ def _index_page(doc: dict) -> str:
     rows = []
     for unit in doc["units"]:
         bias, sigma, truth = unit["accel_bias_ug"], unit["accel_bias_sigma_ug"], unit["truth_accel_bias_ug"]
-        shown = ", ".join(format_value(b, s) for b, s in zip(bias, sigma)) if bias and sigma else "—"
+        shown = ", ".join(f"{format_value(b, s)} ± {format_value(s)}" for b, s in zip(bias, sigma)) if bias and sigma \
+            else "—"
         truth_shown = ", ".join(format_value(t) for t in truth) if truth else "—"
         link = f"{unit['out_dir']}/{REPORT_NAME}"
         rows.append(f"<tr><td><a href='{e(link)}'>{e(unit['name'])}</a></td><td>{e(unit['dut_serial'] or '—')}</td>"
