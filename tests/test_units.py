@@ -59,6 +59,8 @@ BAD_BLOCKS = [
     ("imu_key", lambda u: [u[0], {**u[1], "imu": {"rate_hz": 150}}], "units[1].imu.rate_hz: 150 Hz is not an integer"),
     ("unknown_key", lambda u: [u[0], {**u[1], "mounting": [0, 0, 0]}], "units[1].mounting: unknown key"),
     ("empty", lambda u: [], "units: List should have at least 1 item"),
+    ("read_from_a_port", lambda u: [u[0], {**u[1], "imu": {"source": "serial", "port": "/dev/ttyUSB1"}}],
+     "units[1].imu.source: serial: hil simulate emulates the devices"),
 ]
 
 
