@@ -14,6 +14,7 @@ import yaml
 from hil.cli import main
 from hil.config import load_config
 from hil.history.store import History
+from hil.outputs.result_schema import UNITS_SCHEMA_FILE, UnitsResult, schema_text
 from hil.outputs.units_index import units_exit_code
 from tests.pages import clipped_columns, layout_width, needs_chromium
 
@@ -87,6 +88,10 @@ def test_a_one_unit_command_refuses_a_units_config_in_one_line(tmp_path, capsys,
     assert not (tmp_path / "out" / "result.json").exists()
 
 
+def test_the_committed_units_index_schema_is_the_models_export():
+    assert UNITS_SCHEMA_FILE.read_text() == schema_text(UnitsResult), "run: python -m hil.outputs.result_schema"
+
+
 @pytest.mark.parametrize("verdicts, code", [(["PASS", "PASS"], 0), (["PASS", "FAIL"], 3),
                                             (["FAIL", "ENDED EARLY", "PASS"], 1), (["INTERRUPTED", "PASS"], 1)])
 def test_a_units_trial_exits_1_if_any_unit_ended_early_else_3_if_any_fails(verdicts, code):
@@ -102,6 +107,7 @@ def test_simulating_three_units_estimates_each_against_its_own_truth_and_files_e
     out, history = tmp_path / "out", tmp_path / "h.sqlite"
     assert main(["simulate", str(path), "--out", str(out), "--history", str(history), "--station", "lab-9"]) == 0
     index = json.loads((out / "result.json").read_text())
+    UnitsResult.model_validate(index, strict=True)
     assert [u["name"] for u in index["units"]] == NAMES and index["verdict"] == "PASS"
     for unit in index["units"]:
         result = json.loads((out / unit["out_dir"] / "result.json").read_text())

@@ -1,5 +1,6 @@
 """result.json's schema as a pydantic model (docs/contracts.md, "result.json"), exported as JSON Schema to
-docs/result.schema.json (``python -m hil.outputs.result_schema``; a test fails when the committed file differs).
+docs/result.schema.json, and that of a trial of several units' index to docs/units_result.schema.json
+(``python -m hil.outputs.result_schema``; a test fails when a committed file differs).
 Read a result.json with :func:`read_result`: the model validates it, and callers use its fields."""
 
 from __future__ import annotations
@@ -12,7 +13,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 SCHEMA_FILE = Path(__file__).resolve().parents[2] / "docs" / "result.schema.json"
+UNITS_SCHEMA_FILE = SCHEMA_FILE.with_name("units_result.schema.json")
 Vector3 = list[float | None]
+Verdict = Literal["PASS", "FAIL", "INTERRUPTED", "ENDED EARLY"]
 
 
 class _Block(BaseModel):
@@ -111,7 +114,7 @@ class Result(_Block):
     trial: Trial
     ended: str
     # PASS or FAIL against output.limits for a completed trial, else how it ended; null: not judged yet
-    verdict: Literal["PASS", "FAIL", "INTERRUPTED", "ENDED EARLY"] | None = None
+    verdict: Verdict | None = None
     calibration_applied: dict[str, Any] | None
     streams: dict[str, Any]
     estimate: Estimate | None
@@ -120,6 +123,33 @@ class Result(_Block):
     truth: Truth | None = None
     calibration: CalibrationSummary | None = None
     record: Record | None = None
+
+
+class UnitLine(_Block):
+    """A unit's line of the index: where its outputs are, how it ended, its verdict and headline figures (µg, s)."""
+
+    name: str
+    out_dir: str  # relative to the index's directory: units/<name>
+    dut_serial: str | None
+    ended: str
+    verdict: Verdict
+    accel_bias_ug: Vector3 | None
+    accel_bias_sigma_ug: Vector3 | None
+    converged_at_s: float | None
+    truth_accel_bias_ug: Vector3 | None
+
+
+class UnitsTrial(_Block):
+    name: str
+
+
+class UnitsResult(_Block):
+    """The result.json of a trial of several units (docs/units.md): its index; each unit's own is a :class:`Result`."""
+
+    trial: UnitsTrial
+    ended: str
+    verdict: Verdict  # the units' worst
+    units: list[UnitLine]
 
 
 def read_result(path: str | Path) -> Result:
@@ -138,11 +168,13 @@ def result_problem(doc: dict) -> str | None:
     return None
 
 
-def schema_text() -> str:
-    """The JSON Schema of :class:`Result`, as docs/result.schema.json holds it."""
-    return json.dumps(Result.model_json_schema(), indent=2) + "\n"
+def schema_text(model: type[BaseModel] = Result) -> str:
+    """The JSON Schema of ``model`` (:class:`Result`, as docs/result.schema.json holds it, or :class:`UnitsResult`,
+    as docs/units_result.schema.json does)."""
+    return json.dumps(model.model_json_schema(), indent=2) + "\n"
 
 
-if __name__ == "__main__":  # python -m hil.outputs.result_schema: write docs/result.schema.json anew
-    SCHEMA_FILE.write_text(schema_text())
-    print(SCHEMA_FILE, file=sys.stderr)
+if __name__ == "__main__":  # python -m hil.outputs.result_schema: write both schemas anew
+    for path, model in ((SCHEMA_FILE, Result), (UNITS_SCHEMA_FILE, UnitsResult)):
+        path.write_text(schema_text(model))
+        print(path, file=sys.stderr)
