@@ -17,6 +17,7 @@ from hil.config import load_config
 from hil.estimation.calibration_schedule import default_schedule
 from hil.frames import TableGeometry
 from hil.outputs.measurements import FAIL, PASS, measurements
+from hil.trial.viewer_feed import watched_chamber
 from hil.viewer import trial_viewer
 from hil.viewer.trial_viewer import TrialViewer
 from hil.viewer.verdict import final_markdown
@@ -31,16 +32,18 @@ def _recorded(path: Path) -> set[str]:
     return {chunk.entity_path for chunk in reader.stream(store=recording)} - {"/__properties"}
 
 
-def _documented() -> tuple[set[str], set[str]]:
-    """The entity paths docs/viewer.md's "Entity paths" names: the trial's table and ``hil calibrate``'s."""
+def _documented() -> tuple[set[str], set[str], set[str]]:
+    """The entity paths docs/viewer.md's "Entity paths" names: the trial's table, ``hil calibrate``'s and a
+    chamber's."""
     section = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
-    trial, calibration = section.split("`hil calibrate` adds", 1)
+    trial, rest = section.split("`hil calibrate` adds", 1)
+    calibration, chamber = rest.split("**With a chamber**", 1)
 
     def paths(text: str) -> set[str]:
         cells = [line.split("|")[1] for line in text.splitlines() if line.startswith("| `/")]
         return {p for cell in cells for p in re.findall(r"`(/[^`<>…]*)`", cell)}
 
-    return paths(trial), paths(calibration)
+    return paths(trial), paths(calibration), paths(chamber)
 
 
 def _stated_mb_per_60_s() -> float:
@@ -60,7 +63,7 @@ def trial_rrd(tmp_path_factory) -> Path:
 
 
 def test_a_trials_recording_holds_exactly_the_entities_docs_viewer_names(trial_rrd):
-    documented, _ = _documented()
+    documented, _, _ = _documented()
     assert _recorded(trial_rrd) == documented
 
 
@@ -87,7 +90,7 @@ def test_a_trials_recording_holds_a_few_chunks_per_entity_whatever_its_pace(tria
 
 
 def test_a_calibrations_recording_adds_exactly_the_entities_docs_viewer_names(tmp_path):
-    trial, calibration = _documented()
+    trial, calibration, _ = _documented()
     schedule = default_schedule()
     steps = list(schedule.dwells) + list(schedule.plateaus)
     viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True, layout="calibration")
@@ -206,3 +209,54 @@ def test_a_trial_that_did_not_complete_ends_its_verdict_as_result_json_says_not_
     for ended, verdict in (("interrupted: SIGINT", "INTERRUPTED"), ("early: the IMU stream stopped", "ENDED EARLY")):
         text = final_markdown(result | {"ended": ended, "verdict": verdict}, limits)
         assert text.splitlines()[0] == f"## Verdict: {verdict}"  # never PASS or FAIL
+
+
+def test_the_imus_temperature_is_logged_once_a_second_of_trial_time_as_the_pipeline_reports_it(trial_rrd):
+    rows = _rows(trial_rrd)["/imu/temperature_c"]
+    seen = json.loads((trial_rrd.parent / "result.json").read_text())["streams"]["imu_temperature_c"]
+    times = [t for t, _ in rows]
+    seconds = [int(t) for t in times]  # the first progress of each second of trial time: one a second at most
+    assert seconds == sorted(set(seconds)) and times[0] == 0.0 and times[-1] >= 59.0
+    assert len(rows) >= 40  # a progress comes at least every 1.7 s of trial time, even at --speed max
+    assert all(seen["min"] <= value[0] <= seen["max"] for _, value in rows)
+
+
+class _Chamber:
+    """A chamber controller that reads what it was last sent, 2 deg C short."""
+
+    def __init__(self) -> None:
+        self.set_point_c, self.closed = 25.0, False
+
+    def set_set_point_c(self, value: float) -> None:
+        self.set_point_c = value
+
+    def temperature_c(self) -> float:
+        return self.set_point_c - 2.0
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_a_chambers_set_points_and_readings_go_to_exactly_the_entities_docs_viewer_names(tmp_path):
+    trial, calibration, chamber_paths = _documented()
+    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True)
+    controller = _Chamber()
+    chamber = watched_chamber(controller, 25.0, viewer)
+    viewer.log_temperature(0.5, 24.0)
+    chamber.set_set_point_c(60.0)
+    viewer.log_temperature(12.0, 30.0)
+    assert chamber.temperature_c() == 58.0
+    chamber.close()
+    viewer.close()
+    assert controller.set_point_c == 60.0 and controller.closed
+    path = tmp_path / "recording.rrd"
+    assert _recorded(path) - trial == chamber_paths == {"/chamber/set_point_c", "/chamber/reading_c"}
+    rows = _rows(path)
+    assert rows["/chamber/set_point_c"] == [(0.0, [25.0]), (0.5, [60.0])]
+    assert rows["/chamber/reading_c"] == [(12.0, [58.0])]  # at the latest progress's trial time
+    assert rows["/imu/temperature_c"] == [(0.5, [24.0]), (12.0, [30.0])]
+
+
+def test_the_temperatures_have_a_panel_beside_the_bias_sigma(trial_rrd):
+    views = _blueprint_views(trial_rrd)
+    assert any(name.startswith("temperature (°C)") and v["origin"] == "/" for name, v in views.items())

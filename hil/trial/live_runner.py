@@ -17,7 +17,7 @@ from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.stop_signals import StopSignals
 from hil.trial.table_control import MotionCheck, TableControl, check_controller, motion_needs
-from hil.trial.viewer_feed import ViewerOptions, open_viewer
+from hil.trial.viewer_feed import ViewerOptions, open_viewer, watched_chamber
 from hil.viewer.console_progress import ConsoleProgress
 from hil.vocabulary import Port
 
@@ -76,6 +76,8 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
                 raise TrialSetupError(f"{config_path}: {exc}") from None
         chamber = open_chamber(cfg.environment.chamber, ports)  # before the table moves
         viewer = open_viewer(options, cfg, out, blocking=False)
+        if chamber is not None:  # its readings and set points to the viewer too
+            chamber = watched_chamber(chamber, cfg.environment.chamber.set_point_c, viewer)
         command_url = _command_url(cfg, ports)
         with ConsoleProgress(duration, quiet=quiet) as progress:
             hooks = TrialHooks()

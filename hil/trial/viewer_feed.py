@@ -1,5 +1,6 @@
-"""The viewer of a trial: opened as ``--viewer`` asks, and fed the pipeline's snapshots, stream health
-and gimbal angles as it publishes them (:class:`~hil.pipeline.progress.Progress`)."""
+"""The viewer of a trial: opened as ``--viewer`` asks, and fed the pipeline's snapshots, stream health,
+gimbal angles and the IMU's temperature as it publishes them (:class:`~hil.pipeline.progress.Progress`), and the
+chamber's readings and set points as the harness takes and sends them (:func:`watched_chamber`)."""
 
 from __future__ import annotations
 
@@ -35,6 +36,8 @@ class Viewer(Protocol):
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None: ...
     def log_health(self, t: float, health: Health) -> None: ...
     def log_streams(self, counts: StreamCounts) -> None: ...
+    def log_temperature(self, t: float, imu_c: float | None) -> None: ...
+    def log_chamber(self, reading_c: float | None = None, set_point_c: float | None = None) -> None: ...
     def log_calibration_step(self, t: float, index: int, steps: list) -> None: ...
     def log_calibration_window(self, t: float, accel_ug: np.ndarray | None, gyro_dph: np.ndarray) -> None: ...
     def close(self) -> None: ...
@@ -105,6 +108,36 @@ def flag_health(counts: StreamCounts) -> dict[str, dict[str, float]]:
     return {"imu": {"invalid": counts.extra["imu_invalid"], **{FLAG_PREFIX + name: n for name, n in by_flag.items()}}}
 
 
+class ChamberFeed:
+    """A chamber's controller whose readings and set points also go to the viewer (``log_chamber``); every other
+    call reaches the controller as it is."""
+
+    def __init__(self, controller, viewer: Viewer) -> None:
+        self.controller, self.viewer = controller, viewer
+
+    def temperature_c(self) -> float:
+        reading = self.controller.temperature_c()
+        self.viewer.log_chamber(reading_c=reading)
+        return reading
+
+    def set_set_point_c(self, set_point_c: float) -> None:
+        self.controller.set_set_point_c(set_point_c)
+        self.viewer.log_chamber(set_point_c=set_point_c)
+
+    def __getattr__(self, name: str):
+        return getattr(self.controller, name)
+
+
+def watched_chamber(controller, set_point_c: float | None, viewer: Viewer | None):
+    """The open chamber ``controller`` (None: none) as the trial uses it: with a viewer, a :class:`ChamberFeed`, its
+    ``set_point_c`` (sent when it was opened; None: none) logged at the start."""
+    if controller is None or viewer is None:
+        return controller
+    if set_point_c is not None:
+        viewer.log_chamber(set_point_c=set_point_c)
+    return ChamberFeed(controller, viewer)
+
+
 class ViewerFeed:
     """A listener of the pipeline logging to a viewer (or nowhere): the table angles of each block the estimator
     took and, with ``snapshots``, each new solution with the stream health (``live`` adds a live trial's
@@ -119,6 +152,7 @@ class ViewerFeed:
     def on_progress(self, progress: Progress) -> None:
         if self.viewer is None:
             return
+        self.viewer.log_temperature(progress.trial_time, progress.temperature_c)
         for block in progress.taken:
             if len(block.table_t):
                 self.viewer.log_table(block.table_t, block.table_angles)

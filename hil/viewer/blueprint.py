@@ -10,6 +10,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from hil.pipeline.health import FLAG_PREFIX
+from hil.viewer.temperature_view import TEMPERATURES
 
 TIMELINE = "trial_time"
 AXES = ("x", "y", "z")
@@ -55,7 +56,7 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
                       ) -> rrb.Blueprint:
     """The trial layout: the bias first and largest (per axis the whole history beside the view that follows the
     converged estimate, its range ``follow[axis]`` µg, autoscaled without), its 1σ with the limit under it (its
-    range ``follow["sigma"]``) |
+    range ``follow["sigma"]``) and beside it the temperatures (the IMU's, the chamber's) |
     the verdict, the 3D table, and the rest in tabs (stream health in one compact grid, observability,
     alignment, drift) [| ``extra``, a further column: a trial kind's own views]."""
     follow = follow or {}
@@ -68,6 +69,8 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
         column_shares=[1, 1]) for a in AXES]  # fmt: skip
     sigma = rrb.TimeSeriesView(origin="/sigma", name="bias 1σ (µg), limit, convergence deadline",
                                axis_y=rrb.ScalarAxis(range=follow["sigma"]) if "sigma" in follow else None)
+    temperature = rrb.TimeSeriesView(origin="/", contents=[f"/{path}" for path in TEMPERATURES],
+                                     name="temperature (°C): IMU, chamber, set point")
     tabs = rrb.Tabs(
         rrb.Grid(*(rrb.TimeSeriesView(origin=f"/health/{metric}", name=title) for metric, title in HEALTH_VIEWS),
                  grid_columns=3, name="stream health"),
@@ -93,7 +96,8 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
     )
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(*rows, sigma, row_shares=[3, 3, 3, 2], name="accelerometer bias"),
+            rrb.Vertical(*rows, rrb.Horizontal(sigma, temperature, column_shares=[2, 1]), row_shares=[3, 3, 3, 2],
+                         name="accelerometer bias"),
             side,
             *([extra] if extra is not None else []),
             column_shares=[3, 2] + ([2] if extra is not None else []),

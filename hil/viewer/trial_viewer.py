@@ -54,6 +54,7 @@ from hil.viewer.judged_view import JudgedView, log_verdict
 from hil.viewer.modes import VIEWER_MODES
 from hil.viewer.rerun_process import start_viewer, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
+from hil.viewer.temperature_view import CHAMBER_READING, CHAMBER_SET_POINT, IMU, TemperatureLog
 
 log = logging.getLogger(__name__)
 
@@ -107,6 +108,7 @@ class TrialViewer:
         self._cone_pending: Snapshot | None = None  # the newest observable snapshot whose cone is not drawn
         self._ib0_logged = False
         self._t_latest = 0.0  # the latest trial time logged
+        self._temperatures = TemperatureLog()
         self._file: rr.RecordingStream | None = None  # the .rrd's stream, its rows held FILE_FLUSH_S
         self._view: rr.RecordingStream | None = None  # the live view's (spawn, serve), its rows sent at once
         self._calibration: CalibrationLog | None = None
@@ -183,6 +185,20 @@ class TrialViewer:
         """result.json's stream counters so far (a :class:`~hil.samples.StreamCounts`), for the verdict so far."""
         if self._judged.verdict is not None:
             self._submit(lambda: self._judged.verdict.take_streams(counts.as_dict()))
+
+    def log_temperature(self, t: float, imu_c: float | None) -> None:
+        """The pipeline's progress at trial time t with the IMU's latest temperature (deg C, None: none reported),
+        to ``/imu/temperature_c`` once a second of trial time (:mod:`hil.viewer.temperature_view`)."""
+        if self._rec is not None and self._temperatures.imu_due(float(t), imu_c):
+            self._submit(lambda: self._temperatures.write(self._rec, self._scalars, IMU, float(t), float(imu_c)))
+
+    def log_chamber(self, reading_c: float | None = None, set_point_c: float | None = None) -> None:
+        """The chamber's reading or set point (deg C) as the harness reads or sends it, at the trial time of the
+        latest :meth:`log_temperature`."""
+        t = self._temperatures.t_progress
+        for path, value in ((CHAMBER_READING, reading_c), (CHAMBER_SET_POINT, set_point_c)):
+            if value is not None:
+                self._submit(lambda p=path, v=float(value): self._temperatures.write(self._rec, self._scalars, p, t, v))
 
     def log_calibration_step(self, t: float, index: int, steps: list) -> None:
         """Calibration step ``index`` (0-based) of ``steps`` (dwells and plateaus) commanded at trial time t
