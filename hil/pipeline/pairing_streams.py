@@ -63,6 +63,13 @@ class StreamPairing:
         self.offset = None
         self.late = 0
 
+    def flushed(self) -> Samples | None:
+        """End of data: the held samples of a paired stream, paired as they were (None: unpaired or none held)."""
+        if self.offset is None or not self.held:
+            return None
+        released, self.held = shifted(joined(self.held), self.offset), []
+        return released
+
     def trim(self, span: float) -> int:
         """Drops the oldest held reads beyond ``span`` pulses of the newest sample (one read always stays);
         returns the samples dropped."""

@@ -138,16 +138,10 @@ class SyncPairing:
     def flush(self) -> tuple[TableSamples | None, ImuSamples | None]:
         """End of data: the (table, IMU) samples of late reads of paired streams, which no later read can judge
         now, are paired as they were; IMU samples still waiting for a pairing are unpaired."""
-        out = []
-        for s in (self.table, self.imu):
-            if s.offset is not None and s.held:
-                released, s.held = shifted(joined(s.held), s.offset), []
-                out.append(released)
-            else:
-                out.append(None)
+        table, imu = self.table.flushed(), self.imu.flushed()
         self.report.unpaired += sum(len(read) for read in self.imu.held)
         self.imu.held = []
-        return out[0], out[1]
+        return table, imu
 
     def _read(self, s: StreamPairing, samples: Samples) -> Samples | None:
         """One read of ``s``: what of it (and of earlier reads) is now paired, on the pulse line."""
