@@ -5,6 +5,7 @@ Aerosmith rate table."""
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -67,7 +68,10 @@ def test_the_scale_factor_test_of_a_running_emulated_aerosmith_table_finds_its_t
     assert stats["table_modes"] == "Off"
 
 
+@pytest.mark.skipif(not os.environ.get("HIL_LAB_TESTS"), reason="lab form on a quiet host: set HIL_LAB_TESTS=1")
 def test_the_frequency_response_of_a_running_emulated_acutrol_table_finds_its_bandwidth_and_delay(tmp_path):
+    """Paired by receive times alone, it needs prompt reads: on a host loaded several times over its cores the
+    frame-rate check or the pairing ends it early (docs/ratetests.md), so it runs where the lab tests run."""
     code, doc, stats = _lab_test(tmp_path, "ratetest_acutrol.yaml", "frequency-response",
                                  {"frequencies_hz": [5, 20, 60, 100, 150], "dwell_s": 0.2, "settle_s": 0.2,
                                   "axes": ["z"]})
