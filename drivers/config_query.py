@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
-REPLY_TIMEOUT_S = 1.0  # longest wait for one reply (a KVH answers within 100 ms, an MTi within a few)
+REPLY_TIMEOUT_S = 1.0  # longest wait for one reply (the KVH manual: a ?BIT reply typically within 100 ms)
 T = TypeVar("T")
 
 
