@@ -180,6 +180,7 @@ class EstimatorConfig(Model):
     bias_model: Literal["constant", "drift"] = "constant"  # drift: b = b_s + k t (15 states)
     gyro_table_gate: bool = True  # off: no gyro sample is held to the table's rotation (hil ratetest's live form)
     pair_by_motion: bool = True  # off: the IMU is paired by its counter and receive times alone (frequency response)
+    flags_end_trial: bool = True  # off: samples the IMU flags never end a trial early (hil ratetest: a step may clip)
 
 
 class ReportLimits(Model):

@@ -88,11 +88,11 @@ BATCH = next(Simulation.from_config(CFG).batches(chunk=10**6))
 POWER_UP = 0x70  # the gyros flagged invalid
 
 
-def _processed(status_of, garbage: float = 0.0, duration: float = 20.0):
+def _processed(status_of, garbage: float = 0.0, duration: float = 20.0, cfg=CFG):
     """A processor fed a 20 s swing's KVH and table frames in reads of 0.5 s, the IMU's status per sample
     ``status_of(k)``; a flagged sample's gyro reads ``garbage`` rad more than the truth."""
     imu, table = CODECS[IMU], CODECS[TABLE]
-    processor = TrialProcessor(CFG, duration, None)
+    processor = TrialProcessor(cfg, duration, None)
     n = len(BATCH)
     progress = None
     for start in range(0, n, 50):
@@ -125,6 +125,14 @@ def test_every_sample_flagged_stalls_the_trial_naming_the_flags():
     _, progress = _processed(lambda k: POWER_UP, duration=20.0)
     assert progress.stalled is not None and progress.trial_time < 10.0
     assert "gyro_x_invalid, gyro_y_invalid, gyro_z_invalid" in progress.stalled, progress.stalled
+
+
+def test_flagged_samples_never_end_a_trial_that_expects_them():
+    """hil ratetest's live form: a step beyond the gyro's range flags every sample for longer than the stall."""
+    cfg = CFG.model_copy(update={"estimator": CFG.estimator.model_copy(update={"flags_end_trial": False})})
+    processor, progress = _processed(lambda k: POWER_UP if k < 1500 else 0x77, cfg=cfg)  # 15 s flagged
+    assert progress.stalled is None
+    assert processor.finished().streams.as_dict()["imu_invalid"] == 1500
 
 
 @pytest.mark.parametrize(("invalid", "limits", "outcome"), [(10, {}, FAIL), (2, {}, PASS),

@@ -21,12 +21,14 @@ from hil.units import DEG
 class Judge:
     """The health flags (``flags``, the IMU codec's), the plausibility check and the gyro/table gate of a trial at
     ``rate_hz`` on a table whose fastest gimbal rate limit is ``max_rate_dps``; without ``table_gate`` the gyro is
-    not held to the table's rotation (``estimator.gyro_table_gate``)."""
+    not held to the table's rotation (``estimator.gyro_table_gate``); without ``flags_stall`` samples the device
+    flags do not end a trial however long they last (``estimator.flags_end_trial``)."""
 
     def __init__(self, earth: Earth, geometry: TableGeometry, rate_hz: float, max_rate_dps: float,
-                 flags: tuple[HealthFlag, ...] = (), table_gate: bool = True) -> None:
+                 flags: tuple[HealthFlag, ...] = (), table_gate: bool = True, flags_stall: bool = True) -> None:
         self.rate_hz = rate_hz
         self.table_gate = table_gate
+        self.flags_stall = flags_stall
         self.health = HealthCheck(flags)
         self.plausibility = ImuPlausibility(rate_hz, earth.g, RATE_MARGIN * max_rate_dps * DEG)
         self.gate = GyroTableGate(earth, geometry)
@@ -63,7 +65,7 @@ class Judge:
                                                run.dtheta[valid])
         if good.any():
             self.watch.taken(len(good) - 1 - int(np.flatnonzero(good)[-1]))
-        else:
+        elif valid.any() or self.flags_stall:
             self._rejected(self.gate if valid.any() else self.health, len(good))
         if good.all():
             return [run]

@@ -60,7 +60,8 @@ class TrialProcessor:
         self._decoding = Decoding(cfg, time_scale)
         self._compensation = Compensation(cfg.imu.calibration, 1.0 / cfg.imu_rate_hz) if cfg.imu.calibration else None
         self._judge = Judge(earth, geometry, cfg.imu_rate_hz, max(cfg.turntable.limits.rate_dps),
-                            self._decoding.codec(IMU).health_flags, cfg.estimator.gyro_table_gate)
+                            self._decoding.codec(IMU).health_flags, cfg.estimator.gyro_table_gate,
+                            cfg.estimator.flags_end_trial)
         free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
         self._pairing = None if free_running else sync_pairing(cfg, time_scale, self._decoding, earth, geometry)
         self._aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,

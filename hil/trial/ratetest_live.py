@@ -35,7 +35,7 @@ def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quie
                response: bool = False):
     """Run the steps ``plan(gimbals)`` makes as a live trial (``response``: a frequency response's, module
     docstring); the windows and how it ended."""
-    lagging = {"gyro_table_gate": not response, "pair_by_motion": not response}
+    lagging = {"gyro_table_gate": not response, "pair_by_motion": not response, "flags_end_trial": False}
     cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update=lagging)})
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil ratetest commands the table; set its port "
