@@ -5,7 +5,8 @@
     .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--layout trial] [--out web_viewer.png]
 
 Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
-through ``TrialViewer("serve", ...)`` with the default trial's ``output.limits`` (the verdict so far),
+through ``TrialViewer("serve", ...)`` with the default trial's ``output.limits`` (the verdict so far)
+(``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``),
 checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
 Chromium at 1600x1000 with software WebGL (``--use-gl=angle --use-angle=swiftshader
 --enable-unsafe-swiftshader``), waits for the viewer's WebAssembly to load and draw, and saves a
@@ -32,7 +33,10 @@ from emulators.simulation import Simulation
 from hil.config import load_config
 from hil.estimation.calibration_schedule import default_schedule
 from hil.estimation.online import OnlineEstimator
+from hil.outputs.noise import ADEV_UNITS
+from hil.trial.noise_runner import analyse_record, show_forming, simulated
 from hil.units import UG
+from hil.viewer.allan_view import AllanView
 from hil.viewer.trial_viewer import TrialViewer
 
 CHROMIUM = "/usr/bin/chromium"
@@ -78,6 +82,17 @@ def log_trial(out: Path, layout: str) -> TrialViewer:
     return viewer
 
 
+def log_noise(out: Path) -> AllanView:
+    """The noise view of a simulated static hour at 50 Hz: its curves as they form and its terms."""
+    cfg = load_config("configs/noise_static.yaml")
+    cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 3600.0, "rate_hz": 50.0})})
+    record = simulated(cfg)
+    view = AllanView("serve", out, ADEV_UNITS)
+    show_forming(view, record, analyse_record(record, "noise"), lambda part: analyse_record(part, "noise"))
+    view.close()
+    return view
+
+
 def log_calibration(viewer: TrialViewer) -> None:
     """A calibration's first three dwells and one plateau, with made-up residuals."""
     schedule = default_schedule()
@@ -93,7 +108,8 @@ def log_calibration(viewer: TrialViewer) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load and draw (default 20)")
-    parser.add_argument("--layout", choices=("trial", "calibration"), default="trial", help="blueprint layout")
+    parser.add_argument("--layout", choices=("trial", "calibration", "noise"), default="trial",
+                        help="blueprint layout")
     parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
     parser.add_argument("--chromium", default=CHROMIUM, help=f"browser executable (default {CHROMIUM})")
     args = parser.parse_args()
@@ -107,7 +123,7 @@ def main() -> int:
         return 2
 
     with tempfile.TemporaryDirectory() as tmp:
-        viewer = log_trial(Path(tmp), args.layout)
+        viewer = log_noise(Path(tmp)) if args.layout == "noise" else log_trial(Path(tmp), args.layout)
         try:
             web_port = urlsplit(viewer.url).port
             grpc_port = urlsplit(parse_qs(urlsplit(viewer.url).query)["url"][0]).port

@@ -43,10 +43,15 @@ def _live_options(p: argparse.ArgumentParser) -> None:
 
 def _trial_options(p: argparse.ArgumentParser, out_default: str = "output.dir or runs/NAME-TIME",
                    viewer_default: str | None = None) -> None:
-    from hil.viewer.modes import VIEWER_MODES, default_viewer_mode
+    from hil.viewer.modes import default_viewer_mode
 
     _out_options(p, out_default)
-    default = viewer_default or default_viewer_mode()
+    _viewer_options(p, viewer_default or default_viewer_mode())
+
+
+def _viewer_options(p: argparse.ArgumentParser, default: str) -> None:
+    from hil.viewer.modes import VIEWER_MODES
+
     p.add_argument("--viewer", choices=VIEWER_MODES, default=default,
                    help=f"Rerun viewer: native window, web viewer, .rrd file only, or nothing (default {default})")
     p.add_argument("--bind", default="127.0.0.1", help="address the web viewer listens on (default 127.0.0.1)")
@@ -143,7 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
     _out_options(p, "runs/noise-NAME", "allan.png")
     p.add_argument("--config", type=_config_path, help="for a CSV of a moving trial: its site and table")
     p.add_argument("--export", type=Path, help="also write the increments analysed as a CSV here")
-    p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd")
+    p.add_argument("--rerun", action="store_true", help="also write the Allan deviation curves as OUT/noise.rrd "
+                                                        "(as --viewer save)")
+    _viewer_options(p, "none")
     p.add_argument("--taus", default="octave", help="tau grid of the deviation: octave (default), decade (1, 2, 5 x "
                                                     "10^k s), all (every multiple of the period: n^2/2 operations), "
                                                     "or taus in s such as 1,10,100,3600")

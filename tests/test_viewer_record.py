@@ -32,18 +32,24 @@ def _recorded(path: Path) -> set[str]:
     return {chunk.entity_path for chunk in reader.stream(store=recording)} - {"/__properties"}
 
 
-def _documented() -> tuple[set[str], set[str], set[str]]:
-    """The entity paths docs/viewer.md's "Entity paths" names: the trial's table, ``hil calibrate``'s and a
-    chamber's."""
-    section = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
-    trial, rest = section.split("`hil calibrate` adds", 1)
-    calibration, chamber = rest.split("**With a chamber**", 1)
+PARTS = ("`hil calibrate` adds", "**With a chamber**", "**`hil noise`**")  # docs/viewer.md's after the trial's
+
+
+def documented() -> list[set[str]]:
+    """The entity paths docs/viewer.md's "Entity paths" names: the trial's table, then ``hil calibrate``'s, a
+    chamber's and ``hil noise``'s (``PARTS``)."""
+    text = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
+    sections = []
+    for marker in PARTS:
+        head, text = text.split(marker, 1)
+        sections.append(head)
+    sections.append(text)
 
     def paths(text: str) -> set[str]:
         cells = [line.split("|")[1] for line in text.splitlines() if line.startswith("| `/")]
         return {p for cell in cells for p in re.findall(r"`(/[^`<>…]*)`", cell)}
 
-    return paths(trial), paths(calibration), paths(chamber)
+    return [paths(part) for part in sections]
 
 
 def _stated_mb_per_60_s() -> float:
@@ -63,8 +69,7 @@ def trial_rrd(tmp_path_factory) -> Path:
 
 
 def test_a_trials_recording_holds_exactly_the_entities_docs_viewer_names(trial_rrd):
-    documented, _, _ = _documented()
-    assert _recorded(trial_rrd) == documented
+    assert _recorded(trial_rrd) == documented()[0]
 
 
 def test_a_60_s_trials_recording_is_the_size_docs_viewer_states(trial_rrd):
@@ -90,7 +95,7 @@ def test_a_trials_recording_holds_a_few_chunks_per_entity_whatever_its_pace(tria
 
 
 def test_a_calibrations_recording_adds_exactly_the_entities_docs_viewer_names(tmp_path):
-    trial, calibration, _ = _documented()
+    trial, calibration = documented()[:2]
     schedule = default_schedule()
     steps = list(schedule.dwells) + list(schedule.plateaus)
     viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True, layout="calibration")
@@ -238,7 +243,7 @@ class _Chamber:
 
 
 def test_a_chambers_set_points_and_readings_go_to_exactly_the_entities_docs_viewer_names(tmp_path):
-    trial, calibration, chamber_paths = _documented()
+    trial, _, chamber_paths, _ = documented()
     viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True)
     controller = _Chamber()
     chamber = watched_chamber(controller, 25.0, viewer)

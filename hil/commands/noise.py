@@ -24,14 +24,18 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
     from hil.trial.noise_runner import run_noise
 
     given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
+    view = _view(args, out)
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
-                        rerun=args.rerun, taus=args.taus, duration=args.duration, quiet=args.quiet,
+                        view=view, taus=args.taus, duration=args.duration, quiet=args.quiet,
                         record=lambda cfg: noise_record(given, args.source, cfg, args.started,
                                                         datetime.now(timezone.utc)), detrend=args.detrend)
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code
+    finally:
+        if view is not None:
+            view.close()
     print(noise_summary(doc, out))
     if not args.no_history:
         from hil.history.entry import NOISE, noise_figures, trial_row
@@ -39,4 +43,26 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
 
         result = {"trial": doc["trial"], "ended": "completed", "record": doc["record"]}
         file_trial(args.history, trial_row(NOISE, out, result, None, noise_figures(doc)))
+    if view is not None:
+        from hil.trial.viewer_feed import finish_viewer
+
+        finish_viewer(view)
     return 0
+
+
+def _view(args: argparse.Namespace, out: Path):
+    """The noise view ``--viewer`` asks for (``--rerun``: ``save``), or None."""
+    mode = "save" if args.rerun and args.viewer == "none" else args.viewer
+    if mode == "none":
+        return None
+    from hil.inputs import InputError
+    from hil.outputs.noise import ADEV_UNITS
+    from hil.viewer.allan_view import AllanView  # rerun only when a view is asked for
+
+    try:
+        view = AllanView(mode, out, ADEV_UNITS, args.bind)
+    except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
+        raise InputError(f"--viewer {mode}: the viewer did not start: {exc}") from None
+    if view.url:
+        print(f"web viewer: {view.url}", file=sys.stderr)
+    return view

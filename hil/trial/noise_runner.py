@@ -8,6 +8,7 @@ moving one the table's motion is first taken out with its angles (:mod:`hil.pipe
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,6 +37,7 @@ from hil.units import DEG, DEG_PER_H, HOUR, SQRT_HOUR, UG
 
 STATIC_ANGLE_SPAN = 1e-3 * DEG  # table angles spanning less than this: a static trial
 STATIC_RATE_SPAN = 0.5 * DEG  # rad/s: 1-s mean rates spanning more than this without angles: a moving IMU
+FORMING_HALVINGS = 8  # a live view is shown the analysis of the record's first T / 2^k, k = this .. 1, then T's
 
 
 @dataclass(frozen=True)
@@ -222,16 +224,16 @@ def _temperature_coefficients(gyro: np.ndarray, accel: np.ndarray, about_c: floa
 
 
 def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
-              figure: bool = True, export: Path | None = None, rerun: bool = False, taus: str = "octave",
+              figure: bool = True, export: Path | None = None, view=None, taus: str = "octave",
               duration: float | None = None, quiet: bool = False,
               record: Callable[[Config | None], dict] | None = None, detrend: str = "none") -> dict:
     """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
     separated), with ``detrend`` (``none``, ``linear`` or ``temperature``, see :func:`analyse_record`), and write
-    OUT/noise.json,
-    allan.png, report.html and (``rerun``) noise.rrd; returns the noise
-    document. A config that reads devices is acquired first (``duration`` s, see
-    :mod:`hil.trial.noise_acquisition`). ``record(source_config)`` gives noise.json's ``record`` once the analysis
-    is done (``source_config``: :attr:`NoiseRecord.source_config`)."""
+    OUT/noise.json, allan.png and report.html; returns the noise document. ``view`` (an
+    :class:`~hil.viewer.allan_view.AllanView`, or None) is shown the curves as they form (:func:`show_forming`).
+    A config that reads devices is acquired first (``duration`` s, see :mod:`hil.trial.noise_acquisition`).
+    ``record(source_config)`` gives noise.json's ``record`` once the analysis is done (``source_config``:
+    :attr:`NoiseRecord.source_config`)."""
     try:
         grid = parse_taus(taus)
     except ValueError as exc:
@@ -243,10 +245,35 @@ def run_noise(source: str | Path, out: Path, config: str | Path | None = None, l
     analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source).stem}
     if record is not None:
         analysis.doc["record"] = record(samples.source_config)
+    if view is not None:
+        show_forming(view, samples, analysis, lambda part: analyse_record(part, str(source), level, grid, detrend))
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
-    if rerun:
-        from hil.viewer.allan_view import save_allan  # rerun only when asked for
-
-        save_allan(out, analysis.doc)
     return analysis.doc
+
+
+def show_forming(view, record: NoiseRecord, whole: NoiseAnalysis,
+                 analysed: Callable[[NoiseRecord], NoiseAnalysis]) -> None:
+    """Show ``view`` the analysis of the record's first ``T / 2^k`` (``k`` from ``FORMING_HALVINGS`` down to 1;
+    the parts too short for an analysis left out), each at its record time, then the ``whole`` record's: the long
+    taus join as the record doubles, the short ones settle. The parts cost about one more analysis of the whole."""
+    batch = record.batch
+    total = float(batch.t[-1] - batch.t0)
+    for k in range(FORMING_HALVINGS, 0, -1):
+        n = len(batch) >> k
+        if n < 2:
+            continue
+        part = dataclasses.replace(record, batch=_first(batch, n))
+        try:
+            doc = analysed(part).doc
+        except (DataError, TrialSetupError):  # too short for four octaves of tau, or for the motion's removal
+            continue
+        view.show(float(batch.t[n - 1] - batch.t0), total, doc)
+    view.show(total, total, whole.doc)
+
+
+def _first(batch: AlignedBatch, n: int) -> AlignedBatch:
+    """The batch's first ``n`` samples."""
+    cut = {name: None if getattr(batch, name) is None else getattr(batch, name)[:n]
+           for name in ("t", "dtheta", "dv", "angles", "valid", "temperature_c")}
+    return dataclasses.replace(batch, **cut)

@@ -61,6 +61,16 @@ def start_viewer(mode: str, bind: str, telemetry: bool) -> tuple[subprocess.Pope
     return process, f"rerun+http://{_url_host(local)}:{grpc_port}/proxy", url
 
 
+def stop_served(process: subprocess.Popen | None, mode: str) -> None:
+    """Stop the web viewer of ``serve`` mode (a spawned native viewer stays open)."""
+    if process is not None and mode == "serve" and process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+
+
 def rerun_executable() -> str:
     """The ``rerun`` binary of the installed rerun-sdk (the one whose version matches the SDK)."""
     try:

@@ -52,7 +52,7 @@ from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.chunks import Columns, Streams
 from hil.viewer.judged_view import JudgedView, log_verdict
 from hil.viewer.modes import VIEWER_MODES
-from hil.viewer.rerun_process import start_viewer, telemetry_requested
+from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
 from hil.viewer.temperature_view import CHAMBER_READING, CHAMBER_SET_POINT, IMU, TemperatureLog
 
@@ -250,12 +250,7 @@ class TrialViewer:
         if self._view is not None:
             self._view.disconnect()
         process, self.viewer_process = self.viewer_process, None
-        if process is not None and self.mode == "serve" and process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(5.0)
-            except subprocess.TimeoutExpired:
-                process.kill()
+        stop_served(process, self.mode)
 
     def __enter__(self) -> Self:
         return self
