@@ -198,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip each step's PNG figures")
     p.add_argument("--speed", default="1", type=speed_option,
                    help="emulated devices: X times real time, or 'max' (default 1); also the plan's waits")
+    _viewer_options(p, "none")  # the plan's view, each swing and calibrate step's own in the same viewer
     _record_options(p)
     _history_options(p)
 

@@ -32,12 +32,12 @@ def _recorded(path: Path) -> set[str]:
     return {chunk.entity_path for chunk in reader.stream(store=recording)} - {"/__properties"}
 
 
-PARTS = ("`hil calibrate` adds", "**With a chamber**", "**`hil noise`**")  # docs/viewer.md's after the trial's
+PARTS = ("`hil calibrate` adds", "**With a chamber**", "**`hil noise`**", "**`hil plan`**")  # after the trial's
 
 
 def documented() -> list[set[str]]:
     """The entity paths docs/viewer.md's "Entity paths" names: the trial's table, then ``hil calibrate``'s, a
-    chamber's and ``hil noise``'s (``PARTS``)."""
+    chamber's, ``hil noise``'s and ``hil plan``'s (``PARTS``)."""
     text = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
     sections = []
     for marker in PARTS:
@@ -243,7 +243,7 @@ class _Chamber:
 
 
 def test_a_chambers_set_points_and_readings_go_to_exactly_the_entities_docs_viewer_names(tmp_path):
-    trial, _, chamber_paths, _ = documented()
+    trial, _, chamber_paths = documented()[:3]
     viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True)
     controller = _Chamber()
     chamber = watched_chamber(controller, 25.0, viewer)

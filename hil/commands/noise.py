@@ -55,14 +55,8 @@ def _view(args: argparse.Namespace, out: Path):
     mode = "save" if args.rerun and args.viewer == "none" else args.viewer
     if mode == "none":
         return None
-    from hil.inputs import InputError
     from hil.outputs.noise import ADEV_UNITS
+    from hil.trial.viewer_feed import started_view
     from hil.viewer.allan_view import AllanView  # rerun only when a view is asked for
 
-    try:
-        view = AllanView(mode, out, ADEV_UNITS, args.bind)
-    except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
-        raise InputError(f"--viewer {mode}: the viewer did not start: {exc}") from None
-    if view.url:
-        print(f"web viewer: {view.url}", file=sys.stderr)
-    return view
+    return started_view(lambda: AllanView(mode, out, ADEV_UNITS, args.bind), mode)

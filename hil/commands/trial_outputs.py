@@ -12,10 +12,12 @@ from pathlib import Path
 
 
 def viewer_options(args: argparse.Namespace):
-    """The live viewer the arguments ask for."""
+    """The live viewer the arguments ask for; a plan's step, the plan's viewer (``args.plan_view``, set by
+    :func:`hil.plan.steps.run_trial_step`: its gRPC URL or None, and the plan's document)."""
     from hil.trial.viewer_feed import ViewerOptions
 
-    return ViewerOptions(args.viewer, args.bind)
+    connect, plan = getattr(args, "plan_view", (None, None))
+    return ViewerOptions(args.viewer, args.bind, connect=connect, plan=plan)
 
 
 def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:

@@ -40,13 +40,48 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"plan-{plan.name}"
     with claimed(out, ()):
         state = PlanState.open(out, plan, args.resume)
-        ctx = StepContext(out, plan.name, state.doc["run"], args, commands)
+        view = _view(args, out, plan)
+        ctx = StepContext(out, plan.name, state.doc["run"], args, commands, view)
         devices = Devices(power, chamber, PlanTable(plan.config))
-        with StopSignals() as stop, power, chamber, devices.table:  # left in reverse: the table Off first
-            power.restore(plan, state)
-            chamber.restore(plan, state)
-            ended = _steps(plan, state, ctx, devices, stop)
-        return _close(plan, state, ended, devices)
+        try:
+            with StopSignals() as stop, power, chamber, devices.table:  # left in reverse: the table Off first
+                power.restore(plan, state)
+                chamber.restore(plan, state)
+                ended = _steps(plan, state, ctx, devices, stop)
+            code = _close(plan, state, ended, devices, view)
+        finally:
+            if view is not None:
+                view.close()
+        if view is not None:
+            from hil.trial.viewer_feed import finish_viewer
+
+            finish_viewer(view)  # a served web viewer stays up until Ctrl-C
+        return code
+
+
+def _view(args: argparse.Namespace, out: Path, plan: Plan):
+    """The plan's view ``--viewer`` asks for (:mod:`hil.viewer.plan_view`), or None."""
+    if args.viewer == "none":
+        return None
+    from hil.trial.viewer_feed import started_view
+    from hil.viewer.plan_view import PlanView  # rerun only when a view is asked for
+
+    return started_view(lambda: PlanView(args.viewer, out, plan.name, args.bind), args.viewer)
+
+
+def _show(view, plan: Plan, state: PlanState, step: Step | None, after: bool = False, ended: str | None = None,
+          verdict: str | None = None) -> None:
+    """The plan in its view (None: none) at ``step``'s start (``after``: its end; None: the plan's end), on the
+    plan's scheduled time."""
+    if view is None:
+        return
+    from hil.viewer.plan_view import plan_markdown
+
+    done = len(plan.steps) if step is None else step.index - (0 if after else 1)
+    t, left = (sum(s.duration_s for s in plan.steps[:done]), sum(s.duration_s for s in plan.steps[done:]))
+    running = None if step is None or after else step.index
+    view.show(t, plan_markdown(plan.name, state.doc["steps"], running, _duration(left, 1), ended, verdict), running,
+              len(plan.steps))
 
 
 class Devices(NamedTuple):
@@ -66,8 +101,10 @@ def _steps(plan: Plan, state: PlanState, ctx: StepContext, devices: Devices, sto
             return f"interrupted ({stop.received})"
         _progress(plan, step, devices.power.speed)
         state.start(step)
+        _show(ctx.view, plan, state, step)
         ended, verdict, more = _run_step(step, ctx, devices, stop)
         state.finish(step, ended, verdict, **more)
+        _show(ctx.view, plan, state, step, after=True)
         if verdict == INTERRUPTED or stop.received:
             return f"interrupted ({stop.received or 'during step ' + str(step.index)})"
         if verdict == ENDED_EARLY and step.on_failure == "stop":
@@ -97,7 +134,7 @@ def _run_step(step: Step, ctx: StepContext, devices: Devices, stop: StopSignals)
     return (*power.step(step, stop), {})
 
 
-def _close(plan: Plan, state: PlanState, ended: str, devices: Devices) -> int:
+def _close(plan: Plan, state: PlanState, ended: str, devices: Devices, view) -> int:
     """The plan's end in plan.json, plan.html and junit.xml; its exit code as a trial's."""
     from hil.plan.pages import write_pages
     from hil.plan.repeatability import units_figures
@@ -110,6 +147,7 @@ def _close(plan: Plan, state: PlanState, ended: str, devices: Devices) -> int:
     else:
         verdict = "FAIL" if "FAIL" in verdicts else "PASS" if "PASS" in verdicts else None
     state.close(ended, verdict, units_figures(plan, state))
+    _show(view, plan, state, None, ended=ended, verdict=verdict)
     write_pages(state)
     print(f"plan {plan.name}: {ended}, verdict {verdict or 'none judged'}; {state.out / 'plan.html'}")
     if devices.table.exit_state:

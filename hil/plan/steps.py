@@ -26,13 +26,15 @@ INTERRUPTED, ENDED_EARLY = "INTERRUPTED", "ENDED EARLY"
 @dataclass(frozen=True)
 class StepContext:
     """What every trial step of one plan run shares: the plan's output directory, name and run, the plan
-    command's arguments (speed, history, record options) and the command functions by name (:data:`hil.cli.COMMANDS`)."""
+    command's arguments (speed, history, record options) and the command functions by name (:data:`hil.cli.COMMANDS`);
+    ``view`` the plan's viewer (:class:`hil.viewer.plan_view.PlanView`, None: none)."""
 
     out: Path
     name: str
     run: str
     args: argparse.Namespace
     commands: dict[str, Callable[[argparse.Namespace], int]]
+    view: object | None = None
 
 
 def plan_tag(name: str, run: str, step: Step) -> str:
@@ -44,9 +46,11 @@ def run_trial_step(step: Step, ctx: StepContext, overrides: dict) -> tuple[str, 
     """Run ``step`` through its command into ``OUT/NN-<kind>``, its config with ``overrides`` (the unit's state
     since its last power-on): how it ended, its verdict and its exit code."""
     config = _write_config(step, ctx, overrides)
-    argv = _argv(step, config, ctx.out / step.out_name, ctx.args)
+    argv = _argv(step, config, ctx.out / step.out_name, ctx.args, "none" if ctx.view is None else "save")
     args = build_parser().parse_args(argv)
     args.func, args.started = ctx.commands[args.command], datetime.now(timezone.utc)
+    if ctx.view is not None:  # a swing or calibrate step's own view in the plan's viewer, the plan's document beside
+        args.plan_view = (ctx.view.grpc_url, ctx.view.text)
     try:
         code = args.func(args)
     except InputError as exc:
@@ -69,14 +73,14 @@ def _write_config(step: Step, ctx: StepContext, overrides: dict) -> Path:
     return path
 
 
-def _argv(step: Step, config: Path, out: Path, args: argparse.Namespace) -> list[str]:
-    """The command line of ``step``'s own command."""
+def _argv(step: Step, config: Path, out: Path, args: argparse.Namespace, viewer: str) -> list[str]:
+    """The command line of ``step``'s own command (a swing or calibrate step's ``--viewer``: ``viewer``)."""
     command = COMMAND_OF[step.kind]
     argv = [*command, str(config), "--out", str(out), "--overwrite", "--quiet"]  # --overwrite: a re-run step
     if step.kind == "noise":
         argv += ["--duration", str(step.params["duration_s"])]
     else:
-        argv += ["--speed", args.speed] + (["--viewer", "none"] if step.kind in ("swing", "calibrate") else [])
+        argv += ["--speed", args.speed] + (["--viewer", viewer] if step.kind in ("swing", "calibrate") else [])
     argv += ["--no-history"] if args.no_history else ["--history", args.history] if args.history else []
     for option in ("dut", "operator", "station"):
         if getattr(args, option) is not None:

@@ -9,13 +9,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 
 from hil.config import Config, ReportLimits
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
+from hil.inputs import InputError
 from hil.pipeline.health import FLAG_PREFIX
 from hil.pipeline.progress import Health, Progress
 from hil.samples import StreamCounts
@@ -45,14 +46,20 @@ class Viewer(Protocol):
     def stop(self) -> None: ...
 
 
+OwnView = TypeVar("OwnView")
+
+
 @dataclass(frozen=True)
 class ViewerOptions:
     """``--viewer`` and ``--bind``; ``layout`` the blueprint: ``trial``, or ``calibration`` (the trial's views
-    and the calibration's, :mod:`hil.viewer.calibration_view`)."""
+    and the calibration's, :mod:`hil.viewer.calibration_view`); a plan's step: ``connect`` the gRPC URL of the
+    plan's viewer (None: none) and ``plan`` the plan's document (:mod:`hil.viewer.plan_view`)."""
 
     mode: str = "none"
     bind: str = "127.0.0.1"
     layout: str = "trial"
+    connect: str | None = None
+    plan: str | None = None
 
 
 def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) -> Viewer | None:
@@ -70,12 +77,26 @@ def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) 
                              truth_bias=None if truth is None else np.array(truth["accel_bias_ug"]) * UG,
                              truth_drift=None if truth is None else np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR,
                              bind=options.bind, recording_name=cfg.trial.name, blocking=blocking,
-                             layout=options.layout, limits=cfg.limits, verdict_at_end=True)
+                             layout=options.layout, limits=cfg.limits, verdict_at_end=True, connect=options.connect,
+                             plan=options.plan)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:
         print(f"web viewer: {viewer.url}", file=sys.stderr)
     return viewer
+
+
+def started_view(make: Callable[[], OwnView], mode: str) -> OwnView:
+    """``make()``: a view with a recording of its own (:class:`hil.viewer.own_recording.OwnRecording`: a noise
+    characterisation's, a plan's) in ``mode``, its web viewer's address printed; one that does not start is an
+    :class:`~hil.inputs.InputError` naming ``--viewer``."""
+    try:
+        view = make()
+    except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
+        raise InputError(f"--viewer {mode}: the viewer did not start: {exc}") from None
+    if view.url:
+        print(f"web viewer: {view.url}", file=sys.stderr)
+    return view
 
 
 def show_verdict(viewer: Viewer | None, result: dict, limits: ReportLimits) -> None:

@@ -10,8 +10,6 @@ steps back through them; the view shows the latest. Entity paths in docs/viewer.
 
 from __future__ import annotations
 
-import subprocess
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +19,7 @@ import rerun.blueprint as rrb
 from hil.outputs.measurements import format_value
 from hil.outputs.noise import SENSORS
 from hil.viewer.blueprint import AXES, AXIS_COLORS, TIMELINE, band_color
-from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested
-from hil.viewer.trial_viewer import APPLICATION_ID
+from hil.viewer.own_recording import OwnRecording
 
 NOISE_RRD = "noise.rrd"
 GRID_COLOR = (170, 170, 170)
@@ -76,27 +73,13 @@ def terms_markdown(doc: dict, recorded_s: float, total_s: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-class AllanView:
-    """The noise view in ``mode`` (``spawn``, ``serve`` or ``save``), written to OUT/noise.rrd in every mode;
-    :meth:`show` logs one analysis. ``close``, ``stop``, ``mode``, ``url`` and ``viewer_process`` as a trial's
-    viewer has them (:func:`hil.trial.viewer_feed.finish_viewer`)."""
+class AllanView(OwnRecording):
+    """The noise view in ``mode`` (``spawn``, ``serve`` or ``save``), written to OUT/noise.rrd in every mode
+    (:class:`~hil.viewer.own_recording.OwnRecording`); :meth:`show` logs one analysis."""
 
     def __init__(self, mode: str, out: Path, units: dict[str, str], bind: str = "127.0.0.1") -> None:
-        self.mode, self.units = mode, dict(units)
-        self.url: str | None = None
-        self.viewer_process: subprocess.Popen | None = None
-        self.rrd_path = Path(out) / NOISE_RRD
-        self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-        rr.set_log_time_enabled(False, recording=self.rec)
-        rr.set_log_tick_enabled(False, recording=self.rec)
-        sinks = [rr.FileSink(str(self.rrd_path))]
-        if mode in ("spawn", "serve"):
-            self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, telemetry_requested())
-            sinks.append(rr.GrpcSink(grpc_url))
-        self.rec.set_sinks(*sinks, default_blueprint=noise_blueprint(self.units))
-        self.rec.send_recording_name("noise characterisation")
-        self._closed = False
+        super().__init__(mode, Path(out) / NOISE_RRD, noise_blueprint(units), "noise characterisation", bind)
+        self.units = dict(units)
 
     def show(self, recorded_s: float, total_s: float, doc: dict) -> None:
         """The analysis ``doc`` (a noise.json document) of the record's first ``recorded_s`` of ``total_s`` s,
@@ -120,16 +103,3 @@ class AllanView:
             rec.log(f"allan/{sensor}/grid/labels", rr.Points2D(at, labels=texts, colors=GRID_COLOR, radii=0.01,
                                                                show_labels=True))  # fmt: skip
         rec.log(TERMS, rr.TextDocument(terms_markdown(doc, recorded_s, total_s), media_type=rr.MediaType.MARKDOWN))
-
-    def close(self) -> None:
-        """Flush and finish OUT/noise.rrd; a spawned viewer stays open, a served one serves until :meth:`stop`."""
-        if not self._closed:
-            self._closed = True
-            self.rec.flush()
-            self.rec.disconnect()
-
-    def stop(self) -> None:
-        """Close and stop a served web viewer."""
-        self.close()
-        process, self.viewer_process = self.viewer_process, None
-        stop_served(process, self.mode)

@@ -52,13 +52,14 @@ def band_color(axis: str) -> tuple[int, int, int]:
     return tuple(int(_BAND * c + (1 - _BAND) * 128) for c in AXIS_COLORS[axis])
 
 
-def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tuple[float, float]] | None = None
-                      ) -> rrb.Blueprint:
+def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tuple[float, float]] | None = None,
+                      plan: bool = False) -> rrb.Blueprint:
     """The trial layout: the bias first and largest (per axis the whole history beside the view that follows the
     converged estimate, its range ``follow[axis]`` µg, autoscaled without), its 1σ with the limit under it (its
     range ``follow["sigma"]``) and beside it the temperatures (the IMU's, the chamber's) |
     the verdict, the 3D table, and the rest in tabs (stream health in one compact grid, observability,
-    alignment, drift) [| ``extra``, a further column: a trial kind's own views]."""
+    alignment, drift), with ``plan`` the plan's document under the verdict [| ``extra``, a further column: a trial
+    kind's own views]."""
     follow = follow or {}
     rows = [rrb.Horizontal(
         rrb.TimeSeriesView(origin=f"/bias/{a}", name=f"bias {a} (µg), whole trial",
@@ -87,11 +88,13 @@ def default_blueprint(extra: rrb.Container | None = None, follow: dict[str, tupl
                                           plot_legend=rrb.PlotLegend(visible=False)) for a in AXES),
                      name="bias drift"),
     )  # fmt: skip
+    plan_view = [rrb.TextDocumentView(origin="/plan", name="plan: steps, verdicts, time left")] if plan else []
     side = rrb.Vertical(
         rrb.TextDocumentView(origin="/verdict", name="verdict"),
+        *plan_view,
         rrb.Spatial3DView(origin="/world", name="turntable and apparent gravity in i_b0"),
         tabs,
-        row_shares=[3, 3, 2],
+        row_shares=[3] + [2] * len(plan_view) + [3, 2],
         name="verdict, table, health",
     )
     return rrb.Blueprint(

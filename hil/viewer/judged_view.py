@@ -27,11 +27,12 @@ ScalarRows = Callable[[str, np.ndarray, np.ndarray], None]  # rows (N, K) of an 
 class JudgedView:
     """The judgement of one trial's view; ``limits`` None: nothing judged, only the followed ranges."""
 
-    def __init__(self, limits: ReportLimits | None, truth_bias: np.ndarray | None, extra: rrb.Container | None
-                 ) -> None:
+    def __init__(self, limits: ReportLimits | None, truth_bias: np.ndarray | None, extra: rrb.Container | None,
+                 plan: bool = False) -> None:
         self.limits = limits
         self.truth_bias = truth_bias
         self.extra = extra  # the trial kind's own column of the blueprint (a calibration's)
+        self.plan = plan  # the trial is a plan's step: the plan's document beside the verdict
         truth_ug = None if truth_bias is None else truth_bias / UG
         self.verdict = None if limits is None else VerdictSoFar(limits, truth_ug, calibration=extra is not None)
         self._next_t = 0.0
@@ -77,7 +78,7 @@ class JudgedView:
             log_verdict(rec, self._latest.t, self.verdict.markdown())
 
     def blueprint(self, follow: dict[str, tuple[float, float]] | None) -> rrb.Blueprint:
-        return default_blueprint(self.extra, follow)
+        return default_blueprint(self.extra, follow, self.plan)
 
     def _ranges(self) -> dict[str, tuple[float, float]] | None:
         """The followed bias ranges (µg) per axis and the 1σ panel's, ``sigma``: from 0 to ``SIGMA_SPAN`` times the
@@ -107,3 +108,9 @@ def log_verdict(rec, t: float, markdown: str) -> None:
     """``/verdict`` at trial time t."""
     rec.set_time(TIMELINE, duration=t)
     rec.log("verdict", rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))
+
+
+def log_plan(rec, plan: str | None) -> None:
+    """``/plan``: the document of the plan the trial is a step of (:mod:`hil.viewer.plan_view`; None: none)."""
+    if plan is not None:
+        rec.log("plan", rr.TextDocument(plan, media_type=rr.MediaType.MARKDOWN), static=True)

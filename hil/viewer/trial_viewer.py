@@ -50,7 +50,7 @@ from hil.viewer.blueprint import (
 from hil.viewer.bias_view import bias_rows, log_bias_styles
 from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.chunks import Columns, Streams
-from hil.viewer.judged_view import JudgedView, log_verdict
+from hil.viewer.judged_view import JudgedView, log_plan, log_verdict
 from hil.viewer.modes import VIEWER_MODES
 from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
@@ -85,6 +85,8 @@ class TrialViewer:
         layout: str = "trial",
         limits: ReportLimits | None = None,
         verdict_at_end: bool = False,
+        connect: str | None = None,
+        plan: str | None = None,
     ) -> None:
         if mode not in VIEWER_MODES:
             raise ValueError(f"viewer mode {mode!r}: choose one of {', '.join(VIEWER_MODES)}")
@@ -113,7 +115,8 @@ class TrialViewer:
         self._view: rr.RecordingStream | None = None  # the live view's (spawn, serve), its rows sent at once
         self._calibration: CalibrationLog | None = None
         self.verdict_at_end = verdict_at_end
-        self._judged = JudgedView(limits, self.truth_bias, calibration_views() if layout == "calibration" else None)
+        self._judged = JudgedView(limits, self.truth_bias, calibration_views() if layout == "calibration" else None,
+                                  plan is not None)
         self._ended = False
         if mode == "none":
             self._rec = None
@@ -126,8 +129,9 @@ class TrialViewer:
         self._file = _recording_stream(recording_id, FILE_FLUSH_S)
         self._file.save(self.rrd_path)  # its blueprint at the end, with the converged estimate's ranges
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
-        if mode != "save":
-            self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry)
+        if mode != "save" or connect is not None:  # connect: a viewer already running (a plan's), in any mode
+            self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry) if connect is None \
+                else (None, connect, None)
             self._view = _recording_stream(recording_id)
             self._view.set_sinks(rr.GrpcSink(grpc_url), default_blueprint=blueprint)
             self._columns.append(Columns(self._view, 0.0))
@@ -137,6 +141,7 @@ class TrialViewer:
         self._health_series: dict[str, list[str]] = {}
         log_series_styles(self._rec, self.truth_bias is not None)
         log_bias_styles(self._rec, self.truth_bias is not None)
+        log_plan(self._rec, plan)
         log_turntable(self._rec, geometry)
         self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
         self._worker = threading.Thread(target=self._work, name="rerun-logging", daemon=True)
