@@ -52,7 +52,7 @@ def test_a_calibration_over_three_temperatures_of_a_running_emulator_finds_its_t
         out = tmp_path / "cal"
         code = main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"])
         emulator.stop()
-    assert code == 0
+    assert code == 0, json.loads((out / "result.json").read_text())["ended"] if (out / "result.json").exists() else code
     thermal = json.loads((out / "calibration.json").read_text())["thermal"]
     assert [t["set_point_c"] for t in thermal["temperatures"]] == [20, 25, 30]
     emulated = parse_config(cfg)  # the lab config knows no truth: the emulator's
