@@ -4,6 +4,7 @@ measured, read back from the saved recording."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import queue
 from pathlib import Path
@@ -152,3 +153,19 @@ def test_an_emulated_calibration_logs_every_step_and_each_windows_residual_as_it
     assert min(np.max(np.abs(v)) for _, v in gyro[6:]) > 10 * max(np.max(np.abs(v)) for _, v in gyro[:6])
     bars = _rows(path, "/calibration/bars/y", "BarChart:values")
     assert _bars(bars[-1][1]) == pytest.approx([v[1] for _, v in accel])
+
+
+def test_a_calibration_over_temperature_logs_the_chambers_set_points_and_readings_and_the_imus_temperature(tmp_path):
+    out = tmp_path / "out"
+    assert main(["calibrate", "configs/calibration_thermal.yaml", "--simulate", "--out", str(out), "--viewer",
+                 "save"]) == 0  # fmt: skip
+    rrd = out / "recording.rrd"
+    set_points = [value[0] for _, value in _rows(rrd, "/chamber/set_point_c", "Scalars:scalars")]
+    assert set_points == [-10.0, 25.0, 60.0]  # each soak's, sent as it starts
+    readings = _rows(rrd, "/chamber/reading_c", "Scalars:scalars")
+    imu = _rows(rrd, "/imu/temperature_c", "Scalars:scalars")
+    assert len(readings) >= 10 and len(imu) >= 10
+    assert min(v[0] for _, v in readings) < -5.0 and max(v[0] for _, v in readings) > 55.0  # the chamber's swings
+    thermal = json.loads((out / "calibration.json").read_text())["thermal"]["temperatures"]
+    # the IMU's temperature reaches each point's mean, as the soak waited for it
+    assert all(any(abs(v[0] - point["imu_c"]) < 0.2 for _, v in imu) for point in thermal)

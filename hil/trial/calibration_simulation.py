@@ -34,7 +34,7 @@ from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, 
 from hil.trial.calibration_sequence import CalibrationSequence
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
-from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
+from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer, watched_chamber
 
 
 def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOptions | None = None
@@ -48,7 +48,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     step = cfg.block_samples
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable)
-    sequence = simulated_sequence(cfg, schedule, sim, client, sequence_views(viewer, schedule, cfg))
+    sequence = simulated_sequence(cfg, schedule, sim, client, sequence_views(viewer, schedule, cfg), viewer)
     processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
     try:
         client.apply_limits()
@@ -74,10 +74,12 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
 
 
-def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, client, views: dict):
+def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, client, views: dict,
+                       viewer: Viewer | None):
     """The calibration's sequence on the simulated table ``client``: the schedule's, or at each of
     ``calibration.temperatures_c`` a soak and the schedule, the chamber then a first-order model in this process
-    (:class:`emulators.chamber.SimulatedChamber`) whose air the simulated IMU follows."""
+    (:class:`emulators.chamber.SimulatedChamber`) whose air the simulated IMU follows (its readings and set points
+    to ``viewer`` too)."""
     period = 1.0 / cfg.imu_rate_hz
 
     def sequence(steps: Schedule) -> CalibrationSequence:
@@ -87,7 +89,7 @@ def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, cl
         return sequence(schedule)
     model = chamber_model(cfg.environment.chamber)
     sim.errors.follow_chamber(model.advance)
-    return ThermalSequence(cfg, schedule, client, SimulatedChamber(model), sequence)
+    return ThermalSequence(cfg, schedule, client, watched_chamber(SimulatedChamber(model), None, viewer), sequence)
 
 
 def stopped(sequence) -> str | None:
