@@ -35,7 +35,8 @@ def test_imu_protocol_is_a_registry_name_and_its_options_the_codecs():
 def test_the_old_kvh1750_block_is_taken_as_options_with_one_deprecation_line(caplog):
     with caplog.at_level(logging.WARNING):
         cfg = config({"kvh1750": {"gyro_unit": "deg", "accel_unit": "m/s^2"}})
-    assert cfg.imu.options == {"gyro_unit": "deg", "gyro_output": "delta", "accel_unit": "m/s^2", "temperature_unit": "C"}
+    assert cfg.imu.options == {"gyro_unit": "deg", "gyro_output": "delta", "accel_unit": "m/s^2", "temperature_unit": "C",
+                               "check_config": True}
     assert [r.getMessage() for r in caplog.records] == [
         "hil: imu.kvh1750 is deprecated and will be removed: write its keys under imu.options"]
     with pytest.raises(ConfigError, match="imu: kvh1750: give the KVH 1750's settings in imu.options only"):
