@@ -6,7 +6,8 @@
 
 Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
 through ``TrialViewer("serve", ...)`` with the default trial's ``output.limits`` (the verdict so far)
-(``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``),
+(``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``;
+``--layout plan``: a plan's view at its second step and that step's own view in the same viewer),
 checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
 Chromium at 1600x1000 with software WebGL (``--use-gl=angle --use-angle=swiftshader
 --enable-unsafe-swiftshader``), waits for the viewer's WebAssembly to load and draw, and saves a
@@ -37,6 +38,7 @@ from hil.outputs.noise import ADEV_UNITS
 from hil.trial.noise_runner import analyse_record, show_forming, simulated
 from hil.units import UG
 from hil.viewer.allan_view import AllanView
+from hil.viewer.plan_view import PlanView, plan_markdown
 from hil.viewer.trial_viewer import TrialViewer
 
 CHROMIUM = "/usr/bin/chromium"
@@ -58,13 +60,14 @@ def listening_addresses(port: int) -> set[str]:
     return found
 
 
-def log_trial(out: Path, layout: str) -> TrialViewer:
+def log_trial(out: Path, layout: str, connect: str | None = None, plan: str | None = None) -> TrialViewer:
     cfg = load_config("configs/emulated_swing.yaml")  # the default trial, shortened
     cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 60.0, "rate_hz": 200.0})})
     sim = Simulation.from_config(cfg)
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
     viewer = TrialViewer("serve", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=True, recording_name="web-check", layout=layout, limits=cfg.limits)  # fmt: skip
+                         blocking=True, recording_name="web-check", layout=layout, limits=cfg.limits, connect=connect,
+                         plan=plan)  # fmt: skip
     batches = list(sim.batches(chunk=2000))
     for batch in batches:
         est.update_many(batch)
@@ -76,10 +79,24 @@ def log_trial(out: Path, layout: str) -> TrialViewer:
                   "table": {"frames": 200 * k, "corrupt": 0, "missing": 0, "outages": 0},
                   "aligner": {"aligned": 200 * k, "queue": 1, "latency_p99_ms": 2.0, "table_lag_ms": 0.01}}  # fmt: skip
         viewer.log_health(float(k), health)
+        viewer.log_temperature(float(k), 25.0 + 0.02 * k)  # the IMU warming up a little
     if layout == "calibration":
         log_calibration(viewer)
     viewer.close()
     return viewer
+
+
+def log_plan(out: Path) -> PlanView:
+    """A plan's view at its second step, a swing, and that step's own view sent to the same viewer."""
+    kinds = ("power", "swing", "wait", "swing")
+    entries = [{"index": k + 1, "kind": kind, "out_dir": f"{k + 1:02d}-{kind}" if kind == "swing" else None,
+                "ended": "completed" if k == 0 else None, "verdict": None} for k, kind in enumerate(kinds)]
+    view = PlanView("serve", out, "acceptance")
+    text = plan_markdown("acceptance", entries, 2, "12.5 min")
+    view.show(5.0, text, 2, len(kinds))
+    log_trial(out / "02-swing", "trial", view.grpc_url, text).close()
+    view.close()
+    return view
 
 
 def log_noise(out: Path) -> AllanView:
@@ -108,7 +125,7 @@ def log_calibration(viewer: TrialViewer) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load and draw (default 20)")
-    parser.add_argument("--layout", choices=("trial", "calibration", "noise"), default="trial",
+    parser.add_argument("--layout", choices=("trial", "calibration", "noise", "plan"), default="trial",
                         help="blueprint layout")
     parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
     parser.add_argument("--chromium", default=CHROMIUM, help=f"browser executable (default {CHROMIUM})")
@@ -123,7 +140,8 @@ def main() -> int:
         return 2
 
     with tempfile.TemporaryDirectory() as tmp:
-        viewer = log_noise(Path(tmp)) if args.layout == "noise" else log_trial(Path(tmp), args.layout)
+        own = {"noise": log_noise, "plan": log_plan}.get(args.layout)
+        viewer = own(Path(tmp)) if own is not None else log_trial(Path(tmp), args.layout)
         try:
             web_port = urlsplit(viewer.url).port
             grpc_port = urlsplit(parse_qs(urlsplit(viewer.url).query)["url"][0]).port
