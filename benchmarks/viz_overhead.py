@@ -5,8 +5,9 @@
 The trial's snapshots (1 Hz) and gimbal angles are computed first; then the live call pattern is
 replayed as fast as possible, once with non-blocking calls and once waiting for the logging
 thread: every 1/batch_hz s of trial time a ``log_table`` with the samples of that interval
-(decimated to ``TABLE_RATE_HZ`` inside), every second a ``log_snapshot`` and a ``log_health`` with the
-figures a live trial gives (the pipeline's and the live queue's and latencies) and a ``log_streams`` (the
+(decimated to ``TABLE_RATE_HZ`` inside) and a ``log_temperature`` (logged once a second), every second a
+``log_snapshot`` and a ``log_health`` with the figures a live trial gives (the pipeline's and the live queue's and
+latencies) and a ``log_streams`` (the
 verdict so far, judged against the config's ``output.limits``), at the end the trial's verdict (``end``). Running far
 faster than real time, the caller competes with the logging thread for the interpreter, so its
 figure is pessimistic.
@@ -70,6 +71,7 @@ def live(cfg, sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: b
         stop = min(start + per_batch, len(t))
         c0 = time.perf_counter()
         viewer.log_table(t[start:stop], angles[start:stop])
+        viewer.log_temperature(t[stop - 1], 25.0)  # each progress carries the IMU's temperature
         while next_snap is not None and next_snap.t <= t[stop - 1]:
             viewer.log_snapshot(next_snap)
             viewer.log_health(next_snap.t, HEALTH)
