@@ -88,7 +88,7 @@ def test_the_terms_so_far_end_as_noise_json_gives_them(noise_out):
     rows = _rows(noise_out)["/allan/terms"]
     doc = json.loads((noise_out / "noise.json").read_text())
     first, last = rows[0][1]["TextDocument:text"][0], rows[-1][1]["TextDocument:text"][0]
-    assert first.startswith(f"## Noise terms of the first {rows[0][0]:.0f} s of 2000 s")
+    assert first.startswith(f"## Noise terms of the first {rows[0][0]:.4g} s of 2000 s")
     assert last.startswith("## Noise terms of the first 2000 s of 2000 s")
     arw = doc["gyro"]["arw_deg_per_sqrt_h"]
     assert "| gyro `arw_deg_per_sqrt_h` | " + " | ".join(format_value(v) for v in arw) + " |" in last

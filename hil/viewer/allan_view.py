@@ -64,7 +64,7 @@ def decade_grid(points: np.ndarray, unit: str) -> tuple[list[np.ndarray], np.nda
 def terms_markdown(doc: dict, recorded_s: float, total_s: float) -> str:
     """The noise terms of ``doc`` (a noise.json document, :func:`hil.outputs.noise.noise_document`) as markdown:
     a row per term, its value per axis as report.html shows it (— where the record cannot resolve it)."""
-    lines = [f"## Noise terms of the first {recorded_s:.0f} s of {total_s:.0f} s", "",
+    lines = [f"## Noise terms of the first {recorded_s:.4g} s of {total_s:.4g} s", "",
              "| term | x | y | z |", "|---|---|---|---|"]  # fmt: skip
     for sensor, _, keys in SENSORS:
         for key in keys:
