@@ -14,7 +14,7 @@ live runs are not bit-reproducible: at ``--speed max`` the windows' sample count
 With ``--simulate`` each run is ``hil calibrate --simulate`` (the same sequence commanding the servo in
 process, no transports): reproducible for a seed, and the figures are also summed up per term family.
 
-With ``--thermal`` each run is the calibration over temperature of configs/calibration_thermal.yaml (three chamber
+With ``--thermal`` each run is the calibration over temperature of configs/calibration_thermal_quick.yaml (three chamber
 set points, a soak at each, every term's polynomial of order 2 in the IMU's temperature) for ``trial.seed`` 1..N;
 per term and coefficient (calibration.json ``thermal.terms`` against ``truth.thermal.terms``) the fraction of seeds
 within 3 and 4 sigma and the RMS of error / sigma. Then, per seed, a simulated swing at 40 deg C (between the
@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT))
 from hil.estimation.thermal_calibration import polynomial_at, polynomial_fit
 from hil.outputs.calibration_report import comparison
 
-THERMAL = ROOT / "configs" / "calibration_thermal.yaml"
+THERMAL = ROOT / "configs" / "calibration_thermal_quick.yaml"
 SWING = {"kind": "swing", "axes": {"outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
                                    "middle": {"amplitude_deg": 6, "period_s": 10, "center_deg": 2},
                                    "inner": {"amplitude_deg": 13, "period_s": 8, "center_deg": 6}}}

@@ -28,7 +28,7 @@ from emulators.sources import encoder_reading
 from emulators.table_server import ServoPort, emulated_table
 from emulators.truth import Truth
 from hil.config import Config
-from hil.samples import AlignedBatch
+from hil.samples import AlignedBatch, ImuGap
 from hil.units import ARCSEC
 
 IN_PROCESS = "emulator (in process)"  # the command client's url, for its messages
@@ -62,17 +62,44 @@ class ServoSimulation:
     def step(self, t_end: float) -> AlignedBatch:
         """The samples after those emitted that end at or before ``t_end`` (s), under the servo's plan; the
         servo's horizon is then their end."""
-        n = max(math.floor(t_end * self.rate_hz + 1e-9), self.samples)
-        t = np.arange(self.samples + 1, n + 1) / self.rate_hz
-        t0 = self.samples / self.rate_hz
+        t, t0 = self._instants(t_end), self.samples / self.rate_hz
         if not len(t):
             return AlignedBatch(t, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)), t0)
+        truth = self._advance(t)
+        dtheta, dv = truth.increments(t0, t)
+        dtheta, dv = self.errors.apply(t, dtheta, dv)
+        self.samples += len(t)
+        return AlignedBatch(t, dtheta, dv, encoder_reading(truth.angles(t), self.zero_offset), t0,
+                            temperature_c=self.errors.temperature_c(t) if self.errors.thermal else None)
+
+    def idle(self, t_end: float) -> np.ndarray | None:
+        """The sensor's temperatures (deg C; None without a thermal model) at the instants of the samples
+        :meth:`step` would emit up to ``t_end`` (s), the samples not made: the servo, the chamber and the sensor's
+        temperature move on exactly as under :meth:`step`, its random errors draw nothing (a soak's wait)."""
+        t = self._instants(t_end)
+        if not len(t):
+            return None
+        self._advance(t)
+        self.samples += len(t)
+        return self.errors.temperature_c(t) if self.errors.thermal else None
+
+    def gap(self, t_start: float) -> ImuGap:
+        """The samples not made from trial time ``t_start`` (s) to the last instant reached, with the table's
+        readings at both ends: the estimator carries its attitude across it (:meth:`idle`)."""
+        motion = replace(self.truth, motion=self.servo.motion)
+        ends = np.array([t_start, self.samples / self.rate_hz])
+        start, end = encoder_reading(motion.angles(ends), self.zero_offset)
+        return ImuGap(float(ends[0]), float(ends[1]), tuple(map(float, start)), tuple(map(float, end)))
+
+    def _instants(self, t_end: float) -> np.ndarray:
+        """The times (s) of the samples after those emitted that end at or before ``t_end``."""
+        n = max(math.floor(t_end * self.rate_hz + 1e-9), self.samples)
+        return np.arange(self.samples + 1, n + 1) / self.rate_hz
+
+    def _advance(self, t: np.ndarray) -> Truth:
+        """The servo moved on to the last of ``t`` and committed there; the truth under its plan."""
         with self.servo.lock:
             self.servo.advance(float(t[-1]))
             truth = replace(self.truth, motion=self.servo.motion)
             self.servo.commit(float(t[-1]))
-        dtheta, dv = truth.increments(t0, t)
-        dtheta, dv = self.errors.apply(t, dtheta, dv)
-        self.samples = n
-        return AlignedBatch(t, dtheta, dv, encoder_reading(truth.angles(t), self.zero_offset), t0,
-                            temperature_c=self.errors.temperature_c(t) if self.errors.thermal else None)
+        return truth

@@ -13,8 +13,10 @@ import yaml
 from pages import clipped_columns, layout_width, needs_chromium
 
 from drivers.watlow_f4 import ChamberError
-from emulators.chamber import ChamberModel
+from emulators.chamber import ChamberModel, chamber_model
+from emulators.servo_simulation import ServoSimulation
 from hil.cli import main
+from hil.config import load_config
 from hil.config_environment import SoakSettings
 from hil.estimation.thermal_calibration import fit_polynomial
 from hil.pipeline.compensation import Compensation
@@ -23,7 +25,7 @@ from hil.trial.calibration_soak import Soak
 from hil.units import UG
 
 ROOT = Path(__file__).resolve().parents[1]
-THERMAL = ROOT / "configs" / "calibration_thermal.yaml"
+THERMAL = ROOT / "configs" / "calibration_thermal_quick.yaml"
 
 
 def _config(tmp_path: Path, name: str, change) -> Path:
@@ -36,7 +38,7 @@ def _config(tmp_path: Path, name: str, change) -> Path:
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory) -> Path:
-    """``hil calibrate configs/calibration_thermal.yaml --simulate``: its output directory."""
+    """``hil calibrate configs/calibration_thermal_quick.yaml --simulate``: its output directory."""
     out = tmp_path_factory.mktemp("thermal") / "out"
     assert main(["calibrate", str(THERMAL), "--simulate", "--out", str(out), "--viewer", "none"]) == 0
     return out
@@ -57,6 +59,37 @@ def test_a_calibration_over_three_temperatures_fits_every_thermal_term_within_4_
     assert doc["accel"]["bias_ug"][0] == thermal["terms"]["accel.bias_ug.0"]["coefficients"][0]
     assert len(doc["positions"]) == 18 and {p["temperature_c"] for p in doc["positions"]} == {
         t["imu_c"] for t in thermal["temperatures"]}
+
+
+def test_a_simulated_soak_makes_no_imu_samples_and_settles_when_the_sampled_one_did(calibrated):
+    """--simulate's soaks move the chamber and the sensor's temperature on block by block without the IMU's
+    samples: each ends at the trial time the soaks made sample by sample ended at, and only the schedules'
+    samples are made."""
+    doc = json.loads((calibrated / "calibration.json").read_text())
+    assert [t["soak_s"] for t in doc["thermal"]["temperatures"]] == [16.176, 46.416, 46.416]
+    assert [t["imu_c"] for t in doc["thermal"]["temperatures"]] == pytest.approx(
+        [-8.000385839886548, 26.9988210025391, 61.99882100253908], abs=1e-12)
+    result = json.loads((calibrated / "result.json").read_text())
+    assert result["streams"]["imu_frames"] == 53064  # 80316 with the soaks' samples made
+
+
+def test_an_unsampled_soak_sees_the_temperatures_and_table_the_samples_would_carry():
+    """configs/calibration_thermal.yaml (six set points, -40 to 70 deg C): block by block, ServoSimulation.idle
+    gives the temperatures step's samples carry, and its gap ends at the table's reading of the last sample."""
+    cfg = load_config(ROOT / "configs" / "calibration_thermal.yaml")
+    assert cfg.calibration.temperatures_c == [-40, -18, 4, 26, 48, 70]
+    sims = [ServoSimulation.from_config(cfg) for _ in range(2)]
+    for sim in sims:
+        model = chamber_model(cfg.environment.chamber)
+        model.set_point_c = 70.0
+        sim.errors.follow_chamber(model.advance)
+    sampled, idle = sims
+    for k in range(1, 201):
+        batch = sampled.step(k * 0.05)
+        assert np.array_equal(idle.idle(k * 0.05), batch.temperature_c)
+    assert idle.samples == sampled.samples == 2500 and batch.temperature_c[-1] > -39.99
+    gap = idle.gap(0.0)
+    assert (gap.t_start, gap.t_end) == (0.0, 10.0) and gap.angles_end == tuple(batch.angles[-1])
 
 
 def test_calibration_html_shows_every_thermal_term_with_its_fit(calibrated):

@@ -1,4 +1,4 @@
-"""The calibration over temperature in the lab form: ``hil emulate`` of configs/calibration_thermal.yaml (made
+"""The calibration over temperature in the lab form: ``hil emulate`` of configs/calibration_thermal_quick.yaml (made
 quick: a fast chamber and sensor, 20, 25 and 30 deg C, six positions of 1 s) in its own process, its emulated
 Watlow F4 on a pty, and the harness attached late, setting the chamber over Modbus as it would a real one. The
 calibration completes with every thermal coefficient within 4 sigma of the emulator's truth (about 100 s of trial
@@ -25,8 +25,8 @@ pytestmark = [pytest.mark.xdist_group("lab"),
 
 
 def quick_config() -> dict:
-    """configs/calibration_thermal.yaml with seconds-long soaks and schedules."""
-    cfg = yaml.safe_load((ROOT / "configs" / "calibration_thermal.yaml").read_text())
+    """configs/calibration_thermal_quick.yaml with seconds-long soaks and schedules."""
+    cfg = yaml.safe_load((ROOT / "configs" / "calibration_thermal_quick.yaml").read_text())
     # a KVH 1750 (its counter turns over every 0.64 s at 200 Hz, and pairs on a loaded host where a STIM300's, every
     # 64 ms, may not): its whole-degree temperature reads the sensor's 22, 27 and 32 deg C exactly
     cfg["trial"]["rate_hz"] = cfg["imu"]["rate_hz"] = 200

@@ -157,7 +157,7 @@ def test_an_emulated_calibration_logs_every_step_and_each_windows_residual_as_it
 
 def test_a_calibration_over_temperature_logs_the_chambers_set_points_and_readings_and_the_imus_temperature(tmp_path):
     out = tmp_path / "out"
-    assert main(["calibrate", "configs/calibration_thermal.yaml", "--simulate", "--out", str(out), "--viewer",
+    assert main(["calibrate", "configs/calibration_thermal_quick.yaml", "--simulate", "--out", str(out), "--viewer",
                  "save"]) == 0  # fmt: skip
     rrd = out / "recording.rrd"
     set_points = [value[0] for _, value in _rows(rrd, "/chamber/set_point_c", "Scalars:scalars")]

@@ -23,9 +23,11 @@ from hil.frames import Earth, euler_from_matrix, level_angles, wrapped
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    """v scaled to unit length along the last axis."""
+    """v scaled to unit length along the last axis; NaN for a zero vector (parallel vectors have no triad: the
+    first solution after a gap at the trial's start, one sample in)."""
     v = np.ascontiguousarray(v)  # einsum's sum along a strided axis rounds differently
-    return v / np.sqrt(np.einsum("...i,...i->...", v, v))[..., None]
+    with np.errstate(invalid="ignore"):
+        return v / np.sqrt(np.einsum("...i,...i->...", v, v))[..., None]
 
 
 def unit_triad(v1: np.ndarray, v2: np.ndarray) -> np.ndarray:

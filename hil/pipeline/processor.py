@@ -111,6 +111,14 @@ class TrialProcessor:
         self._t_end = float(batch.t[-1]) if len(batch) else self._t_end
         return self._publish()
 
+    def skip(self, gap: ImuGap) -> None:
+        """Samples a simulation did not make (a soak's wait): the estimator, started at the gap's start if it has
+        not, carries its attitude across with the table's readings at both ends; nothing is published."""
+        if self._estimation.estimator is None:
+            self._estimation.start(gap.t_start)
+        self._estimation.gap(gap)
+        self._t_end = gap.t_end
+
     def finish(self) -> Finished:
         """End of data: release what the stages still hold (the samples still waiting for a pairing are
         unpaired), keep the estimator's final solution, and publish the last progress."""

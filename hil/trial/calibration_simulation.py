@@ -9,7 +9,8 @@ the live processor hands samples and angles on: each step's samples, under the s
 command acts at the first pulse after the step it was sent in), go through the
 :class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, and the sequence, listening to it, takes
 the block's samples and the table's reported angles, which advance it to send the next commands, as in the
-live trial. The trial ends when the sequence is done or fails, or at the emulated
+live trial; over a calibration over temperature's soak, nothing but waiting, the blocks move the chamber and the
+sensor's temperature on without making the samples (:func:`soak_unsampled`). The trial ends when the sequence is done or fails, or at the emulated
 devices' bound on the schedule's length (:func:`~hil.trial.calibration_outcome.emulated_length`), with
 the live trial's result; the table is sent Off on every way out; then the same fit
 (:class:`~hil.trial.calibration_outcome.CalibrationOutcome`). Nothing is written until the outcome's
@@ -55,7 +56,10 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         sequence.start()
         client.sync_output(True)
         while not sequence.done and stopped(sequence) is None and sim.samples < end:
-            processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
+            if isinstance(sequence, ThermalSequence) and sequence.soaking:
+                soak_unsampled(sim, sequence, processor, step, end)
+            else:
+                processor.feed_batch(sim.step(min(sim.samples + step, end) / rate))
     except (TableError, LimitError, InterlockError) as exc:
         if viewer is not None:
             viewer.close()
@@ -90,6 +94,20 @@ def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, cl
     model = chamber_model(cfg.environment.chamber)
     sim.errors.follow_chamber(model.advance)
     return ThermalSequence(cfg, schedule, client, watched_chamber(SimulatedChamber(model), None, viewer), sequence)
+
+
+def soak_unsampled(sim: ServoSimulation, sequence: ThermalSequence, processor: TrialProcessor, step: int,
+                   end: int) -> None:
+    """The current soak to its end (or the trial's ``end``, samples) without the IMU's samples: in blocks of
+    ``step`` samples as they would come, the soak judged at each block's last sample's time on the block's mean
+    temperature, as the processor's progress gives them; the estimator then carries its attitude across the
+    samples not made (the table held at the schedule's first position)."""
+    start, rate = sim.samples / sim.rate_hz, sim.rate_hz
+    while sequence.soaking and sim.samples < end:
+        temperatures = sim.idle(min(sim.samples + step, end) / rate)
+        mean = None if temperatures is None else float(temperatures.sum()) / len(temperatures)
+        sequence.soak_update(sim.samples / rate, mean)
+    processor.skip(sim.gap(start))
 
 
 def stopped(sequence) -> str | None:

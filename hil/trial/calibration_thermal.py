@@ -80,11 +80,7 @@ class ThermalSequence:
         if self.done or self.soak_failure is not None:
             return
         if self.sequence is None:
-            self.soak.update(progress.trial_time, progress.temperature_c)
-            self.soak_failure = self.soak.failure
-            if self.soak.done:
-                self.sequence = self.make(self.schedule)
-                self.sequence.start()
+            self.soak_update(progress.trial_time, progress.temperature_c)
             return
         if progress.temperature_c is not None:
             self._temperatures.append(progress.temperature_c)
@@ -95,6 +91,20 @@ class ThermalSequence:
             self.sequence, self._temperatures = None, []
             if not self.done:
                 self._soak(progress.trial_time)
+
+    @property
+    def soaking(self) -> bool:
+        """A soak is under way: the chamber or the sensor still settling, the table held."""
+        return not self.done and self.soak_failure is None and self.sequence is None and self.soak is not None
+
+    def soak_update(self, t: float, imu_c: float | None) -> None:
+        """The soak at trial time ``t`` (s) with the IMU's latest temperature (deg C, None: none reported); the
+        schedule started once it is over."""
+        self.soak.update(t, imu_c)
+        self.soak_failure = self.soak.failure
+        if self.soak.done:
+            self.sequence = self.make(self.schedule)
+            self.sequence.start()
 
     def _soak(self, t: float) -> None:
         """The table to the schedule's first position, the chamber to the next temperature."""
