@@ -10,11 +10,11 @@ command acts at the first pulse after the step it was sent in), go through the
 :class:`~hil.pipeline.processor.TrialProcessor` as one aligned batch, and the sequence, listening to it, takes
 the block's samples and the table's reported angles, which advance it to send the next commands, as in the
 live trial; over a calibration over temperature's soak, nothing but waiting, the blocks move the chamber and the
-sensor's temperature on without making the samples (:func:`soak_unsampled`). The trial ends when the sequence is done or fails, or at the emulated
-devices' bound on the schedule's length (:func:`~hil.trial.calibration_outcome.emulated_length`), with
-the live trial's result; the table is sent Off on every way out; then the same fit
-(:class:`~hil.trial.calibration_outcome.CalibrationOutcome`). Nothing is written until the outcome's
-``write``: a campaign's worker takes the result and the calibration document from the outcome.
+sensor's temperature on without making the samples (:func:`soak_unsampled`). The trial ends when the sequence
+is done or fails, or at the emulated devices' bound on the schedule's length
+(:func:`~hil.trial.calibration_outcome.emulated_length`), with the live trial's result; the table is sent Off on
+every way out; then the same fit (:class:`~hil.trial.calibration_outcome.CalibrationOutcome`). Nothing is written
+until the outcome's ``write``: a campaign's worker takes the result and the calibration document from the outcome.
 """
 
 from __future__ import annotations
