@@ -14,12 +14,12 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_serializer, model_validator
 
 from drivers.can_settings import CanConfig
 from drivers.registry import IMU_CODECS, TABLE_CODECS, TABLE_CONTROLLERS
 from hil.config_emulated import DeviceTiming, FaultConfig, ImuErrors, ImuFaultConfig
-from hil.config_environment import EnvironmentConfig, SoakSettings
+from hil.config_environment import EnvironmentConfig, SoakSettings, check_temperatures
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.config_types import ZERO3, Model, Vec2, Vec3, describe_validation
 from hil.config_units import UNIT_NAME, check_units, one_unit_only, unit_update
@@ -283,6 +283,14 @@ class Config(Model):
                                  "table latches every n-th pulse")
         return self
 
+    @model_serializer(mode="wrap")
+    def _units_without_imu(self, handler: Any) -> dict:
+        """A units config written out without the one-unit ``imu`` block it never had, so that it reads back."""
+        data = handler(self)
+        if self.units:
+            data.pop("imu", None)
+        return data
+
     def unit_configs(self) -> dict[str, Config]:
         """Each unit's one-unit config by its name (:func:`hil.config_units.unit_update`); empty with ``imu``."""
         data = self.model_dump()
@@ -290,22 +298,8 @@ class Config(Model):
 
     @model_validator(mode="after")
     def _temperatures_within_the_chamber(self) -> Config:
-        """``calibration.temperatures_c`` needs a chamber, set points within its ``limits_c`` and more of them than
-        ``calibration.thermal_order``."""
-        temperatures, chamber = self.calibration.temperatures_c, self.environment.chamber
-        if temperatures is None:
-            return self
-        if chamber is None:
-            raise ValueError("calibration.temperatures_c: a calibration over temperature needs environment.chamber")
-        low, high = chamber.limits_c
-        for k, value in enumerate(temperatures):
-            if not low <= value <= high:
-                raise ValueError(f"calibration.temperatures_c[{k}]: {value:g} deg C is outside environment.chamber."
-                                 f"limits_c [{low:g}, {high:g}]")
-        order = self.calibration.thermal_order
-        if len(set(temperatures)) <= order:
-            raise ValueError(f"calibration.thermal_order: a polynomial of order {order} needs at least {order + 1} "
-                             f"different temperatures in calibration.temperatures_c ({len(set(temperatures))} given)")
+        """``calibration.temperatures_c`` against the chamber (:func:`hil.config_environment.check_temperatures`)."""
+        check_temperatures(self.calibration.temperatures_c, self.calibration.thermal_order, self.environment.chamber)
         return self
 
     @property

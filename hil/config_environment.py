@@ -97,3 +97,20 @@ class SoakSettings(Model):
     for_s: float = Field(600.0, gt=0)
     timeout_s: float = Field(14400.0, gt=0)
     stalled_s: float = Field(600.0, gt=0)
+
+
+def check_temperatures(temperatures: list[float] | None, order: int, chamber: ChamberConfig | None) -> None:
+    """``calibration.temperatures_c`` needs a chamber, set points within its ``limits_c`` and more of them than
+    ``calibration.thermal_order``; ValueError naming the key otherwise."""
+    if temperatures is None:
+        return
+    if chamber is None:
+        raise ValueError("calibration.temperatures_c: a calibration over temperature needs environment.chamber")
+    low, high = chamber.limits_c
+    for k, value in enumerate(temperatures):
+        if not low <= value <= high:
+            raise ValueError(f"calibration.temperatures_c[{k}]: {value:g} deg C is outside environment.chamber."
+                             f"limits_c [{low:g}, {high:g}]")
+    if len(set(temperatures)) <= order:
+        raise ValueError(f"calibration.thermal_order: a polynomial of order {order} needs at least {order + 1} "
+                         f"different temperatures in calibration.temperatures_c ({len(set(temperatures))} given)")

@@ -117,7 +117,7 @@ def test_classes_of_the_data_flow_stay_small_and_take_few_arguments():
                 assert params <= 8, f"{name}: {node.name}({params} parameters)"
 
 
-PIPELINE_CALLS = {"feed", "feed_batch", "finish", "finished"}  # the rest comes out as Progress and Finished
+PIPELINE_CALLS = {"feed", "feed_batch", "skip", "finish", "finished"}  # the rest comes out as Progress and Finished
 
 
 def _pipeline_reads(tree: ast.AST) -> list[tuple[int, str]]:

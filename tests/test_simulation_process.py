@@ -58,7 +58,7 @@ def test_a_batch_crosses_the_pipe_as_it_is_with_or_without_angles_and_temperatur
 
 @pytest.mark.parametrize("name", TRIAL_CONFIGS)
 def test_the_config_survives_its_json(name):
-    cfg = load_config(ROOT / "configs" / name)
+    cfg = load_config(ROOT / "configs" / name, units=True)
     assert Config.model_validate_json(cfg.model_dump_json()) == cfg
 
 
