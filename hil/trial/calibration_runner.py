@@ -59,4 +59,6 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
 
     outcome, viewer = run_live(cfg, config_path, out, duration, speed, dataclasses.replace(viewer, layout="calibration"),
                                quiet, commanded)
+    for sequence in sequences:
+        sequence.report_rest()  # the last window, when the data ended at its end, before the viewer closes
     return CalibrationOutcome.of_sequence(outcome, sequences[0] if sequences else None, is_emulated), viewer

@@ -22,6 +22,7 @@ samples have all arrived (t its end; the window as :meth:`windows` will cut it).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -105,19 +106,28 @@ class CalibrationSequence:
         a closed window whose samples have all arrived is cut at once: one that lacks samples ends the trial
         (:attr:`failure`), the others go to ``on_window``."""
         self._samples.append((t, dtheta, dv, angles))
-        if self._reported == len(self.windows_found) or len(t) == 0:
-            return
-        if t[-1] >= self.windows_found[self._reported].end:
-            samples = self._joined()
-            while self._reported < len(self.windows_found) and t[-1] >= self.windows_found[self._reported].end:
-                try:
-                    window = self._cut(self._reported, *samples)
-                except ValueError as exc:
-                    self.failure = self.failure or str(exc)
-                    return
-                if self.on_window is not None:
-                    self.on_window(self.windows_found[self._reported].end, self._reported, window)
-                self._reported += 1
+        if self._reported < len(self.windows_found) and len(t) and t[-1] >= self.windows_found[self._reported].end:
+            self._report(float(t[-1]))
+
+    def report_rest(self) -> None:
+        """End of data: the closed windows not handed to ``on_window`` yet (the data ended at or before a window's
+        end), cut from the samples that came; one that lacks samples is left for the fit to judge."""
+        if self._samples:
+            self._report(math.inf, judge=False)
+
+    def _report(self, until: float, judge: bool = True) -> None:
+        """Cut the closed windows that end by ``until`` and hand them to ``on_window``; a window that lacks samples
+        ends the trial (:attr:`failure`) when ``judge``."""
+        samples = self._joined()
+        while self._reported < len(self.windows_found) and until >= self.windows_found[self._reported].end:
+            try:
+                window = self._cut(self._reported, *samples)
+            except ValueError as exc:
+                self.failure = self.failure or (str(exc) if judge else None)
+                return
+            if self.on_window is not None:
+                self.on_window(self.windows_found[self._reported].end, self._reported, window)
+            self._reported += 1
 
     def add(self, t: np.ndarray, angles: np.ndarray) -> None:
         """Reported gimbal angles (N, 3) rad at trial times t (N,) s: advance through the schedule."""

@@ -70,6 +70,7 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
         except TableError as exc:
             print(f"hil: WARNING: could not confirm the turntable is off: {exc}", file=sys.stderr)
     finished = processor.finish()
+    sequence.report_rest()  # the last window, when the data ended at its end
     if viewer is not None and finished.estimator is not None:
         viewer.log_snapshots(finished.snapshots)
     ended = str(TrialEnd(COMPLETED) if stopped(sequence) is None else TrialEnd.early(stopped(sequence)))

@@ -71,6 +71,12 @@ class ThermalSequence:
             step = self.soak.state if self.soak is not None else "not started"
         return f"temperature {len(self.points) + 1} of {len(self.temperatures)}, {step}"
 
+    def report_rest(self) -> None:
+        """End of data: the current schedule's windows not shown yet
+        (:meth:`~hil.trial.calibration_sequence.CalibrationSequence.report_rest`)."""
+        if self.sequence is not None:
+            self.sequence.report_rest()
+
     def start(self) -> None:
         """The first soak."""
         self._soak(0.0)
@@ -86,6 +92,7 @@ class ThermalSequence:
             self._temperatures.append(progress.temperature_c)
         self.sequence.on_progress(progress)
         if self.sequence.done:
+            self.sequence.report_rest()  # its samples end here: its last window is shown as the fit will take it
             self.points.append(TemperaturePoint(float(np.mean(self._temperatures)) if self._temperatures
                                                 else float("nan"), self.sequence, self.soak.record()))
             self.sequence, self._temperatures = None, []
