@@ -54,6 +54,14 @@ class StreamEventKind(StrEnum):
     RECONNECTED = "reconnected"
 
 
+class TrialKind(StrEnum):
+    """What a history row files: a trial's kind (docs/history.md)."""
+
+    SWING = "swing"
+    CALIBRATION = "calibration"
+    NOISE = "noise"
+
+
 class Verdict(StrEnum):
     """A judged measurement's, and a completed trial's, verdict."""
 

@@ -7,7 +7,7 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hil.commands.trial_outputs import claimed
+from hil.commands.trial_outputs import claimed, record_options
 
 
 def cmd_noise(args: argparse.Namespace) -> int:
@@ -23,7 +23,7 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
     from hil.trial.noise_acquisition import AcquisitionFailed
     from hil.trial.noise_runner import run_noise
 
-    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
+    given = record_options(args)
     view = _view(args, out)
     try:
         doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,

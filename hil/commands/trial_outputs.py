@@ -64,6 +64,11 @@ def finish_units(args: argparse.Namespace, fixture) -> int:
     return fixture.write_index()
 
 
+def record_options(args: argparse.Namespace) -> dict[str, str | None]:
+    """The record's fields the command line gives (``--dut``, ``--operator``, ``--station``; None where not given)."""
+    return {"dut_serial": args.dut, "operator": args.operator, "station": args.station}
+
+
 def trial_config(args: argparse.Namespace, units: bool = False):
     """The trial config the arguments name, and the trial's output directory; a ``units`` config only where the
     command takes one (``units``), and then without ``--dut`` (each unit names its own), ``--operator`` and
@@ -76,8 +81,7 @@ def trial_config(args: argparse.Namespace, units: bool = False):
     if cfg.units and args.dut:
         raise InputError(f"--dut {args.dut}: {args.config} has several units; each names its serial in "
                          "units[i].record.dut_serial")
-    given = {"dut_serial": args.dut, "operator": args.operator, "station": args.station}  # _record_options
-    record = {key: value for key, value in given.items() if value is not None}
+    record = {key: value for key, value in record_options(args).items() if value is not None}
     if record:
         units = [unit.model_copy(update={"record": unit.record.model_copy(update=record)}) for unit in cfg.units or ()]
         cfg = cfg.model_copy(update={"record": cfg.record.model_copy(update=record), "units": units or None})

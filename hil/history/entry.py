@@ -6,7 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-SWING, CALIBRATION, NOISE = "swing", "calibration", "noise"
+from hil.vocabulary import TrialKind
+
+SWING, CALIBRATION, NOISE = TrialKind.SWING, TrialKind.CALIBRATION, TrialKind.NOISE
 RECORD_KEYS = ("dut_part", "dut_serial", "station", "operator", "notes", "software_version", "started_utc",
                "ended_utc", "host", "config_sha256")
 

@@ -35,6 +35,7 @@ from hil.samples import GIMBAL_AXES
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 from hil.trial.table_control import check_controller
+from hil.vocabulary import TrialKind
 
 # The emulated devices run for this many times the schedule's nominal length (+ 120 s), and the trial ends when
 # the schedule does. Each command acts as late as the data queued between the devices and the processing, so on
@@ -81,7 +82,7 @@ class CalibrationOutcome(TrialOutcome):
     residuals: Residuals | None = None
 
     def filed_as(self) -> tuple[str, dict, Path | None]:
-        return "calibration", self.calibration or {}, None
+        return TrialKind.CALIBRATION, self.calibration or {}, None
 
     @classmethod
     def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool, unfinished: str = UNFINISHED

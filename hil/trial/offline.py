@@ -20,6 +20,7 @@ from hil.recording.recorder import Recording, RecordingReader
 from hil.recording.replay import open_recording, recorded_pace, recording_path
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
+from hil.vocabulary import TrialKind
 
 if TYPE_CHECKING:
     from emulators.simulation_process import SimulationProcess
@@ -33,7 +34,7 @@ class ReplayOutcome(TrialOutcome):
     replay_of: Path | None = None
 
     def filed_as(self) -> tuple[str, dict, Path | None]:
-        return "swing", self.result, self.replay_of
+        return TrialKind.SWING, self.result, self.replay_of
 
 
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions

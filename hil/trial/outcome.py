@@ -18,6 +18,7 @@ from hil.outputs.trial_outputs import write_trial_outputs
 from hil.pipeline.compensation import compensated_bias, load_calibration
 from hil.pipeline.progress import Finished
 from hil.units import UG
+from hil.vocabulary import TrialKind
 
 
 class TrialSetupError(InputError, ValueError):
@@ -81,7 +82,7 @@ class TrialOutcome:
     def filed_as(self) -> tuple[str, dict, Path | None]:
         """How the history files this trial (docs/history.md): its kind, the document its figures are read from,
         and the run directory of the trial it re-processed (a replay's; else None)."""
-        return "swing", self.result, None
+        return TrialKind.SWING, self.result, None
 
     def exit_code(self, verdict: str) -> int:
         """The exit code (docs/contracts.md, "Exit codes"): 1 a trial that ended early or was interrupted, 3 one that
