@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -121,35 +122,54 @@ class BiasInstability:
         return total.T
 
 
+@dataclass(frozen=True)
+class AxisErrors:
+    """A triad's axes (steps 1 and 2 of the module docstring), SI: scale factor errors, misalignment angles
+    (xy, xz, yx, yz, zx, zy), the quadratic nonlinearity (per m/s^2) and the scale asymmetry (None: none)."""
+
+    scale: np.ndarray
+    misalignment: np.ndarray
+    nonlinearity: np.ndarray
+    asymmetry: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class RateErrors:
+    """The errors a triad adds to its rate (step 3), SI: the bias, the white noise (1-sigma per sample), the
+    linear drift (per s) and the random walk (per sqrt(s))."""
+
+    bias: np.ndarray
+    noise: np.ndarray
+    drift: np.ndarray
+    random_walk: np.ndarray
+
+
+@dataclass(frozen=True)
+class Output:
+    """How a triad puts its rate out (steps 1 and 4): the quantum of an increment (0: none), the response
+    (delay, low-pass; None: none) and the range, a rate (None: unlimited)."""
+
+    quantum: float
+    response: SensorResponse | None = None
+    limit: float | None = None
+
+
 class _Channel:
     """One sensor triad (gyros or accelerometers): static coefficients in SI and the random-walk state."""
 
-    def __init__(
-        self,
-        bias: np.ndarray,
-        noise: np.ndarray,
-        drift: np.ndarray,
-        random_walk: np.ndarray,
-        scale: np.ndarray,
-        misalignment: np.ndarray,
-        nonlinearity: np.ndarray,
-        quantum: float,
-        period: float,
-        asymmetry: np.ndarray | None = None,
-        response: SensorResponse | None = None,
-        limit: float | None = None,
-    ) -> None:
-        self._limit = None if limit is None else limit * period  # the output's range, as an increment
+    def __init__(self, axes: AxisErrors, rate: RateErrors, output: Output, period: float) -> None:
+        self._limit = None if output.limit is None else output.limit * period  # the output's range, as an increment
         self.clipped: np.ndarray | None = None  # (N, 3) of the last call: where the output read its range
+        asymmetry = axes.asymmetry
         self._asymmetry = None if asymmetry is None or not asymmetry.any() else asymmetry / 2.0
-        self._response = response
-        matrix = np.diag(1.0 + scale) @ misalignment_matrix(misalignment)
+        self._response = output.response
+        matrix = np.diag(1.0 + axes.scale) @ misalignment_matrix(axes.misalignment)
         self._matrix = None if np.array_equal(matrix, np.eye(3)) else matrix
-        self._bias, self._noise, self._drift, self._nonlinearity = bias, noise, drift, nonlinearity
-        self._walk_step = random_walk * math.sqrt(period)
+        self._bias, self._noise, self._drift, self._nonlinearity = rate.bias, rate.noise, rate.drift, axes.nonlinearity
+        self._walk_step = rate.random_walk * math.sqrt(period)
         self._walk = np.zeros(3)
         self._period = period
-        self._quantise = _Quantiser(quantum) if quantum > 0.0 else None
+        self._quantise = _Quantiser(output.quantum) if output.quantum > 0.0 else None
 
     def __call__(
         self, t: np.ndarray, x: np.ndarray, white: np.ndarray, walk: np.ndarray, instability: np.ndarray | None
@@ -205,30 +225,23 @@ class SensorErrorModel:
         e = errors
         self._rng = np.random.Generator(np.random.PCG64(seed))
         self._gyro = _Channel(
-            bias=np.array(e.gyro_bias_dph) * DEG_PER_H,
-            noise=np.array(e.gyro_noise_dph) * DEG_PER_H,
-            drift=np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / HOUR,
-            random_walk=np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / sqrt_hour,
-            scale=np.array(e.gyro_scale_ppm) * PPM,
-            misalignment=np.array(e.gyro_misalignment_arcsec) * ARCSEC,
-            nonlinearity=np.zeros(3),
-            quantum=e.dtheta_quantum_rad,
-            period=period,
-            asymmetry=np.array(e.scale_asymmetry_ppm) * PPM,
-            response=_response(e, rate_hz, lowpass=True),
-            limit=None if e.gyro_range_dps is None else e.gyro_range_dps * DEG,
+            AxisErrors(np.array(e.gyro_scale_ppm) * PPM, np.array(e.gyro_misalignment_arcsec) * ARCSEC, np.zeros(3),
+                       np.array(e.scale_asymmetry_ppm) * PPM),
+            RateErrors(np.array(e.gyro_bias_dph) * DEG_PER_H, np.array(e.gyro_noise_dph) * DEG_PER_H,
+                       np.array(e.gyro_drift_dph_per_h) * DEG_PER_H / HOUR,
+                       np.array(e.gyro_random_walk_dph_per_sqrt_h) * DEG_PER_H / sqrt_hour),
+            Output(e.dtheta_quantum_rad, _response(e, rate_hz, lowpass=True),
+                   None if e.gyro_range_dps is None else e.gyro_range_dps * DEG),
+            period,
         )
         self._accel = _Channel(
-            bias=np.array(e.accel_bias_ug) * UG,
-            noise=np.array(e.accel_noise_ug) * UG,
-            drift=np.array(e.accel_drift_ug_per_h) * UG / HOUR,
-            random_walk=np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / sqrt_hour,
-            scale=np.array(e.accel_scale_ppm) * PPM,
-            misalignment=np.array(e.accel_misalignment_arcsec) * ARCSEC,
-            nonlinearity=np.array(e.accel_nonlinearity_ug_per_g2) * UG_PER_G2,
-            quantum=e.dv_quantum_mps,
-            period=period,
-            response=_response(e, rate_hz, lowpass=False),
+            AxisErrors(np.array(e.accel_scale_ppm) * PPM, np.array(e.accel_misalignment_arcsec) * ARCSEC,
+                       np.array(e.accel_nonlinearity_ug_per_g2) * UG_PER_G2),
+            RateErrors(np.array(e.accel_bias_ug) * UG, np.array(e.accel_noise_ug) * UG,
+                       np.array(e.accel_drift_ug_per_h) * UG / HOUR,
+                       np.array(e.accel_random_walk_ug_per_sqrt_h) * UG / sqrt_hour),
+            Output(e.dv_quantum_mps, _response(e, rate_hz, lowpass=False)),
+            period,
         )
         instability = np.concatenate(
             [np.array(e.gyro_bias_instability_dph) * DEG_PER_H, np.array(e.accel_bias_instability_ug) * UG]
