@@ -27,18 +27,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hil.estimation.calibration_fit import Fit, Observations, full_scale_effects, least_squares
 from hil.estimation.calibration_model import (
     INDEX,
     MISALIGNMENT_ENTRIES,
     NONLIN,
     TERMS,
-    Fit,
     Window,
     forward,
     forward_jacobian,
-    full_scale_effects,
     inverse,
-    least_squares,
     measured_noise,
     misalignment_matrix,
     triad_matrix,
@@ -111,8 +109,9 @@ def calibrate_accelerometers(windows: Sequence[Window], earth: Earth, geometry: 
 
     def vector_fit(theta0: np.ndarray, groups: Sequence[str]) -> Fit:
         chosen = names(groups)
-        result = least_squares(theta0, _unit_basis(chosen), chosen, vector_model, samples, prior, tolerance,
-                               measured=noise is not None, effects=effects)
+        result = least_squares(theta0, _unit_basis(chosen), chosen,
+                               Observations(vector_model, samples, prior, measured=noise is not None), tolerance,
+                               effects=effects)
         return _with_outer_reason(result)
 
     coarse = vector_fit(np.zeros(len(TERMS)), [g for g in fit if g != "nonlinearity"])
@@ -149,8 +148,8 @@ def _fine_stage(coarse: Fit, y: np.ndarray, samples: np.ndarray, gravity: float,
         return (0.5 * (gravity**2 - np.sum(inverse(theta, y) ** 2, axis=1)))[:, None], \
             magnitude_jacobian(theta, y)[:, None, :]
 
-    return least_squares(coarse.theta, np.array(columns).T, chosen, magnitude_model, samples, prior, tolerance,
-                         measured=measured)
+    return least_squares(coarse.theta, np.array(columns).T, chosen,
+                         Observations(magnitude_model, samples, prior, measured), tolerance)
 
 
 def magnitude_jacobian(theta: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -15,15 +15,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from hil.estimation.calibration_fit import Fit, Observations, full_scale_effects, least_squares
 from hil.estimation.calibration_model import (
     INDEX,
     TERMS,
-    Fit,
     Window,
     forward,
     forward_jacobian,
-    full_scale_effects,
-    least_squares,
     measured_noise,
     window_means,
 )
@@ -81,6 +79,6 @@ def calibrate_gyros(windows: Sequence[Window], earth: Earth, geometry: TableGeom
             held[15, :] = held[:, 15] = 0.0
     # each sample's variance, measured in its window
     noise = measured_noise([w.rate_noise for w in windows], y)
-    return least_squares(theta0, basis, names, model, samples, noise if noise is not None else np.ones_like(y),
-                         tolerance, held_covariance=held, measured=noise is not None,
+    observed = Observations(model, samples, noise if noise is not None else np.ones_like(y), noise is not None)
+    return least_squares(theta0, basis, names, observed, tolerance, held_covariance=held,
                          effects=full_scale_effects(reference_at(theta0[15:18])))

@@ -15,11 +15,11 @@ import numpy as np
 
 from hil.config import ImuErrors
 from hil.estimation.accel_calibration import AccelCalibration
+from hil.estimation.calibration_fit import Fit
 from hil.estimation.calibration_model import (
     INDEX,
     TERMS,
     ZERO,
-    Fit,
     Window,
 )
 from hil.pipeline.compensation import ACCEL_KEYS, GYRO_KEYS

@@ -22,7 +22,8 @@ import numpy as np
 
 from hil.config import ImuErrors
 from hil.estimation.accel_calibration import AccelCalibration
-from hil.estimation.calibration_model import TERMS, Fit, Window, fold_inner_rotation
+from hil.estimation.calibration_fit import Fit
+from hil.estimation.calibration_model import TERMS, Window, fold_inner_rotation
 from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import ACCEL_KEYS, GYRO_KEYS
