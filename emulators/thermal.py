@@ -10,7 +10,9 @@ caller gives it) and the chamber held at T_ch; a chamber whose air moves is
 taken as constant over each batch of samples (its value at the batch's first time), the case's lag carried
 from batch to batch. With dT = T - reference_c, the
 accelerometer bias is ``a1 dT + a2 dT^2`` (ug), the gyro bias ``g1 dT`` (deg/h), and each scale factor error
-``s dT`` (ppm), per axis."""
+``s dT`` (ppm), per axis. They are added to the ideal increments, ahead of the triad's static scale factor S and
+misalignment, so an axis puts them out times 1 + S: its scale factor at T is (1 + S)(1 + s dT) - 1, the truth a
+calibration is judged against (:func:`hil.outputs.calibration_thermal.thermal_truth`)."""
 
 from __future__ import annotations
 

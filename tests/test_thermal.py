@@ -102,3 +102,31 @@ def test_hil_simulate_reports_the_thermal_model_temperature_in_result_json(tmp_p
     rate = 200.0  # the IMU samples at trial.rate_hz
     assert seen["min"] == pytest.approx(40.0 - 18.0 * math.exp(-1.0 / rate / 20.0), abs=1e-9)
     assert seen["max"] == pytest.approx(40.0 - 18.0 * math.exp(-10.0 / 20.0), abs=1e-9)
+
+
+def test_the_thermal_truth_is_the_bias_and_scale_factor_the_emulated_imu_has_at_its_temperature():
+    """calibration.json's ``truth.thermal.terms`` against the emulated IMU itself, soaked at 70 deg C with static
+    scale factors and biases: the thermal errors act on the ideal increments, ahead of the triad's scale factor, so
+    each thermal coefficient is seen times 1 + S (0.027 ppm of gyro z's scale factor and 0.054 ug of accelerometer
+    z's bias here, about two sigma of the quick thermal calibration's first-order coefficients)."""
+    from hil.outputs.calibration_thermal import thermal_truth
+
+    statics = {"accel_bias_ug": [60.0, 150.0, 260.0], "accel_scale_ppm": [120.0, -250.0, 300.0],
+               "gyro_bias_dph": [0.5, -0.3, 0.8], "gyro_scale_ppm": [50.0, -80.0, 150.0]}
+    errors = ImuErrors(temperature_c=70.0, thermal=THERMAL, **statics)
+    model = SensorErrorModel(errors, RATE, 1, 70.0)
+    n, rate, force = 10, np.array([0.5, -1.0, 2.0]), np.array([3.0, -4.0, 9.8])
+    seen = []
+    for k, sign in enumerate((1.0, -1.0)):
+        t = (np.arange(1, n + 1) + k * n) / RATE
+        dtheta, dv = model.apply(t, np.tile(sign * rate / RATE, (n, 1)), np.tile(sign * force / RATE, (n, 1)))
+        seen.append((dtheta.mean(axis=0) * RATE, dv.mean(axis=0) * RATE))
+    (gyro_up, accel_up), (gyro_down, accel_down) = seen
+    measured = {"gyro.scale_ppm": ((gyro_up - gyro_down) / (2 * rate) - 1.0) / 1e-6,
+                "gyro.bias_dph": (gyro_up + gyro_down) / 2 / DEG_PER_H,
+                "accel.scale_ppm": ((accel_up - accel_down) / (2 * force) - 1.0) / 1e-6,
+                "accel.bias_ug": (accel_up + accel_down) / 2 / UG}
+    _, truth = thermal_truth(errors, (0.0, 0.0, 0.0), 40.0, 2)
+    for key, values in measured.items():
+        at_70 = [np.polyval(truth["terms"][f"{key}.{i}"][::-1], 30.0) for i in range(3)]
+        assert values == pytest.approx(at_70, rel=1e-9, abs=1e-7), key

@@ -26,6 +26,7 @@ from hil.config import ImuErrors
 from hil.estimation.thermal_calibration import SIGMA_FLOOR, fit_polynomial, polynomial_at, polynomial_fit
 from hil.outputs.calibration_report import BLOCKS, observed_truth
 from hil.outputs.figures import pyplot
+from hil.units import PPM
 
 # term key -> (the errors.thermal fields of its polynomial's first and second order coefficients)
 THERMAL_TRUTH = {("accel", "bias_ug"): ("accel_bias_ug_per_c", "accel_bias_ug_per_c2"),
@@ -110,9 +111,14 @@ def _zero_offsets(points: list[dict], documents: list[dict], unobservable: dict[
 
 def thermal_truth(errors: ImuErrors, zero_offset_arcsec, reference_c: float, order: int) -> tuple[dict, dict]:
     """(``as_observed`` at ``reference_c``, ``{reference_c, terms}``): the injected errors as the schedule sees
-    them, their ``imu.errors.thermal`` polynomials moved to ``reference_c`` and cut at ``order``."""
+    them, their ``imu.errors.thermal`` polynomials moved to ``reference_c`` and cut at ``order``.
+
+    The emulator adds the thermal errors to the ideal increments, ahead of the triad's scale factor (emulators/
+    thermal.py), so an axis sees each thermal coefficient times 1 + S, S its static scale factor error: the scale
+    factor at T is (1 + S)(1 + s dT) - 1. The misalignment's share (arcsec times a thermal bias) is left out."""
     observed = observed_truth(errors, zero_offset_arcsec)
     thermal = errors.thermal
+    gains = {block: 1.0 + np.array(observed[block]["scale_ppm"]) * PPM for block, _ in BLOCKS}
     terms = {}
     for block, keys in BLOCKS:
         for key, _, _ in keys:
@@ -121,8 +127,8 @@ def thermal_truth(errors: ImuErrors, zero_offset_arcsec, reference_c: float, ord
                 fields = THERMAL_TRUTH.get((block, key))
                 if thermal is not None and fields is not None:
                     d0 = reference_c - thermal.reference_c
-                    first = getattr(thermal, fields[0])[i]
-                    second = getattr(thermal, fields[1])[i] if fields[1] else 0.0
+                    first = getattr(thermal, fields[0])[i] * gains[block][i]
+                    second = (getattr(thermal, fields[1])[i] if fields[1] else 0.0) * gains[block][i]
                     poly[:3] = [base + first * d0 + second * d0 * d0, first + 2.0 * second * d0, second]
                 observed[block][key][i] = poly[0]
                 terms[f"{block}.{key}.{i}"] = poly[:order + 1]
