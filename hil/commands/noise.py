@@ -21,15 +21,16 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
     from hil.outputs.noise import noise_summary
     from hil.outputs.record import noise_record
     from hil.trial.noise_acquisition import AcquisitionFailed
-    from hil.trial.noise_runner import run_noise
+    from hil.trial.noise_runner import AllanSettings, NoiseSource, run_noise
 
     given = record_options(args)
     view = _view(args, out)
     try:
-        doc = run_noise(args.source, out, args.config, figure=not args.no_figures, export=args.export,
-                        view=view, taus=args.taus, duration=args.duration, quiet=args.quiet,
+        doc = run_noise(NoiseSource(args.source, args.config, args.duration, args.quiet), out,
+                        AllanSettings(taus=args.taus, detrend=args.detrend), figure=not args.no_figures,
+                        export=args.export, view=view,
                         record=lambda cfg: noise_record(given, args.source, cfg, args.started,
-                                                        datetime.now(timezone.utc)), detrend=args.detrend)
+                                                        datetime.now(timezone.utc)))
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code

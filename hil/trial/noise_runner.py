@@ -41,6 +41,29 @@ FORMING_HALVINGS = 8  # a live view is shown the analysis of the record's first 
 
 
 @dataclass(frozen=True)
+class NoiseSource:
+    """What ``hil noise`` reads: ``source`` a run directory or recording, a CSV (``config``: its site and table,
+    needed when it moves) or a trial config; ``duration`` s to simulate or acquire (None: ``trial.duration_s``);
+    ``quiet``: no progress line while acquiring."""
+
+    source: str | Path
+    config: str | Path | None = None
+    duration: float | None = None
+    quiet: bool = False
+
+
+@dataclass(frozen=True)
+class AllanSettings:
+    """How a record is analysed: the two-sided ``level`` of every interval, the tau grid ``taus`` (``octave``,
+    ``decade``, ``all`` or taus in s: :func:`~hil.estimation.allan_taus.parse_taus`) and the ``detrend``
+    (``none``, ``linear`` or ``temperature``, see :func:`analyse_record`)."""
+
+    level: float = DEFAULT_LEVEL
+    taus: str | tuple[float, ...] = "octave"
+    detrend: str = "none"
+
+
+@dataclass(frozen=True)
 class NoiseRecord:
     """A trial's increments and what the analysis needs to know of the trial."""
 
@@ -54,13 +77,11 @@ class NoiseRecord:
         return self.cfg if self.source in ("simulation", "devices") else None
 
 
-def read_source(source: str | Path, out: Path, config: str | Path | None = None, duration: float | None = None,
-                quiet: bool = False) -> NoiseRecord:
-    """The increments of ``source``: a run directory or recording, a CSV (with ``config`` for its site and table,
-    needed when it moves), or a config: simulated (for ``duration`` s when given), or, when its devices are read
-    from ports, acquired from them for ``duration`` s into ``out`` (:mod:`hil.trial.noise_acquisition`)."""
-    path = Path(source)
-    given = None if config is None else load_config(config)
+def read_source(source: NoiseSource, out: Path) -> NoiseRecord:
+    """The increments of ``source``: a run directory or recording, a CSV, or a config: simulated, or, when its
+    devices are read from ports, acquired from them into ``out`` (:mod:`hil.trial.noise_acquisition`)."""
+    path, duration = Path(source.source), source.duration
+    given = None if source.config is None else load_config(source.config)
     if path.is_dir() or path.suffix == ".mcap":
         batch, recorded = _replayed(path)
         return NoiseRecord(batch, "recording", given or recorded)
@@ -72,7 +93,7 @@ def read_source(source: str | Path, out: Path, config: str | Path | None = None,
             cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": duration})})
         return simulated(cfg)
 
-    return NoiseRecord(_replayed(acquire(cfg, path, out, duration, quiet))[0], "devices", cfg)
+    return NoiseRecord(_replayed(acquire(cfg, path, out, duration, source.quiet))[0], "devices", cfg)
 
 
 def simulated(cfg: Config) -> NoiseRecord:
@@ -169,13 +190,13 @@ def with_gaps(t: np.ndarray, period: float, *columns: np.ndarray) -> tuple[int, 
     return missing, filled
 
 
-def analyse_record(record: NoiseRecord, label: str, level: float = DEFAULT_LEVEL,
-                   taus: str | tuple[float, ...] = "octave", detrend: str = "none") -> NoiseAnalysis:
-    """The Allan deviation on the ``taus`` grid and the noise terms of a record (the table's motion taken out
-    first if it moved; samples missing in gaps left out, ``missing`` in the document; with ``detrend``
+def analyse_record(record: NoiseRecord, label: str, settings: AllanSettings = AllanSettings()) -> NoiseAnalysis:
+    """The Allan deviation on the settings' tau grid and the noise terms of a record (the table's motion taken out
+    first if it moved; samples missing in gaps left out, ``missing`` in the document; with the ``detrend``
     ``linear`` each rate's linear trend, the ramp, removed, with ``temperature`` the part a polynomial of the
     IMU's reported temperature explains, ``detrend`` in the document); ``label`` names the source in errors.
     Nothing is written."""
+    level, taus, detrend = settings.level, settings.taus, settings.detrend
     batch = record.batch
     period = float(np.median(np.diff(batch.t))) if len(batch) > 1 else 0.0
     is_moving = moving(batch, period)
@@ -223,30 +244,28 @@ def _temperature_coefficients(gyro: np.ndarray, accel: np.ndarray, about_c: floa
     return out
 
 
-def run_noise(source: str | Path, out: Path, config: str | Path | None = None, level: float = DEFAULT_LEVEL,
-              figure: bool = True, export: Path | None = None, view=None, taus: str = "octave",
-              duration: float | None = None, quiet: bool = False,
-              record: Callable[[Config | None], dict] | None = None, detrend: str = "none") -> dict:
-    """Analyse ``source`` on the tau grid ``taus`` (``octave``, ``decade``, ``all`` or taus in s, comma
-    separated), with ``detrend`` (``none``, ``linear`` or ``temperature``, see :func:`analyse_record`), and write
+def run_noise(source: NoiseSource, out: Path, settings: AllanSettings = AllanSettings(), *, figure: bool = True,
+              export: Path | None = None, view=None, record: Callable[[Config | None], dict] | None = None) -> dict:
+    """Analyse ``source`` with ``settings`` (its ``taus`` as ``--taus`` gives them, comma separated) and write
     OUT/noise.json, allan.png and report.html; returns the noise document. ``view`` (an
     :class:`~hil.viewer.allan_view.AllanView`, or None) is shown the curves as they form (:func:`show_forming`).
-    A config that reads devices is acquired first (``duration`` s, see :mod:`hil.trial.noise_acquisition`).
+    A config that reads devices is acquired first (see :mod:`hil.trial.noise_acquisition`).
     ``record(source_config)`` gives noise.json's ``record`` once the analysis is done (``source_config``:
     :attr:`NoiseRecord.source_config`)."""
     try:
-        grid = parse_taus(taus)
+        settings = dataclasses.replace(settings, taus=parse_taus(settings.taus))
     except ValueError as exc:
         raise DataError(str(exc)) from None
-    samples = read_source(source, out, config, duration, quiet)
+    samples = read_source(source, out)
     if export is not None:
         write_increments_csv(export, samples.batch)
-    analysis = analyse_record(samples, str(source), level, grid, detrend)
-    analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source).stem}
+    label = str(source.source)
+    analysis = analyse_record(samples, label, settings)
+    analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source.source).stem}
     if record is not None:
         analysis.doc["record"] = record(samples.source_config)
     if view is not None:
-        show_forming(view, samples, analysis, lambda part: analyse_record(part, str(source), level, grid, detrend))
+        show_forming(view, samples, analysis, lambda part: analyse_record(part, label, settings))
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)
     write_noise_report(out)
     return analysis.doc
