@@ -33,6 +33,8 @@ from hil.config import load_config
 from hil.estimation.online import OnlineEstimator
 from hil.samples import StreamCounts
 from hil.units import UG
+from hil.viewer.bias_view import BiasTruth
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TABLE_RATE_HZ, TrialViewer
 
 HEALTH = {  # what a live trial gives (hil.pipeline.processor and hil.trial.live)
@@ -64,8 +66,9 @@ def live(cfg, sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: b
     caller = 0.0
     cpu0, wall0 = time.process_time(), time.perf_counter()
     c0 = time.perf_counter()
-    viewer = TrialViewer("save", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=blocking, limits=cfg.limits, verdict_at_end=True)  # fmt: skip
+    viewer = TrialViewer(ViewerOptions("save"), out, geometry=sim.truth.geometry,
+                         truth=BiasTruth(np.array([60, 150, 260]) * UG), limits=cfg.limits, blocking=blocking,
+                         verdict_at_end=True)
     caller += time.perf_counter() - c0
     for start in range(0, len(t), per_batch):
         stop = min(start + per_batch, len(t))
@@ -87,8 +90,8 @@ def live(cfg, sim, snapshots, t, angles, batch_hz: float, out: Path, blocking: b
 
 def batched(sim, snapshots, t, angles, out: Path) -> dict:
     cpu0, wall0 = time.process_time(), time.perf_counter()
-    viewer = TrialViewer("save", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=True)  # fmt: skip
+    viewer = TrialViewer(ViewerOptions("save"), out, geometry=sim.truth.geometry,
+                         truth=BiasTruth(np.array([60, 150, 260]) * UG), blocking=True)
     for start in range(0, len(t), 20000):
         viewer.log_table(t[start : start + 20000], angles[start : start + 20000])
     viewer.log_snapshots(snapshots)

@@ -5,7 +5,7 @@
     .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--layout trial] [--out web_viewer.png]
 
 Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
-through ``TrialViewer("serve", ...)`` with the default trial's ``output.limits`` (the verdict so far)
+through a serving ``TrialViewer`` with the default trial's ``output.limits`` (the verdict so far)
 (``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``;
 ``--layout plan``: a plan's view at its second step and that step's own view in the same viewer),
 checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
@@ -39,6 +39,8 @@ from hil.trial.noise_runner import analyse_record, show_forming, simulated
 from hil.units import UG
 from hil.viewer.allan_view import AllanView
 from hil.viewer.plan_view import PlanView, plan_markdown
+from hil.viewer.bias_view import BiasTruth
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TrialViewer
 
 CHROMIUM = "/usr/bin/chromium"
@@ -65,9 +67,9 @@ def log_trial(out: Path, layout: str, connect: str | None = None, plan: str | No
     cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 60.0, "rate_hz": 200.0})})
     sim = Simulation.from_config(cfg)
     est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
-    viewer = TrialViewer("serve", out, geometry=sim.truth.geometry, truth_bias=np.array([60, 150, 260]) * UG,
-                         blocking=True, recording_name="web-check", layout=layout, limits=cfg.limits, connect=connect,
-                         plan=plan)  # fmt: skip
+    viewer = TrialViewer(ViewerOptions("serve", layout=layout, connect=connect, plan=plan), out,
+                         geometry=sim.truth.geometry, truth=BiasTruth(np.array([60, 150, 260]) * UG), limits=cfg.limits,
+                         recording_name="web-check", blocking=True)
     batches = list(sim.batches(chunk=2000))
     for batch in batches:
         est.update_many(batch)

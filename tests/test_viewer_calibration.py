@@ -21,6 +21,7 @@ from hil.estimation.calibration_schedule import Dwell, default_schedule
 from hil.frames import Earth, TableGeometry
 from hil.units import ARCSEC, DEG, G0, PPM, UG
 from hil.viewer import calibration_view, trial_viewer
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TrialViewer
 
 MARKERS = "/" + calibration_view.MARKERS
@@ -50,7 +51,7 @@ def _rgb(packed: int) -> tuple[int, int, int]:
 def test_progress_markers_steps_and_residuals_are_logged_as_given(tmp_path):
     schedule = default_schedule()
     steps = list(schedule.dwells) + list(schedule.plateaus)
-    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True, layout="calibration")
+    viewer = TrialViewer(ViewerOptions("save", layout="calibration"), tmp_path, geometry=TableGeometry(), blocking=True)
     viewer.log_calibration_step(0.0, 0, steps)
     viewer.log_calibration_window(30.0, [100.0, -20.0, 5.0], [0.01, 0.02, -0.03])
     viewer.log_calibration_step(30.0, 1, steps)
@@ -114,7 +115,8 @@ class _FullForLiveCalls(queue.Queue):
 def test_a_live_viewer_fallen_behind_still_logs_every_calibration_step_and_window(tmp_path, monkeypatch):
     steps = list(default_schedule().dwells)
     monkeypatch.setattr(trial_viewer, "queue", SimpleNamespace(Queue=_FullForLiveCalls, Full=queue.Full))
-    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), layout="calibration")  # live: never blocks
+    viewer = TrialViewer(ViewerOptions("save", layout="calibration"), tmp_path,
+                         geometry=TableGeometry())  # live: never blocks
     viewer.log_table(np.array([0.0]), np.zeros((1, 3)))  # a live call: dropped and counted
     viewer.log_calibration_step(0.0, 0, steps)
     viewer.log_calibration_window(30.0, [100.0, -20.0, 5.0], [0.01, 0.02, -0.03])

@@ -19,6 +19,7 @@ from hil.frames import TableGeometry
 from hil.outputs.measurements import FAIL, PASS, measurements
 from hil.trial.viewer_feed import watched_chamber
 from hil.viewer import trial_viewer
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TrialViewer
 from hil.viewer.verdict import final_markdown
 
@@ -98,7 +99,7 @@ def test_a_calibrations_recording_adds_exactly_the_entities_docs_viewer_names(tm
     trial, calibration = documented()[:2]
     schedule = default_schedule()
     steps = list(schedule.dwells) + list(schedule.plateaus)
-    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True, layout="calibration")
+    viewer = TrialViewer(ViewerOptions("save", layout="calibration"), tmp_path, geometry=TableGeometry(), blocking=True)
     viewer.log_table(np.array([0.0]), np.zeros((1, 3)))
     viewer.log_calibration_step(0.0, 0, steps)
     viewer.log_calibration_window(30.0, [100.0, -20.0, 5.0], [0.01, 0.02, -0.03])
@@ -108,7 +109,7 @@ def test_a_calibrations_recording_adds_exactly_the_entities_docs_viewer_names(tm
 
 
 def test_the_rrd_gets_each_entitys_rows_as_one_chunk_every_two_minutes_of_trial_time(tmp_path):
-    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True)
+    viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=TableGeometry(), blocking=True)
     t = np.arange(0.0, 300.0, 0.01)
     angles = np.column_stack((np.sin(t), np.cos(t), t)) * 0.1
     for start in range(0, len(t), 100):  # a call a second, as a live trial makes them
@@ -244,7 +245,7 @@ class _Chamber:
 
 def test_a_chambers_set_points_and_readings_go_to_exactly_the_entities_docs_viewer_names(tmp_path):
     trial, _, chamber_paths = documented()[:3]
-    viewer = TrialViewer("save", tmp_path, geometry=TableGeometry(), blocking=True)
+    viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=TableGeometry(), blocking=True)
     controller = _Chamber()
     chamber = watched_chamber(controller, 25.0, viewer)
     viewer.log_temperature(0.5, 24.0)

@@ -18,9 +18,10 @@ from hil.config import ReportLimits
 from hil.estimation.online import OnlineEstimator
 from hil.units import DEG, UG
 from hil.viewer import blueprint, rerun_process, trial_viewer
-from hil.viewer.bias_view import follow_ranges
+from hil.viewer.bias_view import BiasTruth, follow_ranges
 from hil.viewer.verdict import PENDING, VerdictSoFar
 from hil.viewer.modes import default_viewer_mode
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TrialViewer
 
 HEALTH = {  # the pipeline's figures and a live trial's
@@ -81,7 +82,7 @@ def saved(trial, tmp_path_factory):
     sim, snapshots, batches = trial
     out = tmp_path_factory.mktemp("viz")
     truth = np.array(PAPER_ERRORS["accel_bias_ug"]) * UG
-    viewer = TrialViewer("save", out, geometry=sim.truth.geometry, truth_bias=truth, blocking=True)
+    viewer = TrialViewer(ViewerOptions("save"), out, geometry=sim.truth.geometry, truth=BiasTruth(truth), blocking=True)
     viewer.log_snapshots(snapshots[:30])
     for snap in snapshots[30:]:  # the live path, one at a time
         viewer.log_snapshot(snap)
@@ -136,7 +137,7 @@ def test_saved_recording_holds_bias_sigma_rank_alignment_and_health(saved):
 def test_a_real_devices_bias_has_its_table_reference_no_truth_and_the_limits_drawn(trial, tmp_path):
     sim, snapshots, _ = trial
     limits = ReportLimits(bias_sigma_ug_max=5.0, converged_by_s=30.0)
-    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry, blocking=True, limits=limits)
+    viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=sim.truth.geometry, blocking=True, limits=limits)
     viewer.log_snapshots(snapshots)
     viewer.close()
     series = _series(tmp_path / "recording.rrd")
@@ -153,7 +154,7 @@ def test_a_real_devices_bias_has_its_table_reference_no_truth_and_the_limits_dra
 
 def test_a_batched_trial_gets_its_verdict_so_far_once_at_its_end(trial, tmp_path):
     sim, snapshots, _ = trial
-    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry, blocking=True,
+    viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=sim.truth.geometry, blocking=True,
                          limits=ReportLimits(bias_sigma_ug_max=5.0))
     viewer.log_snapshots(snapshots)  # simulate and replay: every snapshot in one call
     viewer.close()
@@ -230,7 +231,7 @@ def test_saved_recording_carries_the_blueprint_and_passes_rrd_verify(saved, tmp_
 def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, monkeypatch):
     sim, snapshots, _ = trial
     monkeypatch.setattr(trial_viewer, "QUEUE_ITEMS", 4)
-    viewer = TrialViewer("save", tmp_path, geometry=sim.truth.geometry)
+    viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=sim.truth.geometry)
     release = threading.Event()
     viewer._submit(release.wait)  # the logging thread is stuck in this job
     for k in range(50):  # a call that waited would wait for ever: the logging thread is held until after
@@ -244,14 +245,14 @@ def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, mon
 
 def test_mode_none_writes_nothing_and_unknown_modes_are_refused(trial, tmp_path):
     sim, snapshots, batches = trial
-    viewer = TrialViewer("none", tmp_path / "none", geometry=sim.truth.geometry)
+    viewer = TrialViewer(ViewerOptions("none"), tmp_path / "none", geometry=sim.truth.geometry)
     viewer.log_snapshots(snapshots)
     viewer.log_table(batches[0].t, batches[0].angles)
     viewer.log_health(1.0, HEALTH)
     viewer.close()
     assert not (tmp_path / "none").exists()
     with pytest.raises(ValueError, match="spawn, serve, save, none"):
-        TrialViewer("web", tmp_path, geometry=sim.truth.geometry)
+        TrialViewer(ViewerOptions("web"), tmp_path, geometry=sim.truth.geometry)
 
 
 def test_default_mode_spawns_only_with_a_display(monkeypatch):
@@ -279,7 +280,7 @@ def _listening(port: int) -> set[str]:
 @pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="needs Linux /proc/net/tcp")
 def test_serve_mode_binds_loopback_prints_the_url_and_keeps_analytics_off(trial, tmp_path, capsys):
     sim, snapshots, _ = trial
-    viewer = TrialViewer("serve", tmp_path, geometry=sim.truth.geometry)
+    viewer = TrialViewer(ViewerOptions("serve"), tmp_path, geometry=sim.truth.geometry)
     try:
         viewer.log_snapshots(snapshots[:5])
         viewer.close()

@@ -7,7 +7,6 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, TypeVar
 
@@ -22,6 +21,7 @@ from hil.pipeline.progress import Health, Progress
 from hil.samples import StreamCounts
 from hil.trial.outcome import TrialSetupError, emulated_truth
 from hil.units import HOUR, UG
+from hil.viewer.modes import ViewerOptions
 from hil.viewer.verdict import final_markdown
 
 
@@ -49,36 +49,22 @@ class Viewer(Protocol):
 OwnView = TypeVar("OwnView")
 
 
-@dataclass(frozen=True)
-class ViewerOptions:
-    """``--viewer`` and ``--bind``; ``layout`` the blueprint: ``trial``, or ``calibration`` (the trial's views
-    and the calibration's, :mod:`hil.viewer.calibration_view`); a plan's step: ``connect`` the gRPC URL of the
-    plan's viewer (None: none) and ``plan`` the plan's document (:mod:`hil.viewer.plan_view`)."""
-
-    mode: str = "none"
-    bind: str = "127.0.0.1"
-    layout: str = "trial"
-    connect: str | None = None
-    plan: str | None = None
-
-
 def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) -> Viewer | None:
     """The Rerun viewer the options ask for (None for ``none``); raises :class:`TrialSetupError` when it
     does not start."""
     if options.mode == "none":
         return None
+    from hil.viewer.bias_view import BiasTruth
     from hil.viewer.trial_viewer import (
         TrialViewer,  # rerun only when a viewer is asked for
     )
 
     truth = emulated_truth(cfg)
+    bias = None if truth is None else BiasTruth(np.array(truth["accel_bias_ug"]) * UG,
+                                                np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR)
     try:
-        viewer = TrialViewer(options.mode, out, geometry=TableGeometry.from_config(cfg.turntable),
-                             truth_bias=None if truth is None else np.array(truth["accel_bias_ug"]) * UG,
-                             truth_drift=None if truth is None else np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR,
-                             bind=options.bind, recording_name=cfg.trial.name, blocking=blocking,
-                             layout=options.layout, limits=cfg.limits, verdict_at_end=True, connect=options.connect,
-                             plan=options.plan)
+        viewer = TrialViewer(options, out, geometry=TableGeometry.from_config(cfg.turntable), truth=bias,
+                             limits=cfg.limits, recording_name=cfg.trial.name, blocking=blocking, verdict_at_end=True)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:

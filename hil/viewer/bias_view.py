@@ -4,6 +4,8 @@ estimate (a few sigma about the latest estimate, sent as the blueprint's scalar 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import rerun as rr
 
@@ -18,6 +20,15 @@ REFERENCE_COLOR = (40, 40, 40)
 FOLLOW_FLOOR_UG = 0.5  # the followed view spans at least the latest estimate ± this
 REFERENCE_SIGMAS = 20.0  # a reference (table, truth) this close to the estimate is kept in the followed view
 RESEND_CHANGE = 0.25  # the followed ranges are sent again once a bound moves by this fraction of their width
+
+
+@dataclass(frozen=True)
+class BiasTruth:
+    """An emulated trial's accelerometer bias, the reference its view draws: ``bias`` (3,) m/s^2 at the start and
+    its ``drift`` (3,) m/s^3 (None: constant)."""
+
+    bias: np.ndarray
+    drift: np.ndarray | None = None
 
 
 def series_color(axis: str, series: str) -> tuple[int, int, int]:

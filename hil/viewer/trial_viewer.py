@@ -47,11 +47,11 @@ from hil.viewer.blueprint import (
     health_series,
     log_series_styles,
 )
-from hil.viewer.bias_view import bias_rows, log_bias_styles
+from hil.viewer.bias_view import BiasTruth, bias_rows, log_bias_styles
 from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.chunks import Columns, Streams
 from hil.viewer.judged_view import JudgedView, log_plan, log_verdict
-from hil.viewer.modes import VIEWER_MODES
+from hil.viewer.modes import VIEWER_MODES, ViewerOptions
 from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
 from hil.viewer.temperature_view import CHAMBER_READING, CHAMBER_SET_POINT, IMU, TemperatureLog
@@ -69,36 +69,23 @@ QUEUE_ITEMS = 1024
 class TrialViewer:
     """Rerun logging of one trial; see the module docstring. All methods return at once."""
 
-    def __init__(
-        self,
-        mode: str,
-        out_dir: Path,
-        *,
-        geometry: TableGeometry,
-        truth_bias: np.ndarray | None = None,
-        truth_drift: np.ndarray | None = None,
-        bind: str = "127.0.0.1",
-        recording_name: str = "trial",
-        blocking: bool = False,
-        telemetry: bool | None = None,
-        table_rate_hz: float = TABLE_RATE_HZ,
-        layout: str = "trial",
-        limits: ReportLimits | None = None,
-        verdict_at_end: bool = False,
-        connect: str | None = None,
-        plan: str | None = None,
-    ) -> None:
+    def __init__(self, options: ViewerOptions, out_dir: Path, *, geometry: TableGeometry,
+                 truth: BiasTruth | None = None, limits: ReportLimits | None = None, recording_name: str = "trial",
+                 blocking: bool = False, verdict_at_end: bool = False) -> None:
+        """The view ``options`` ask for (:class:`~hil.viewer.modes.ViewerOptions`: mode, bind address, layout, a
+        running viewer to connect to, a plan's document) of a trial writing to ``out_dir``; ``truth``: an emulated
+        trial's, drawn as the bias's reference; ``limits``: drawn, and judged in ``/verdict`` as the trial goes;
+        ``blocking``: waits for room rather than drops (offline producers); ``verdict_at_end``: :meth:`close`
+        waits for :meth:`end`'s verdict."""
+        mode, layout, plan = options.mode, options.layout, options.plan
         if mode not in VIEWER_MODES:
             raise ValueError(f"viewer mode {mode!r}: choose one of {', '.join(VIEWER_MODES)}")
         self.mode = mode
         self.out_dir = Path(out_dir)
         self.geometry = geometry
-        self.truth_bias = None if truth_bias is None else np.asarray(truth_bias, dtype=float)
-        self.truth_drift = None if truth_drift is None else np.asarray(truth_drift, dtype=float)
-        self.bind = bind
+        self.truth_bias = None if truth is None else np.asarray(truth.bias, dtype=float)
+        self.truth_drift = None if truth is None or truth.drift is None else np.asarray(truth.drift, dtype=float)
         self.blocking = blocking
-        self.table_rate_hz = table_rate_hz
-        self.telemetry = telemetry_requested() if telemetry is None else telemetry
         self.rrd_path: Path | None = None
         self.url: str | None = None  # the web viewer's address in serve mode
         self.viewer_process: subprocess.Popen | None = None
@@ -129,9 +116,9 @@ class TrialViewer:
         self._file = _recording_stream(recording_id, FILE_FLUSH_S)
         self._file.save(self.rrd_path)  # its blueprint at the end, with the converged estimate's ranges
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
-        if mode != "save" or connect is not None:  # connect: a viewer already running (a plan's), in any mode
-            self.viewer_process, grpc_url, self.url = start_viewer(mode, bind, self.telemetry) if connect is None \
-                else (None, connect, None)
+        if mode != "save" or options.connect is not None:  # connect: a viewer already running (a plan's), any mode
+            self.viewer_process, grpc_url, self.url = (start_viewer(mode, options.bind, telemetry_requested())
+                                                       if options.connect is None else (None, options.connect, None))
             self._view = _recording_stream(recording_id)
             self._view.set_sinks(rr.GrpcSink(grpc_url), default_blueprint=blueprint)
             self._columns.append(Columns(self._view, 0.0))
@@ -162,11 +149,11 @@ class TrialViewer:
     def log_table(self, t: np.ndarray, angles: np.ndarray) -> None:
         """Gimbal angles (N, 3) rad ordered (outer, middle, inner) at trial times t (N,) s, for the 3D view.
 
-        Decimated to ``table_rate_hz``."""
+        Decimated to ``TABLE_RATE_HZ``."""
         if self._rec is None or len(t) == 0:
             return
         t = np.asarray(t, dtype=float)
-        ticks = np.floor(t * self.table_rate_hz + 1e-9)  # a sample on a tick belongs to it
+        ticks = np.floor(t * TABLE_RATE_HZ + 1e-9)  # a sample on a tick belongs to it
         first_of_tick = np.empty(len(t), dtype=bool)
         first_of_tick[0] = True
         first_of_tick[1:] = ticks[1:] != ticks[:-1]
