@@ -1,5 +1,5 @@
 """The layers of docs/design.md, "Layers", held against the code: imports point down the layer list, no import cycles
-(lazy imports included), no module over 400 lines."""
+(lazy imports included), no module over 400 lines, no function over 8 parameters."""
 
 from __future__ import annotations
 
@@ -9,6 +9,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("hil", "drivers", "emulators")
 MAX_LINES = 400
+MAX_PARAMETERS = 8  # self and cls not counted; more are grouped in the small settings each stage uses
+# functions that still take more, each with why; a function brought within the bound leaves this list
+EMULATOR_OPTIONS = "the emulator process's options, until the rig's emulated devices take them"
+PARAMETER_EXCEPTIONS = {
+    "hil/trial/live_runner.py::_acquire": "the live trial's devices and viewer, built here until the rig holds them",
+    "emulators/process.py::run_emulator": EMULATOR_OPTIONS,
+    "emulators/process.py::spawn_emulator": EMULATOR_OPTIONS,
+}
 # docs/design.md, "Layers": an import may only point to its own layer or one above it in this list
 LAYERS = (
     ("hil.config_types", "hil.inputs", "hil.units", "hil.samples", "hil.vocabulary"),
@@ -103,18 +111,51 @@ def test_the_walk_sees_the_imports_it_checks():
 
 
 
-def test_classes_of_the_data_flow_stay_small_and_take_few_arguments():
-    """No class over 200 lines and no constructor over 8 parameters in hil/pipeline and hil/trial."""
+def test_classes_of_the_data_flow_stay_small():
+    """No class over 200 lines in hil/pipeline and hil/trial."""
     for path in sorted((ROOT / "hil" / "pipeline").glob("*.py")) + sorted((ROOT / "hil" / "trial").glob("*.py")):
         name = str(path.relative_to(ROOT))
         for node in ast.walk(ast.parse(path.read_text())):
-            if not isinstance(node, ast.ClassDef):
-                continue
-            lines = node.end_lineno - node.lineno + 1
-            assert lines <= 200, f"{name}: {node.name} has {lines} lines"
-            for init in (m for m in node.body if isinstance(m, ast.FunctionDef) and m.name == "__init__"):
-                params = len(init.args.args) + len(init.args.kwonlyargs) - 1
-                assert params <= 8, f"{name}: {node.name}({params} parameters)"
+            if isinstance(node, ast.ClassDef):
+                lines = node.end_lineno - node.lineno + 1
+                assert lines <= 200, f"{name}: {node.name} has {lines} lines"
+
+
+def _parameters(function: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    """How many parameters ``function`` takes: positional, keyword-only, ``*args`` and ``**kwargs``, its first one
+    not counted when it is ``self`` or ``cls``."""
+    args = function.args
+    positional = args.posonlyargs + args.args
+    bound = bool(positional) and positional[0].arg in ("self", "cls")
+    return len(positional) - bound + len(args.kwonlyargs) + (args.vararg is not None) + (args.kwarg is not None)
+
+
+def _over_parameters(tree: ast.AST) -> dict[str, int]:
+    """Each function or method of ``tree`` over ``MAX_PARAMETERS`` parameters: its name, how many."""
+    return {node.name: n for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and (n := _parameters(node)) > MAX_PARAMETERS}
+
+
+def test_no_function_takes_more_than_8_parameters():
+    """hil/, drivers/ and emulators/: no function, method or constructor over 8 parameters, bar the listed
+    exceptions; an exception no longer needed is taken off the list."""
+    paths = [path for package in PACKAGES for path in sorted((ROOT / package).rglob("*.py"))]
+    over = {f"{path.relative_to(ROOT)}::{name}": n for path in paths
+            for name, n in _over_parameters(ast.parse(path.read_text())).items()}
+    wrong = {name: n for name, n in over.items() if name not in PARAMETER_EXCEPTIONS}
+    assert not wrong, f"over {MAX_PARAMETERS} parameters: {wrong}"
+    stale = sorted(set(PARAMETER_EXCEPTIONS) - set(over))
+    assert not stale, f"within {MAX_PARAMETERS} parameters now, take them off PARAMETER_EXCEPTIONS: {stale}"
+
+
+def test_the_parameter_count_leaves_out_self_and_counts_the_rest():
+    source = ("def nine(a, b, c, d, e, f, g, h, i): pass\n"
+              "class C:\n"
+              "    def __init__(self, a, b, c, d, e, f, g, h): pass\n"
+              "    @classmethod\n"
+              "    def make(cls, a, *rest, b, c, d, e, f, g, **options): pass\n"
+              "    async def run(self, a, /, b, c, d, e, f, g, h, *, i): pass\n")
+    assert _over_parameters(ast.parse(source)) == {"nine": 9, "make": 9, "run": 9}
 
 
 PIPELINE_CALLS = {"feed", "feed_batch", "skip", "finish", "finished"}  # the rest comes out as Progress and Finished
