@@ -40,6 +40,31 @@ def quick_config() -> dict:
     return cfg
 
 
+def account(out: Path, errors: dict | None = None) -> str:
+    """What a failed run did, for the assertion's message: how the trial ended, its verdict, streams and residuals
+    (result.json), each temperature's soak, IMU temperature, windows and accelerometer biases (calibration.json) and
+    the coefficients' errors in sigmas."""
+    lines = []
+    if (out / "result.json").exists():
+        result = json.loads((out / "result.json").read_text())
+        summary = {k: v for k, v in (result.get("calibration") or {}).items() if k != "unobservable"}
+        lines += [f"ended: {result['ended']}; verdict: {result.get('verdict')}", f"streams: {result.get('streams')}",
+                  f"calibration: {summary}"]
+    if (out / "calibration.json").exists():
+        doc = json.loads((out / "calibration.json").read_text())
+        for point in doc["thermal"]["temperatures"]:
+            windows = [(p["samples"], [round(r, 1) for r in p["residual_ug"]]) for p in doc["positions"]
+                       if p["temperature_c"] == point["imu_c"]]
+            biases = [f"{v:.2f} +- {s:.2f}" for v, s in zip(point["accel"]["bias_ug"],
+                                                            point["sigma"]["accel"]["bias_ug"], strict=True)]
+            lines.append(f"set point {point['set_point_c']} deg C: chamber {point['chamber_c']}, IMU "
+                         f"{point['imu_c']:.3f} deg C after a soak of {point['soak_s']:.1f} s; accel bias {biases} ug; "
+                         f"windows (samples, residuals ug) {windows}")
+    if errors is not None:
+        lines.append(f"error / sigma per coefficient: { {k: [round(e, 2) for e in v] for k, v in errors.items()} }")
+    return "\n".join(lines) or f"no result.json in {out}"
+
+
 def test_a_calibration_over_three_temperatures_of_a_running_emulator_finds_its_thermal_terms_within_4_sigma(
         tmp_path):
     cfg = quick_config()
@@ -52,7 +77,7 @@ def test_a_calibration_over_three_temperatures_of_a_running_emulator_finds_its_t
         out = tmp_path / "cal"
         code = main(["calibrate", str(lab), "--out", str(out), "--viewer", "none", "--quiet", "--no-figures"])
         emulator.stop()
-    assert code == 0, json.loads((out / "result.json").read_text())["ended"] if (out / "result.json").exists() else code
+    assert code == 0, f"hil calibrate exited {code}\n{account(out)}"
     thermal = json.loads((out / "calibration.json").read_text())["thermal"]
     assert [t["set_point_c"] for t in thermal["temperatures"]] == [20, 25, 30]
     emulated = parse_config(cfg)  # the lab config knows no truth: the emulator's
@@ -60,4 +85,4 @@ def test_a_calibration_over_three_temperatures_of_a_running_emulator_finds_its_t
     errors = {name: [(c - t) / s for c, s, t in zip(term["coefficients"], term["sigma"], truth["terms"][name],
                                                      strict=True)] for name, term in thermal["terms"].items()}
     assert set(errors) == {"accel.bias_ug.0", "accel.bias_ug.1", "accel.bias_ug.2"}
-    assert all(abs(e) <= 4.0 for values in errors.values() for e in values), errors
+    assert all(abs(e) <= 4.0 for values in errors.values() for e in values), account(out, errors)
