@@ -154,7 +154,7 @@ def outputs(finished: Finished, cfg: Config, config_text: str, ended: str, rows:
     """Every output of the trial, written to a temporary directory."""
     with tempfile.TemporaryDirectory() as tmp:
         outcome = TrialOutcome.of(finished, cfg, config_text, Path(tmp), ended, emulated_truth(cfg))
-        verdict = outcome.write()
+        verdict = outcome.write().verdict
     rows.row("outputs written", f"   ({verdict})")
 
 

@@ -81,7 +81,7 @@ def _simulated_outcome(tmp_path: Path, scale: float = 1.0) -> TrialOutcome:
 def test_an_estimate_holding_nan_is_not_a_completed_trial(tmp_path, capsys):
     outcome = _simulated_outcome(tmp_path, scale=1e305)
     assert outcome.ended.startswith("early: estimate.accel_bias_ug is not finite")
-    verdict = outcome.write(figures=False)
+    verdict = outcome.write(figures=False).verdict
     assert verdict == ENDED_EARLY and outcome.exit_code(verdict) == 1
     result = json.loads((outcome.out / "result.json").read_text())
     assert result["verdict"] == ENDED_EARLY and result["ended"] != "completed"
@@ -94,7 +94,7 @@ def test_report_exits_as_the_trials_verdict(tmp_path, capsys):
     outcome.cfg = outcome.cfg.model_copy(update={"output": outcome.cfg.output.model_copy(
         update={"limits": ReportLimits(bias_sigma_ug_max=1e-9)})})
     outcome.config_text = outcome.cfg.model_dump_json()  # read back as YAML by hil report
-    assert outcome.exit_code(outcome.write(figures=False)) == 3
+    assert outcome.exit_code(outcome.write(figures=False).verdict) == 3
     assert main(["report", str(outcome.out)]) == 3
     result = json.loads((outcome.out / "result.json").read_text())
     (outcome.out / "result.json").write_text(json.dumps({**result, "ended": "interrupted: SIGINT"}))

@@ -16,6 +16,7 @@ from hil.cli import main
 from hil.config import load_config
 from hil.estimation.calibration_schedule import default_schedule
 from hil.frames import TableGeometry
+from hil.outputs.judgement import judge
 from hil.outputs.measurements import FAIL, PASS, measurements
 from hil.trial.viewer_feed import watched_chamber
 from hil.viewer import trial_viewer
@@ -213,7 +214,7 @@ def test_a_trial_that_did_not_complete_ends_its_verdict_as_result_json_says_not_
     result = json.loads((trial_rrd.parent / "result.json").read_text())
     limits = load_config(trial_rrd.parent / "config.yaml").limits
     for ended, verdict in (("interrupted: SIGINT", "INTERRUPTED"), ("early: the IMU stream stopped", "ENDED EARLY")):
-        text = final_markdown(result | {"ended": ended, "verdict": verdict}, limits)
+        text = final_markdown(judge(result | {"ended": ended}, limits))
         assert text.splitlines()[0] == f"## Verdict: {verdict}"  # never PASS or FAIL
 
 

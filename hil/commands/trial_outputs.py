@@ -22,13 +22,13 @@ def viewer_options(args: argparse.Namespace):
 
 def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     """Write the outputs (the figures drawn by ``figures``, a :class:`~hil.outputs.figure_process.FigureProcess`,
-    when given), show its verdict in the viewer, file the trial in the history, close the viewer of a completed
+    when given), show its judgement in the viewer, file the trial in the history, close the viewer of a completed
     trial; the exit code."""
     from hil.trial.viewer_feed import finish_viewer, show_verdict
 
-    verdict = written(args, outcome, figures)
-    show_verdict(viewer, outcome.result, outcome.cfg.limits)
-    code = outcome.exit_code(verdict)
+    judged = written(args, outcome, figures)
+    show_verdict(viewer, judged)
+    code = outcome.exit_code(judged.verdict)
     if code == 1:
         print(f"hil: trial {outcome.ended}", file=sys.stderr)
     else:
@@ -36,28 +36,29 @@ def finish(args: argparse.Namespace, outcome, viewer=None, figures=None) -> int:
     return code
 
 
-def written(args: argparse.Namespace, outcome, figures=None) -> str:
+def written(args: argparse.Namespace, outcome, figures=None):
     """Write one trial's outputs with its record (the figures drawn by ``figures`` when given) and file it in the
-    history as the outcome says it is filed (:meth:`~hil.trial.outcome.TrialOutcome.filed_as`); its verdict."""
+    history, with its verdict, as the outcome says it is filed (:meth:`~hil.trial.outcome.TrialOutcome.filed_as`);
+    its :class:`~hil.outputs.judgement.Judgement`."""
     from hil.outputs.figures import write_figures
     from hil.outputs.record import trial_record
 
     draw = write_figures if figures is None else figures.draw
     outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
                                             outcome.out)
-    verdict = outcome.write(figures=not args.no_figures, draw=draw)
+    judged = outcome.write(figures=not args.no_figures, draw=draw)
     if not args.no_history:
         from hil.history.entry import outcome_row
         from hil.history.filing import file_trial
 
-        file_trial(args.history, outcome_row(outcome.out, outcome.result, verdict, *outcome.filed_as()))
-    return verdict
+        file_trial(args.history, outcome_row(outcome.out, outcome.result, judged.verdict, *outcome.filed_as()))
+    return judged
 
 
 def finish_units(args: argparse.Namespace, fixture) -> int:
     """Write and file every unit's trial of a :class:`~hil.trial.units.FixtureOutcome` (:func:`written`), then the
     trial's index (result.json, report.html, junit.xml); the exit code of the worst unit."""
-    verdicts = {name: written(args, outcome) for name, outcome in fixture.units.items()}
+    verdicts = {name: written(args, outcome).verdict for name, outcome in fixture.units.items()}
     for name, outcome in fixture.units.items():
         if outcome.exit_code(verdicts[name]) == 1:
             print(f"hil: unit {name}: trial {outcome.ended}", file=sys.stderr)

@@ -11,6 +11,7 @@ import base64
 import html
 import json
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,13 +21,14 @@ from hil.outputs.calibration_section import RESIDUALS_PNG, calibration_lead
 from hil.outputs.figures import FIGURES, Draw, write_figures
 from hil.outputs.junit import write_junit
 from hil.outputs.html_page import REPORT_NAME, ReportError, html_page, measurement_table
-from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value, measurements, overall
+from hil.outputs.judgement import Judgement, judge
+from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value
 from hil.outputs.noise import NOISE_JSON
 from hil.outputs.noise_section import noise_section
 from hil.outputs.page_header import page_header
 from hil.outputs.ratetest import ratetest_document, rebuild_ratetest
 from hil.outputs.record import PROPERTIES
-from hil.outputs.result import COMPLETED, calibration_applied_text, trial_verdict
+from hil.outputs.result import COMPLETED, calibration_applied_text
 from hil.outputs.result_schema import result_problem
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
@@ -72,7 +74,7 @@ def rebuild_report(out_dir: Path) -> tuple[Path, str | None]:
 
 def _write_report(out_dir: Path, limits: ReportLimits | None = None,
                   draw: Draw = write_figures) -> tuple[Path, str]:
-    """:func:`write_report`; the page and the trial's verdict (:func:`~hil.outputs.result.trial_verdict`)."""
+    """:func:`write_report`; the page and the trial's verdict (:func:`~hil.outputs.judgement.judge`)."""
     result_path = out_dir / "result.json"
     try:
         result = json.loads(result_path.read_text(encoding="utf-8"))
@@ -94,16 +96,25 @@ def _write_report(out_dir: Path, limits: ReportLimits | None = None,
         else:
             limits = ReportLimits()
             notes.append("config.yaml not found beside result.json: no limits, nothing judged.")
-    results = measurements(result, limits)
+    judged = judge(result, limits)
+    return write_judged_report(out_dir, result, judged, draw, notes), judged.verdict
+
+
+def write_judged_report(out_dir: Path, result: dict, judged: Judgement, draw: Draw = write_figures,
+                        notes: Sequence[str] = ()) -> Path:
+    """``out_dir/report.html`` and junit.xml of a result.json document (as written) and its judgement, computed
+    once for both (``notes``: said under the summary); returns the report's path."""
+    results = list(judged.measurements)
+    notes = list(notes)
     if not any(m.outcome != NOT_JUDGED for m in results):
         notes.append("No limits are set (output.limits in the trial config): the verdict judges nothing.")
     series = read_series(out_dir / SERIES_NAME)
-    verdict = trial_verdict(result["ended"], overall(results))
-    page = _render(result, results, verdict, _figures(out_dir, series, result, draw), series, notes, _noise(out_dir))
+    page = _render(result, results, judged.verdict, _figures(out_dir, series, result, draw), series, notes,
+                   _noise(out_dir))
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     write_junit(out_dir, result, results)
-    return path, verdict
+    return path
 
 
 def write_noise_report(out_dir: Path) -> Path:

@@ -30,6 +30,7 @@ from hil.outputs.calibration_report import (
     write_residual_figure,
 )
 from hil.outputs.figures import Draw, write_figures
+from hil.outputs.judgement import Judgement
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
 from hil.trial.calibration_thermal import ThermalSequence
@@ -106,21 +107,21 @@ class CalibrationOutcome(TrialOutcome):
         fields["result"]["calibration"] = calibration_summary(document)
         return cls(**fields, calibration=document, residuals=residuals)
 
-    def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
+    def write(self, figures: bool = True, draw: Draw = write_figures) -> Judgement:
         """The residual figure (when calibrated), the trial's outputs, then calibration.json with the trial's
-        record and calibration.html headed by its verdict; returns the verdict."""
+        record and calibration.html headed by its verdict; returns the trial's judgement."""
         image = None
         if self.calibration is not None and self.calibration["positions"] and figures and self.cfg.output.figures:
             image = write_residual_figure(self.out, self.residuals)  # before the report, which leads with it
-        verdict = super().write(figures, draw)
+        judged = super().write(figures, draw)
         if self.calibration is not None:
             if "record" in self.result:
                 self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
             thermal = "thermal" in self.calibration
             extra = thermal_section(self.calibration, figures and self.cfg.output.figures) if thermal else ""
-            write_calibration_report(self.out, self.calibration, self.result, verdict, image, extra)
-        return verdict
+            write_calibration_report(self.out, self.calibration, self.result, judged.verdict, image, extra)
+        return judged
 
 
 def fit_sequence(cfg: Config, sequence, truth: bool) -> tuple[dict, Residuals]:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from hil.config import Config
 from hil.inputs import InputError
-from hil.outputs.measurements import FAIL, STREAM_MEASUREMENTS, format_value, measurements
+from hil.outputs.measurements import FAIL, STREAM_MEASUREMENTS, format_value
 from hil.outputs.result import COMPLETED
 from hil.trial.live_runner import run_live
 from hil.trial.viewer_feed import ViewerOptions
@@ -42,11 +42,10 @@ def acquire(cfg: Config, config_path: Path, out: Path, duration: float | None, q
         raise AcquisitionFailed(f"{config_path}: trial.duration_s or --duration: how long a record to acquire", 2)
     directory = out / ACQUISITION_DIR
     outcome, _ = run_live(held_still(cfg), config_path, directory, duration, "1", ViewerOptions(), quiet)
-    outcome.write(figures=False)
+    judged = outcome.write(figures=False)
     if outcome.ended != COMPLETED:
         raise AcquisitionFailed(f"the acquisition {outcome.ended}: no noise analysis ({directory / 'report.html'})", 1)
-    judged = measurements(outcome.result, cfg.limits)
-    failed = [m for m in judged if m.name in STREAM_MEASUREMENTS and m.outcome == FAIL]
+    failed = [m for m in judged.measurements if m.name in STREAM_MEASUREMENTS and m.outcome == FAIL]
     if failed:
         named = ", ".join(f"{m.name} {format_value(m.value)} (limit {m.limit})" for m in failed)
         report = directory / "report.html"

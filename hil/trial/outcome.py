@@ -12,6 +12,7 @@ import numpy as np
 from hil.config import Config, InputError
 from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
+from hil.outputs.judgement import Judgement
 from hil.outputs.result import (COMPLETED, TrialEnd, non_finite_figure, summary_text, trial_result,
                                verdict_exit_code)
 from hil.outputs.trial_outputs import write_trial_outputs
@@ -89,14 +90,15 @@ class TrialOutcome:
         completed but FAILs its limits, 0 otherwise."""
         return verdict_exit_code(verdict)
 
-    def write(self, figures: bool = True, draw: Draw = write_figures) -> str:
-        """Write every output and print the summary (the figures drawn by ``draw``); returns the verdict: PASS or
-        FAIL against ``output.limits`` for a completed trial, else INTERRUPTED or ENDED EARLY."""
-        verdict = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
-                                      self.config_text, figures=figures and self.cfg.output.figures, draw=draw,
-                                      temperatures=self.temperatures)
+    def write(self, figures: bool = True, draw: Draw = write_figures) -> Judgement:
+        """Write every output and print the summary (the figures drawn by ``draw``); returns the trial's judgement:
+        its measurements and its verdict, PASS or FAIL against ``output.limits`` for a completed trial, else
+        INTERRUPTED or ENDED EARLY."""
+        judged = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
+                                     self.config_text, figures=figures and self.cfg.output.figures, draw=draw,
+                                     temperatures=self.temperatures)
         print(summary_text(self.result, self.out))
-        judged = "against output.limits" if self.ended == COMPLETED else \
+        against = "against output.limits" if self.ended == COMPLETED else \
             "(did not complete: not judged against output.limits)"
-        print(f"  report: {verdict} {judged} ({self.out / 'report.html'})")
-        return verdict
+        print(f"  report: {judged.verdict} {against} ({self.out / 'report.html'})")
+        return judged

@@ -12,10 +12,11 @@ from typing import Protocol, TypeVar
 
 import numpy as np
 
-from hil.config import Config, ReportLimits
+from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.frames import TableGeometry
 from hil.inputs import InputError
+from hil.outputs.judgement import Judgement
 from hil.pipeline.health import FLAG_PREFIX
 from hil.pipeline.progress import Health, Progress
 from hil.samples import StreamCounts
@@ -85,10 +86,10 @@ def started_view(make: Callable[[], OwnView], mode: str) -> OwnView:
     return view
 
 
-def show_verdict(viewer: Viewer | None, result: dict, limits: ReportLimits) -> None:
-    """Log the trial's verdict (result.json's, its measurements judged against ``limits``) and finish the .rrd."""
+def show_verdict(viewer: Viewer | None, judged: Judgement) -> None:
+    """Log the trial's verdict and judged measurements (those of report.html and junit.xml) and finish the .rrd."""
     if viewer is not None:
-        viewer.end(final_markdown(result, limits))
+        viewer.end(final_markdown(judged))
 
 
 def finish_viewer(viewer: Viewer | None) -> None:

@@ -4,25 +4,28 @@ the values shown by :func:`~hil.outputs.measurements.format_value`).
 
 While the trial runs the measurements are those of a result.json document of the trial so far
 (:class:`VerdictSoFar`): a measurement without a value yet, or a convergence time not reached before its
-deadline, is ``pending`` (a calibration's figures, fitted at the end, stay so); at the end the text is that of
-the trial's result.json, its verdict included.
+deadline, is ``pending`` (a calibration's figures, fitted at the end, stay so); at the end the text is the
+trial's judgement (:class:`~hil.outputs.judgement.Judgement`), the one its report.html and junit.xml show.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
 from hil.config import ReportLimits
 from hil.estimation.convergence import BIAS_TOLERANCE, SolveTrack, convergence_time
 from hil.estimation.online import Snapshot
-from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value, measurements, overall
+from hil.outputs.judgement import Judgement
+from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value, measurements
 from hil.units import DEG, UG
 
 PENDING = "pending"
 TAIL = 0.1  # result.json's alignment errors: the mean over the last 10 % of the trial
 
 
-def verdict_markdown(heading: str, results: list[Measurement]) -> str:
+def verdict_markdown(heading: str, results: Sequence[Measurement]) -> str:
     """The markdown of the judged measurements under ``heading``: a table of name, value, limit, outcome."""
     lines = [f"## {heading}", "", "| measurement | value | limit | outcome |", "|---|---|---|---|"]
     for m in results:
@@ -36,10 +39,9 @@ def verdict_markdown(heading: str, results: list[Measurement]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def final_markdown(result: dict, limits: ReportLimits) -> str:
-    """The text at the end: result.json's verdict and its measurements judged against ``limits``."""
-    return verdict_markdown(f"Verdict: {result.get('verdict') or overall(measurements(result, limits))}",
-                            measurements(result, limits))
+def final_markdown(judged: Judgement) -> str:
+    """The text at the end: the trial's verdict and its judged measurements, as report.html lists them."""
+    return verdict_markdown(f"Verdict: {judged.verdict}", judged.measurements)
 
 
 class VerdictSoFar:
