@@ -10,6 +10,7 @@ from emulators.simulation import Simulation
 from hil.config import ReportLimits
 from hil.outputs import measurements as measurements_module
 from hil.outputs.judgement import as_written, judge
+from hil.outputs.measurements import DECLARED
 from hil.pipeline.processor import TrialProcessor
 from hil.trial.outcome import TrialOutcome
 from hil.viewer.verdict import final_markdown
@@ -54,3 +55,11 @@ def test_the_verdict_report_junit_and_viewer_read_the_one_judgement(tmp_path):
     assert last.startswith("## Verdict: FAIL\n")
     assert all(f"| `{name}` |" in last and "**FAIL**" in last for name in failed)
     assert judge(as_written(outcome.result), LIMITS) == judged  # what hil report makes of the same files
+
+
+def test_every_limit_of_a_trial_judges_a_declared_measurement():
+    declared = {d.limit for d in DECLARED if d.limit is not None}
+    rate_tests = {"scale_factor_ppm_max", "nonlinearity_ppm_max", "asymmetry_ppm_max"}  # hil ratetest's documents
+    assert declared == set(ReportLimits.model_fields) - rate_tests
+    names = [d.name for d in DECLARED if d.name]
+    assert len(names) == len(set(names))  # each declared once

@@ -1,6 +1,11 @@
 """A trial's results as measurements in the manner of OpenHTF: a name, a value, a unit, a limit and an
 outcome (PASS, FAIL, or not judged when the config sets no limit for it).
 
+Each measurement is declared once in :data:`DECLARED`: its name, its unit, how it is read from a result.json
+document and the key of ``output.limits`` that judges it. :func:`measurements` reads them all, once a trial
+(:mod:`hil.outputs.judgement`), for report.html, junit.xml, the viewer's verdict and the history; the pytest
+plugin names a trial's measurements from the same table.
+
 The trial passes when no judged measurement fails; a judged measurement without a value (e.g. a bias
 that was not observable) fails.
 """
@@ -8,7 +13,10 @@ that was not observable) fails.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
+from typing import Any
 
 from hil.config import ReportLimits
 from hil.estimation.table_reference import drifts_agree
@@ -17,6 +25,7 @@ from hil.vocabulary import Verdict
 PASS, FAIL, NOT_JUDGED = Verdict.PASS, Verdict.FAIL, "not judged"
 SIGMA_DIGITS = 2  # significant digits of a value's sigma that set the decimals it is shown with
 SIGNIFICANT = 3  # significant digits of a value shown without a sigma
+AXES = "xyz"
 # the measurements of the streams themselves, whatever the estimators made of them
 STREAM_MEASUREMENTS = frozenset({"frames_dropped", "frames_corrupt", "imu_missing_fraction", "imu_gated_fraction",
                                  "imu_invalid_fraction", "imu_without_angles_fraction", "sync_offset"})
@@ -44,11 +53,16 @@ def _at_most(name, value, unit, bound, description="", absolute=False, sigma=Non
     """A measurement judged by ``value <= bound`` (``|value| <= bound`` when absolute); bound None: not judged."""
     if bound is None:
         return Measurement(name, value, unit, "", NOT_JUDGED, description, sigma)
-    limit = f"{'|x| ' if absolute else ''}≤ {format_value(bound)}"
+    limit = _limit_text(bound, absolute)
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return Measurement(name, value, unit, limit, FAIL, description, sigma)
     ok = (abs(value) if absolute else value) <= bound
     return Measurement(name, value, unit, limit, PASS if ok else FAIL, description, sigma)
+
+
+def _limit_text(bound: float, absolute: bool) -> str:
+    """A limit as the outputs show it: ``≤ bound``, ``|x| ≤ bound`` on an absolute value."""
+    return f"{'|x| ' if absolute else ''}≤ {format_value(bound)}"
 
 
 def _info(name, value, unit, description="", sigma=None) -> Measurement:
@@ -69,141 +83,255 @@ def drift_not_the_accelerometer(result: dict) -> bool | None:
                                         table["accel_bias_drift_ug_per_h"], table["accel_bias_drift_sigma_ug_per_h"])
 
 
-def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
-    """The trial's measurements from a result.json document, judged against ``limits``."""
-    est = result.get("estimate", {})
-    bias = est.get("accel_bias_ug") or [None] * 3
-    sigma = est.get("accel_bias_sigma_ug") or [None] * 3
-    truth = (result.get("truth") or {}).get("accel_bias_ug")
-    out: list[Measurement] = []
-    for k, axis in enumerate("xyz"):
-        out.append(_info(f"accel_bias_{axis}", bias[k], "µg", f"accelerometer bias estimate, {axis} axis", sigma[k]))
-    for k, axis in enumerate("xyz"):
-        out.append(_at_most(f"accel_bias_sigma_{axis}", sigma[k], "µg", limits.bias_sigma_ug_max,
-                            f"1σ of the bias estimate, {axis} axis"))  # fmt: skip
-    if truth is not None:
-        # the truth is the bias at the start: with the drift model, compare the estimate of b_s
-        drift_model = est.get("bias_model") == "drift"
-        start = (est.get("accel_bias_t0_ug") or [None] * 3) if drift_model else bias
-        start_sigma = (est.get("accel_bias_t0_sigma_ug") or [None] * 3) if drift_model else sigma
-        for k, axis in enumerate("xyz"):
-            error = None if start[k] is None else start[k] - truth[k]
-            out.append(_at_most(f"accel_bias_error_{axis}", error, "µg", limits.bias_error_ug_max,
-                                f"estimate − truth ({format_value(truth[k])} µg), {axis} axis", absolute=True,
-                                sigma=start_sigma[k]))  # fmt: skip
-    elif limits.bias_error_ug_max is not None:
-        out.append(Measurement("accel_bias_error", None, "µg", f"|x| ≤ {format_value(limits.bias_error_ug_max)}", NOT_JUDGED,
-                               "no truth: the bias error is judged on emulated trials only"))  # fmt: skip
-    out.append(_info("bias_observable", est.get("observable"), "", "scaled Gram matrix of full rank"))
-    out.append(_info("gram_rank", est.get("gram_rank"), "of 12", "rank of the scaled Gram matrix (2019 eq. 19)"))
-    if "gram_condition" in est:  # null when the matrix is singular
-        out.append(_info("gram_condition", est["gram_condition"], "", "condition number of the scaled Gram matrix"))
-    converged, bound = est.get("converged_at_s"), limits.converged_by_s
-    what = "first solve after which every estimate is settled: 3σ and its distance to each later one within 10 µg"
-    duration = (result.get("trial") or {}).get("duration_s") or 0.0
-    if converged is None and bound is not None and duration < bound:
-        out.append(Measurement("converged_at", None, "s", f"≤ {format_value(bound)}", NOT_JUDGED,
-                               f"not converged yet when the trial ended at {format_value(duration)} s, before the "
-                               f"limit: {what}"))
-    else:
-        out.append(_at_most("converged_at", converged, "s", bound, what))
-    drift = est.get("accel_bias_drift_ug_per_h")
-    if drift is not None:
-        sigma_k = est.get("accel_bias_drift_sigma_ug_per_h") or [None] * 3
-        for k, axis in enumerate("xyz"):
-            out.append(_info(f"accel_bias_drift_{axis}", drift[k], "µg/h", f"bias drift rate ±{format_value(sigma_k[k])} "
-                             f"(1σ), {axis} axis (2018 gravity-vector paper, b = b_s + k t)", sigma_k[k]))
-    check = est.get("drift_check")
-    if check is not None:
-        out.append(_info("bias_drift_significant", check["significant"], "",
-                         "15-state drift check: some axis drifts beyond 4σ ("
-                         + ", ".join(format_value(v) for v in check["drift_ug_per_h"]) + " µg/h)"))
-    gyros = drift_not_the_accelerometer(result)
-    if gyros is not None:
-        table_drift = result["table_reference"]["accel_bias_drift_ug_per_h"]
-        out.append(_info("bias_drift_not_in_table_reference", gyros, "",
-                         "a drift the self-calibration sees that the table-referenced fit ("
-                         + ", ".join(format_value(v) for v in table_drift)
-                         + " µg/h) does not: the gyros' errors turning the attitude, not the accelerometer"))
-    if est.get("noise_ug") is not None:
-        out.append(_info("accel_noise", est["noise_ug"], "µg", "residual RMS per axis and sample"))
+class Limit(Enum):
+    """How a reading meets its measurement's limit."""
 
+    JUDGED = "judged"  # judged against it
+    SHOWN = "shown"  # shown beside it, not judged (and no row at all when no limit is set)
+    NONE = "none"  # no limit applies to this trial
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What a declared measurement reads of a result.json document: a value, what it is, its 1-sigma, its name's
+    ``suffix`` (an axis's ``_x``; a counter's whole name), its ``unit`` where it varies (None: the declared one), and
+    how its limit meets it."""
+
+    value: Any
+    description: str
+    sigma: float | None = None
+    suffix: str = ""
+    unit: str | None = None
+    limit: Limit = Limit.JUDGED
+
+
+@dataclass(frozen=True)
+class Declared:
+    """One measurement (or one per axis, per counter) declared once: its ``name``, its ``unit``, how it is ``read``
+    from a result.json document (no reading: the trial has no such measurement), the key of ``output.limits`` that
+    judges it (None: informational), whether that bounds its absolute value, and for a time limit ``pending``: what
+    a value not reached yet is called when the trial ended before the limit (not judged then)."""
+
+    name: str
+    unit: str
+    read: Callable[[dict], list[Reading]]
+    limit: str | None = None
+    absolute: bool = False
+    pending: str = ""
+
+
+def _estimate(result: dict) -> dict:
+    return result.get("estimate", {})
+
+
+def _axes(values: list | None, description: str, sigmas: list | None = None) -> list[Reading]:
+    """A reading per axis of ``values`` (None: none on any axis), ``{axis}`` in ``description`` named."""
+    values, sigmas = values or [None] * 3, sigmas or [None] * 3
+    return [Reading(values[k], description.format(axis=a), sigmas[k], f"_{a}") for k, a in enumerate(AXES)]
+
+
+def _one(value: Any, description: str, present: bool = True) -> list[Reading]:
+    """One reading of ``value``, or none when the trial has no such measurement (not ``present``)."""
+    return [Reading(value, description)] if present else []
+
+
+def _bias_error(result: dict) -> list[Reading]:
+    """Estimate minus truth per axis; the truth is the bias at the start: with the drift model, the estimate of
+    b_s is compared. Without a truth, a reading that says so (a limit set for it is shown, not judged)."""
+    truth = (result.get("truth") or {}).get("accel_bias_ug")
+    if truth is None:
+        return [Reading(None, "no truth: the bias error is judged on emulated trials only", limit=Limit.SHOWN)]
+    est = _estimate(result)
+    t0 = est.get("bias_model") == "drift"
+    start = (est.get("accel_bias_t0_ug") if t0 else est.get("accel_bias_ug")) or [None] * 3
+    sigma = (est.get("accel_bias_t0_sigma_ug") if t0 else est.get("accel_bias_sigma_ug")) or [None] * 3
+    return [Reading(None if start[k] is None else start[k] - truth[k],
+                    f"estimate − truth ({format_value(truth[k])} µg), {a} axis", sigma[k], f"_{a}")
+            for k, a in enumerate(AXES)]
+
+
+def _drift(result: dict) -> list[Reading]:
+    drift = _estimate(result).get("accel_bias_drift_ug_per_h")
+    if drift is None:
+        return []
+    sigma = _estimate(result).get("accel_bias_drift_sigma_ug_per_h") or [None] * 3
+    return [Reading(drift[k], f"bias drift rate ±{format_value(sigma[k])} (1σ), {a} axis (2018 gravity-vector paper, "
+                    "b = b_s + k t)", sigma[k], f"_{a}") for k, a in enumerate(AXES)]
+
+
+def _drift_check(result: dict) -> list[Reading]:
+    check = _estimate(result).get("drift_check")
+    return [] if check is None else [Reading(check["significant"], "15-state drift check: some axis drifts beyond 4σ ("
+                                             + ", ".join(format_value(v) for v in check["drift_ug_per_h"]) + " µg/h)")]
+
+
+def _gyros_drift(result: dict) -> list[Reading]:
+    gyros = drift_not_the_accelerometer(result)
+    if gyros is None:
+        return []
+    table = result["table_reference"]["accel_bias_drift_ug_per_h"]
+    return [Reading(gyros, "a drift the self-calibration sees that the table-referenced fit ("
+                    + ", ".join(format_value(v) for v in table)
+                    + " µg/h) does not: the gyros' errors turning the attitude, not the accelerometer")]
+
+
+def _method2(result: dict) -> dict:
+    return (result.get("alignment_deg") or {}).get("method2") or {}
+
+
+def _other_alignments(result: dict) -> list[Reading]:
+    """Method 1's pitch, roll and yaw errors and the theoretical pitch and roll errors the trial has."""
     alignment = result.get("alignment_deg") or {}
-    method2 = alignment.get("method2") or {}
-    for angle in ("pitch", "roll"):
-        out.append(_at_most(f"alignment_method2_{angle}", method2.get(angle), "deg", limits.method2_error_deg_max,
-                            f"method-2 {angle} error against the turntable, mean of the last 10 %",
-                            absolute=True))  # fmt: skip
-    if "yaw" in method2:
-        out.append(_info("alignment_method2_yaw", method2["yaw"], "deg", "method-2 yaw error, mean of the last 10 %"))
+    out = []
     for method, angles in (("method1", ("pitch", "roll", "yaw")), ("theoretical", ("pitch", "roll"))):
         values = alignment.get(method) or {}
-        for angle in angles:
-            if angle in values:
-                out.append(_info(f"alignment_{method}_{angle}", values[angle], "deg",
-                                 f"{'method-1' if method == 'method1' else 'theoretical (2019 eq. 8)'} {angle} error"))  # fmt: skip
-
-    table = (result.get("table_reference") or {}).get("accel_bias_ug")
-    if table is not None:
-        table_sigma = result["table_reference"].get("accel_bias_sigma_ug") or [None] * 3
-        for k, axis in enumerate("xyz"):
-            out.append(_info(f"table_referenced_bias_{axis}", table[k], "µg", "bias from the turntable attitude",
-                             table_sigma[k]))
-
-    calibration = result.get("calibration")
-    if calibration is not None:
-        out.append(_at_most("calibration_residual_max", calibration["residual_max_ug"], "µg",
-                            limits.calibration_residual_ug_max, "largest specific-force residual at a position, "
-                            "after calibration (calibration.json)"))
-        out.append(_at_most("calibration_error_worst", calibration["worst_error_sigma"], "σ",
-                            limits.calibration_error_sigma_max if "truth" in result else None,
-                            "largest |estimate − truth| of an observable term, in its 1σ (emulated trials)"))
-    streams = result.get("streams") or {}
-    out.append(_at_most("frames_dropped", streams.get("dropped"), "frames", limits.dropped_max, "frames lost"))
-    out.append(_at_most("frames_corrupt", streams.get("corrupt"), "frames", limits.corrupt_max,
-                        "frames with a bad checksum or framing"))  # fmt: skip
-    out += _judged_data(streams, limits)
-    for key, value in streams.items():
-        if key == "sync" and value:
-            out += [_info(f"stream_sync_{k}", len(v) if isinstance(v, list) else v, "", "sync pairing")
-                    for k, v in value.items()]
-        elif key == "imu_temperature_c":
-            out += [_info(f"imu_temperature_{k}", v, "°C", f"the IMU's own temperature, {k} over the trial")
-                    for k, v in (value or {}).items()]
-        elif key == "imu_invalid_by_flag":
-            out += [_info(f"imu_invalid_{flag}", n, "", "samples the IMU flagged so") for flag, n in value.items()]
-        elif key == "gyro_rate_error_dph":
-            out += [_info(f"gyro_rate_error_{axis}", v, "°/h", f"gyro rate minus the table's, {axis} axis: the gyro "
-                          "bias, plus scale factor and misalignment times the rate of a turning axis")
-                    for axis, v in zip("xyz", value or ())]  # fmt: skip
-        elif key not in ("dropped", "corrupt", "sync"):
-            out.append(_info(f"stream_{key}", value, "frames" if "frames" in key else "", "stream counter"))
+        what = "method-1" if method == "method1" else "theoretical (2019 eq. 8)"
+        out += [Reading(values[angle], f"{what} {angle} error", suffix=f"_{method}_{angle}") for angle in angles
+                if angle in values]
     return out
 
 
-def _judged_data(streams: dict, limits: ReportLimits) -> list[Measurement]:
-    """The aligned streams' own judgement (a simulation's are not aligned): the fractions of the IMU samples
-    filled or bridged, gated, flagged invalid by the IMU and without angles, and the sync offset between the
-    streams."""
+def _table_bias(result: dict) -> list[Reading]:
+    table = result.get("table_reference") or {}
+    if table.get("accel_bias_ug") is None:
+        return []
+    return _axes(table["accel_bias_ug"], "bias from the turntable attitude", table.get("accel_bias_sigma_ug"))
+
+
+def _calibration_reading(key: str, description: str, truth_only: bool = False) -> Callable[[dict], list[Reading]]:
+    """The reader of the calibration's figure ``key`` (none without a calibration); ``truth_only``: judged on an
+    emulated trial alone, whose document holds the truth."""
+    def read(result: dict) -> list[Reading]:
+        calibration = result.get("calibration")
+        if calibration is None:
+            return []
+        applies = not truth_only or "truth" in result
+        return [Reading(calibration[key], description, limit=Limit.JUDGED if applies else Limit.NONE)]
+
+    return read
+
+
+def _streams(result: dict) -> dict:
+    return result.get("streams") or {}
+
+
+def _fraction(numerator: Callable[[dict], float], description: str) -> Callable[[dict], list[Reading]]:
+    """Of the aligned streams' IMU samples (filled, bridged and aligned: a simulation's are not aligned, and have
+    none), the fraction ``numerator(streams)``."""
+    def read(result: dict) -> list[Reading]:
+        streams = _streams(result)
+        if "aligner_aligned" not in streams:
+            return []
+        slots = max(streams["aligner_aligned"] + streams["aligner_imu_bridged"], 1)
+        return [Reading(numerator(streams) / slots, description)]
+
+    return read
+
+
+def _sync_offset(result: dict) -> list[Reading]:
+    streams = _streams(result)
     if "aligner_aligned" not in streams:
         return []
-    aligned, bridged = streams["aligner_aligned"], streams["aligner_imu_bridged"]
-    slots = max(aligned + bridged, 1)
-    out = [_at_most("imu_missing_fraction", (streams["aligner_imu_filled"] + bridged) / slots, "", limits.missing_max,
-                    "IMU samples filled or bridged (their frames lost), of all"),
-           _at_most("imu_gated_fraction", streams["imu_gated"] / slots, "", limits.gated_max,
-                    "IMU samples the gyro/table gate removed, of all"),
-           _at_most("imu_invalid_fraction", streams.get("imu_invalid", 0) / slots, "", limits.invalid_max,
-                    "IMU samples the IMU's own status flagged invalid (never estimated), of all"),
-           _at_most("imu_without_angles_fraction", streams["aligner_without_angles"] / slots, "",
-                    limits.without_angles_max, "IMU samples aligned without table angles, of all")]
-    offset = streams.get("sync_offset_ms")
     what = "lag of the table's angles behind the IMU, from the gyros against the table's rate"
-    if offset is None:
-        out.append(Measurement("sync_offset", None, "ms", "", NOT_JUDGED, f"{what}: no motion to measure it by"))
-    else:
-        out.append(_at_most("sync_offset", offset, "ms", limits.sync_offset_ms_max, what, absolute=True))
+    offset = streams.get("sync_offset_ms")
+    return [Reading(None, f"{what}: no motion to measure it by", limit=Limit.NONE) if offset is None
+            else Reading(offset, what)]
+
+
+def _counters(result: dict) -> list[Reading]:
+    """Every other figure of the streams, each named for its counter, in result.json's order."""
+    out = []
+    for key, value in _streams(result).items():
+        if key == "sync" and value:
+            out += [Reading(len(v) if isinstance(v, list) else v, "sync pairing", suffix=f"stream_sync_{k}")
+                    for k, v in value.items()]
+        elif key == "imu_temperature_c":
+            out += [Reading(v, f"the IMU's own temperature, {k} over the trial", suffix=f"imu_temperature_{k}",
+                            unit="°C") for k, v in (value or {}).items()]
+        elif key == "imu_invalid_by_flag":
+            out += [Reading(n, "samples the IMU flagged so", suffix=f"imu_invalid_{flag}") for flag, n in value.items()]
+        elif key == "gyro_rate_error_dph":
+            out += [Reading(v, f"gyro rate minus the table's, {a} axis: the gyro bias, plus scale factor and "
+                            "misalignment times the rate of a turning axis", suffix=f"gyro_rate_error_{a}", unit="°/h")
+                    for a, v in zip(AXES, value or ())]
+        elif key not in ("dropped", "corrupt", "sync"):
+            unit = "frames" if "frames" in key else ""
+            out.append(Reading(value, "stream counter", suffix=f"stream_{key}", unit=unit))
     return out
+
+
+CONVERGED = "first solve after which every estimate is settled: 3σ and its distance to each later one within 10 µg"
+# every measurement of a trial, in the order the outputs list them
+DECLARED = (
+    Declared("accel_bias", "µg", lambda r: _axes(_estimate(r).get("accel_bias_ug"),
+                                                 "accelerometer bias estimate, {axis} axis",
+                                                 _estimate(r).get("accel_bias_sigma_ug"))),
+    Declared("accel_bias_sigma", "µg", lambda r: _axes(_estimate(r).get("accel_bias_sigma_ug"),
+                                                       "1σ of the bias estimate, {axis} axis"), "bias_sigma_ug_max"),
+    Declared("accel_bias_error", "µg", _bias_error, "bias_error_ug_max", absolute=True),
+    Declared("bias_observable", "", lambda r: _one(_estimate(r).get("observable"), "scaled Gram matrix of full rank")),
+    Declared("gram_rank", "of 12", lambda r: _one(_estimate(r).get("gram_rank"),
+                                                  "rank of the scaled Gram matrix (2019 eq. 19)")),
+    Declared("gram_condition", "", lambda r: _one(_estimate(r).get("gram_condition"),  # null: a singular matrix
+                                                  "condition number of the scaled Gram matrix",
+                                                  "gram_condition" in _estimate(r))),
+    Declared("converged_at", "s", lambda r: _one(_estimate(r).get("converged_at_s"), CONVERGED), "converged_by_s",
+             pending="not converged yet"),
+    Declared("accel_bias_drift", "µg/h", _drift),
+    Declared("bias_drift_significant", "", _drift_check),
+    Declared("bias_drift_not_in_table_reference", "", _gyros_drift),
+    Declared("accel_noise", "µg", lambda r: _one(_estimate(r).get("noise_ug"), "residual RMS per axis and sample",
+                                                 _estimate(r).get("noise_ug") is not None)),
+    Declared("alignment_method2_pitch", "deg", lambda r: _one(_method2(r).get("pitch"), "method-2 pitch error "
+             "against the turntable, mean of the last 10 %"), "method2_error_deg_max", absolute=True),
+    Declared("alignment_method2_roll", "deg", lambda r: _one(_method2(r).get("roll"), "method-2 roll error "
+             "against the turntable, mean of the last 10 %"), "method2_error_deg_max", absolute=True),
+    Declared("alignment_method2_yaw", "deg", lambda r: _one(_method2(r).get("yaw"), "method-2 yaw error, mean of the "
+                                                            "last 10 %", "yaw" in _method2(r))),
+    Declared("alignment", "deg", _other_alignments),
+    Declared("table_referenced_bias", "µg", _table_bias),
+    Declared("calibration_residual_max", "µg", _calibration_reading("residual_max_ug", "largest specific-force "
+             "residual at a position, after calibration (calibration.json)"), "calibration_residual_ug_max"),
+    Declared("calibration_error_worst", "σ", _calibration_reading("worst_error_sigma", "largest |estimate − truth| "
+             "of an observable term, in its 1σ (emulated trials)", truth_only=True), "calibration_error_sigma_max"),
+    Declared("frames_dropped", "frames", lambda r: [Reading(_streams(r).get("dropped"), "frames lost")], "dropped_max"),
+    Declared("frames_corrupt", "frames", lambda r: [Reading(_streams(r).get("corrupt"), "frames with a bad checksum "
+                                                            "or framing")], "corrupt_max"),
+    Declared("imu_missing_fraction", "", _fraction(lambda s: s["aligner_imu_filled"] + s["aligner_imu_bridged"],
+             "IMU samples filled or bridged (their frames lost), of all"), "missing_max"),
+    Declared("imu_gated_fraction", "", _fraction(lambda s: s["imu_gated"], "IMU samples the gyro/table gate removed, "
+                                                 "of all"), "gated_max"),
+    Declared("imu_invalid_fraction", "", _fraction(lambda s: s.get("imu_invalid", 0), "IMU samples the IMU's own "
+             "status flagged invalid (never estimated), of all"), "invalid_max"),
+    Declared("imu_without_angles_fraction", "", _fraction(lambda s: s["aligner_without_angles"], "IMU samples aligned "
+             "without table angles, of all"), "without_angles_max"),
+    Declared("sync_offset", "ms", _sync_offset, "sync_offset_ms_max", absolute=True),
+    Declared("", "", _counters),
+)
+
+
+def measurements(result: dict, limits: ReportLimits) -> list[Measurement]:
+    """The trial's measurements from a result.json document, judged against ``limits``: what :data:`DECLARED`
+    reads of it, in that order."""
+    duration = (result.get("trial") or {}).get("duration_s") or 0.0
+    judged = (_judged(declared, reading, limits, duration) for declared in DECLARED
+              for reading in declared.read(result))
+    return [m for m in judged if m is not None]
+
+
+def _judged(declared: Declared, reading: Reading, limits: ReportLimits, duration: float) -> Measurement | None:
+    """The measurement of one reading; None for a reading whose limit is only shown, when none is set."""
+    name, unit = declared.name + reading.suffix, declared.unit if reading.unit is None else reading.unit
+    bound = None if declared.limit is None or reading.limit is Limit.NONE else getattr(limits, declared.limit)
+    pending = declared.pending and reading.value is None and bound is not None and duration < bound
+    if reading.limit is Limit.SHOWN or pending:
+        if bound is None:
+            return None
+        description = (f"{declared.pending} when the trial ended at {format_value(duration)} s, before the limit: "
+                       f"{reading.description}" if pending else reading.description)
+        return Measurement(name, reading.value, unit, _limit_text(bound, declared.absolute), NOT_JUDGED, description,
+                           reading.sigma)
+    return _at_most(name, reading.value, unit, bound, reading.description, declared.absolute, reading.sigma)
 
 
 def overall(results: list[Measurement]) -> str:
