@@ -94,10 +94,10 @@ def test_a_power_cycle_mid_trial_is_noticed_re_paired_and_the_trial_goes_on(tmp_
     doc = result(out)
     sync = doc["streams"]["sync"]
     assert code == 0 and doc["ended"] == "completed", (doc["ended"], {k: v for k, v in doc["streams"].items() if v})
-    # the table is re-paired on its receive times, and the IMU's motion check may then move the IMU by a pulse
+    # the stream is re-paired by its motion against the other's; the IMU's motion check may then move it by a pulse
     assert 1 <= len(sync["repairs"]) <= 2 and sync["repairs"][0]["cause"].startswith({"imu": "imu", "turntable": "table"}[device])
     assert 3.0 < sync["repairs"][0]["at_s"] < 8.0  # the power cycle, 1.5 s after the harness started
-    # a table re-paired on its receive times may be a pulse off until the IMU's motion check moves the IMU
+    # no sample meets the angles of another pulse: a table's samples wait for the motion to place them
     assert doc["streams"]["imu_gated"] <= 0.02 * doc["streams"]["aligned"] and within_sigmas(doc)
     again = tmp_path / "again"
     assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0

@@ -4,7 +4,8 @@ increments over (t_k-1, t_k] are ``theta(t_k) - theta(t_k-1)`` exactly (rotation
 
 The devices count from their own starts: the IMU sample of pulse p carries the unwrapped counter
 ``p - OFFSET`` (a KVH whose 7-bit counter the decoder has unwrapped), the table sample the count p. Reads of
-``PER`` frames arrive at host times ``p_newest / rate + latency + jitter`` (seeded).
+``PER`` frames arrive at host times ``p_newest / rate + latency + jitter`` (seeded). Each sample's status is its
+true pulse p, which the pairing never reads: what came out can be checked against it.
 """
 
 from __future__ import annotations
@@ -34,13 +35,14 @@ def _imu(p: np.ndarray, moving: bool = True, shift: int = 0) -> ImuSamples:
     """IMU samples of pulses p (their counters ``p - OFFSET - shift``)."""
     dtheta = np.zeros((len(p), 3))
     dtheta[:, 1] = _inner(p, moving) - _inner(p - 1, moving)
-    return ImuSamples(p - OFFSET - shift, dtheta, np.zeros((len(p), 3)), np.zeros(len(p)), np.zeros(len(p), dtype=np.int64))
+    return ImuSamples(p - OFFSET - shift, dtheta, np.zeros((len(p), 3)), np.zeros(len(p)), p.astype(np.int64))
 
 
-def _table(p: np.ndarray, moving: bool = True) -> TableSamples:
+def _table(p: np.ndarray, moving: bool = True, shift: int = 0) -> TableSamples:
+    """Table samples of pulses p (their counts ``p - shift``)."""
     angles = np.zeros((len(p), 3))
     angles[:, 2] = _inner(p, moving)
-    return TableSamples(p, angles, np.zeros(len(p)), np.zeros(len(p)), np.zeros(len(p), dtype=np.int64))
+    return TableSamples(p - shift, angles, np.zeros(len(p)), np.zeros(len(p)), p.astype(np.int64))
 
 
 def _rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
@@ -52,15 +54,19 @@ def _pairing(time_scale: float | None = 1.0) -> SyncPairing:
 
 
 def _run(pairing: SyncPairing, start: int, stop: int, *, moving: bool = True, shift=lambda p: 0, late=lambda p: 0.0,
-         jitter: float = 0.5e-3, seed: int = 1) -> dict[str, list]:
-    """Reads of both streams for pulses [start, stop); returns what came out, per stream."""
+         jitter: float = 0.5e-3, seed: int = 1, table_at=lambda p: (0, 0.0)) -> dict[str, list]:
+    """Reads of both streams for pulses [start, stop); returns what came out, per stream. ``table_at(p)`` gives the
+    table's counter shift and extra lateness (s) at pulse p; a shift of None: the table is silent."""
     rng = np.random.default_rng(seed)
     out: dict[str, list] = {"imu": [], "table": []}
     for first in range(start, stop, PER):
         p = np.arange(first, min(first + PER, stop))
         for name in ("table", "imu"):
-            samples = _table(p, moving) if name == "table" else _imu(p, moving, shift(p[-1]))
-            h = p[-1] / RATE + 1e-3 + late(p[-1]) + jitter * rng.random()
+            table_shift, table_late = table_at(p[-1])
+            if name == "table" and table_shift is None:
+                continue
+            samples = _table(p, moving, table_shift) if name == "table" else _imu(p, moving, shift(p[-1]))
+            h = p[-1] / RATE + 1e-3 + late(p[-1]) + (table_late if name == "table" else 0.0) + jitter * rng.random()
             samples = type(samples)(*(np.full(len(p), h) if f == "host_time" else getattr(samples, f)
                                       for f in type(samples).__dataclass_fields__))
             table, imu = pairing.add_table(samples) if name == "table" else pairing.add_imu(samples)
@@ -124,6 +130,28 @@ def test_a_counter_that_jumps_is_noticed_dropped_and_paired_again(jump, cause):
     imu = _pulses(out["imu"])
     assert np.all(np.diff(imu) >= 1) and imu[-1] >= 156_000 - PER  # on the table's count throughout
     assert report.offset_pulses == OFFSET + jump and report.unpaired <= 2 * PER
+
+
+def test_a_power_cycled_table_re_paired_a_pulse_off_by_its_receive_times_gives_no_sample_the_wrong_angles():
+    """The table is silent for 1 s, then counts from zero, and its reads now come a pulse later than before:
+    its receive times put its new count a pulse off. The table's samples wait until the motion against the
+    IMU's places them, so every IMU sample meets the table angles of its own pulse, and the IMU is never moved."""
+    pairing = _pairing()
+    off, on = 152_000, 152_200  # silent from off, counting from zero at on
+
+    def table_at(p: int) -> tuple[int | None, float]:
+        return (0, 0.0) if p < off else (None, 0.0) if p < on else (on, 1.0 / RATE)
+
+    out = _run(pairing, 150_000, 155_000, table_at=table_at)
+    report = pairing.report
+    assert [r["cause"].split(":")[0] for r in report.repairs] == ["table"], report.repairs  # the IMU never moved
+    assert report.paired_by == "motion" and report.offset_pulses == OFFSET - on  # the IMU's, in the table's new count
+    table_true = dict(zip(_pulses(out["table"]).tolist(), np.concatenate([t.status for t in out["table"]]).tolist()))
+    imu_pulse, imu_true = _pulses(out["imu"]), np.concatenate([s.status for s in out["imu"]])
+    met = np.array([table_true.get(k, -1) for k in imu_pulse.tolist()])  # the table's true pulse at each IMU sample
+    after = imu_pulse >= on
+    assert np.count_nonzero(after) >= 155_000 - on - PER  # the IMU samples after the restart went out ...
+    assert np.array_equal(met[met >= 0], imu_true[met >= 0]) and np.all(met[after] >= 0)  # ... each at its own angles
 
 
 def test_a_host_that_was_only_late_keeps_the_pairing():

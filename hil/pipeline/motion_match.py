@@ -13,12 +13,13 @@ or turning at a constant rate, shows no such change: its time cannot be read fro
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hil.frames import Earth, TableGeometry, table_body_rotation
 from hil.pipeline.plausibility import small_rotation_vectors
+from hil.samples import ImuSamples, TableSamples
 
 DECISIVE = 25.0  # chi-square gain of the best offset over every other one (5 sigma)
 MIN_INTERVALS = 50  # table intervals the best offset must cover
@@ -142,6 +143,15 @@ class PairedMotion:
     def match(self, pulses: np.ndarray, dtheta: np.ndarray, candidates: np.ndarray) -> Match:
         """The offset among ``candidates`` that makes the IMU's increments at ``pulses`` agree with the table."""
         return best_offset(pulses, dtheta, self.rotations(*self.table), candidates)
+
+    def match_held(self, held: ImuSamples | TableSamples, candidates: np.ndarray) -> Match:
+        """The offset among ``candidates`` that puts a waiting stream's samples where they agree with the other
+        stream's history: the IMU's against the table's, the table's against the IMU's (the IMU shifted by minus
+        the offset against the table at its counts)."""
+        if isinstance(held, ImuSamples):
+            return self.match(held.sync_index, held.dtheta, candidates)
+        match = best_offset(*self.imu, self.rotations(held.sync_index, held.angles), -candidates)
+        return match if match.offset is None else replace(match, offset=-match.offset)
 
 
 def kept(history: tuple[np.ndarray, np.ndarray], pulses: np.ndarray, values: np.ndarray, span: float

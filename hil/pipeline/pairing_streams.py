@@ -30,7 +30,7 @@ class StreamPairing:
     cause: str | None = None  # why the pairing broke, until re-paired
     offset_before: int | None = None  # the offset before the break
     before_break: Samples | None = None  # held samples from before the break, paired as they were: yet to go out
-    tried: int | None = None  # newest table pulse at the last motion search for this stream
+    tried: int | None = None  # newest table pulse (the table's: count) at the last motion search for this stream
     first: int | None = None  # the stream's first counter (unpaced, the coarse offset's; held reads may be trimmed)
 
     def baseline(self, reads: int = MIN_READS) -> float | None:

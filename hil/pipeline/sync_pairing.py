@@ -24,12 +24,15 @@ stage finds, watches and re-finds (docs/harness.md, "Sync pairing"):
   rounded to whole pulses, and a frequency response measures that lag. Good while the least lateness of
   ``RECEIVE_S`` of each stream's reads is within half a pulse of the other's (docs/ratetests.md).
 
-The table is the reference: its first offset is 0, so the pulse line is the table's count; a table that
-breaks is re-paired on its own receive times, the IMU by motion against it. At ``--speed max`` the host
-times say nothing of the devices' (the emulator then starts its pulse train once both ports have a reader,
-and its first frames arrive together), and the coarse offset is the difference of the streams' first counters,
-searched by motion over ``UNPACED_SEARCH_S``. Every decision depends only on
-the samples and their recorded receive times, so a replay pairs exactly as the live run did.
+The table is the reference: its first offset is 0, so the pulse line is the table's count. A table that
+breaks is re-paired by its motion against the paired IMU's, searched around the offset its receive times give
+(alone they can put it a pulse off, and every IMU sample would meet the angles of the pulse next to its own);
+its samples wait for that as a broken IMU's do, and where the motion cannot tell (or the IMU is not paired, or
+by its receive times alone) its receive times place it. At ``--speed max`` the host times say nothing of the
+devices' (the emulator then starts its pulse train once both ports have a reader, and its first frames arrive
+together), and the coarse offset is the difference of the streams' first counters, searched by motion over
+``UNPACED_SEARCH_S``. Every decision depends only on the samples and their recorded receive times, so a replay
+pairs exactly as the live run did.
 """
 
 from __future__ import annotations
@@ -191,24 +194,24 @@ class SyncPairing:
             self._checked = 0  # the IMU is checked against the table's new segment as soon as it can be
 
     def _settle(self, s: StreamPairing) -> Samples | None:
-        """Pair a waiting stream once its data allow; returns its held samples, paired, or None."""
+        """Pair a waiting stream (by motion: the IMU against the table, a broken table against the IMU) once its
+        data allow; returns its held samples, paired, or None."""
         receive = self.receive
         coarse = receive.coarse(s, self.rate, self.motion.table_first)
         if coarse is None:
             return None
-        if s is self.table:
-            return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME)
-        if not self.by_motion:
-            held_enough = s.waited(self.rate) >= RECEIVE_S
+        imu_history = self.imu.offset is not None and len(self.motion.imu[0])  # what a broken table is matched to
+        if not self.by_motion or (s is self.table and not imu_history):  # by receive time (the IMU's: RECEIVE_S held)
+            held_enough = s is self.table or s.waited(self.rate) >= RECEIVE_S
             return self._paired(s, receive.offset(s, coarse), RECEIVE_TIME) if held_enough else None
-        pulses, _ = self.motion.table
+        held = joined(s.held)
+        pulses = self.motion.table[0] if s is self.imu else held.sync_index  # the table's data searched
         if not len(pulses) or (s.tried is not None and pulses[-1] - s.tried < RETRY_S * self.rate):
             return None
         s.tried = int(pulses[-1])
         search = math.ceil(max(2 * receive.tolerance(), SEARCH_S * self.host_rate, receive.backlog(s))
                            if self.host_rate is not None else UNPACED_SEARCH_S * self.rate)
-        held = joined(s.held)
-        match = self.motion.match(held.sync_index, held.dtheta, np.arange(coarse - search, coarse + search + 1))
+        match = self.motion.match_held(held, np.arange(coarse - search, coarse + search + 1))
         if match.offset is not None:
             return self._paired(s, match.offset, MOTION)
         table_span = (pulses[-1] - pulses[0]) / self.rate
@@ -234,8 +237,8 @@ class SyncPairing:
                 self._first_pulse = int(released.sync_index[keep][0])
         at = self._trial_time(int(released.sync_index[-1]))
         released = released.take(keep) if first else released
-        if s is self.imu:
-            self.report.offset_pulses = offset - (self.table.offset or 0)
+        if self.imu.offset is not None:  # the streams are paired again: the IMU now, or the table to it
+            self.report.offset_pulses = self.imu.offset - (self.table.offset or 0)
             self._set_by(by, at)
         if changed:
             self.report.repairs.append({"at_s": round(at, 6), "cause": f"{s.name}: {s.cause}"})
