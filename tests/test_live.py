@@ -119,6 +119,9 @@ def test_kill_minus_9_keeps_the_recording_up_to_a_second_before(tmp_path):
     assert finished.progress.health["imu"]["corrupt"] == 0
 
 
+FAULT_RUN_S = 200.0  # the faults' counts and the bias kept need no 10 minutes; the unplug is at 100 s
+
+
 def _run_config(tmp_path, name, limits=None, **imu_and_table):
     import yaml
 
@@ -130,8 +133,8 @@ def _run_config(tmp_path, name, limits=None, **imu_and_table):
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / name
-    assert main(["run", str(path), "--speed", "max", "--quiet", "--no-figures", "--viewer", "none",
-                 "--out", str(out)]) == 0
+    assert main(["run", str(path), "--duration", str(FAULT_RUN_S), "--speed", "max", "--quiet", "--no-figures",
+                 "--viewer", "none", "--out", str(out)]) == 0
     return json.loads((out / "result.json").read_text()), out
 
 
@@ -142,7 +145,7 @@ def test_fault_run_completes_counts_every_fault_and_keeps_the_bias(tmp_path):
     # 1 % of the frames dropped, 5 % hit by a bit error, 2 s unplugged: the default 0.1 % limits would fail it
     faulty, out = _run_config(tmp_path, "faulty", {"missing_max": 0.1, "gated_max": 0.01, "without_angles_max": 0.01},
                               imu={**faults, "unplug_at_s": 100.0, "unplug_s": 2.0}, turntable=faults)
-    assert faulty["trial"]["duration_s"] == pytest.approx(600.0)
+    assert faulty["trial"]["duration_s"] == pytest.approx(FAULT_RUN_S)
     s = faulty["streams"]
     assert s["imu_outages"] == 1
     # every frame lost to a drop, a bit error or the unplug is counted as missing, bar the last few
@@ -156,7 +159,9 @@ def test_fault_run_completes_counts_every_fault_and_keeps_the_bias(tmp_path):
     assert injected["imu"]["faults"]["unplugs"] == 1
     assert s["corrupt"] > 1000 and s["skipped_bytes"] > 0
     assert s["aligner_imu_filled"] > 0 and s["aligner_imu_bridged"] >= 400 and s["bridged_without_table"] == 0
-    np.testing.assert_allclose(faulty["estimate"]["accel_bias_ug"], clean["estimate"]["accel_bias_ug"], atol=1.0)
+    # the ~8 % of the samples the faults cost move the bias by a fraction of its sigma (~0.3), never by 0.6
+    moved = np.subtract(faulty["estimate"]["accel_bias_ug"], clean["estimate"]["accel_bias_ug"])
+    assert np.all(np.abs(moved) < 0.6 * np.array(faulty["estimate"]["accel_bias_sigma_ug"])), moved
     again = tmp_path / "again"
     assert main(["replay", str(out), "--out", str(again), "--no-figures", "--viewer", "none"]) == 0
     faulty.pop("record")
