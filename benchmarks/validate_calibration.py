@@ -46,6 +46,7 @@ sys.path.insert(0, str(ROOT))
 
 from hil.estimation.thermal_calibration import polynomial_at, polynomial_fit
 from hil.outputs.calibration_report import comparison
+from hil.outputs.calibration_thermal import term_temperatures
 
 THERMAL = ROOT / "configs" / "calibration_thermal_quick.yaml"
 SWING = {"kind": "swing", "axes": {"outer": {"amplitude_deg": 8, "period_s": 8, "center_deg": 5},
@@ -128,7 +129,7 @@ def calibration_sigma(doc: dict, axis: int, at_c: float) -> float:
     points = thermal["temperatures"]
     values = np.array([p["accel"]["bias_ug"][axis] for p in points])
     sigmas = np.array([p["sigma"]["accel"]["bias_ug"][axis] for p in points])
-    fit = polynomial_fit(np.array([p["imu_c"] for p in points]), values, sigmas, thermal["order"],
+    fit = polynomial_fit(term_temperatures(points, f"accel.bias_ug.{axis}"), values, sigmas, thermal["order"],
                          thermal["reference_c"])
     return float(polynomial_at(*fit, thermal["reference_c"], np.array([at_c]))[1][0])
 

@@ -18,10 +18,14 @@ from emulators.servo_simulation import ServoSimulation
 from hil.cli import main
 from hil.config import load_config
 from hil.config_environment import SoakSettings
+from hil.estimation.calibration_model import TERMS, Window
 from hil.estimation.thermal_calibration import fit_polynomial
+from hil.outputs.calibration_report import BLOCKS
+from hil.outputs.calibration_thermal import thermal_document
 from hil.pipeline.compensation import Compensation
 from hil.samples import ImuSamples
 from hil.trial.calibration_soak import Soak
+from hil.trial.calibration_thermal import window_temperatures
 from hil.units import UG
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -286,3 +290,52 @@ def test_a_soak_on_an_imu_that_reports_no_temperature_ends_naming_it_not_at_the_
     assert soak.failure == ("soak at 40 deg C: the IMU reported no temperature in the last 5 s (calibration.soak."
                             "for_s): a calibration over temperature needs an IMU whose frames carry it")
     assert soak.chamber_readings[-1][0] < 7.0
+
+
+def test_a_window_stands_at_its_own_temperature_and_a_scale_factor_at_its_plateaus():
+    """The sensor warming 0.01 deg C/s through a schedule: the dwells, every window and each gyro axis's plateaus
+    (weighted by their samples times the squared rate on the axis) each at their own mean temperature."""
+    t = np.arange(1.0, 51.0)
+    trace = np.column_stack([t, 20.0 + 0.01 * (t - 0.5)])  # each read's mean, ending at t
+    trace = np.vstack([trace[:10], trace[9], trace[10:]])  # an event at 10 s repeating the last read
+    spans = [(2.0, 6.0), (8.0, 12.0), (14.0, 18.0), (30.0, 34.0), (40.0, 44.0)]
+    turns = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.5, 0.0, 0.0), (0.0, 0.0, 0.5), (0.0, 0.0, -1.0)]
+    windows = [Window(np.zeros((1, 3)), np.array(w), np.zeros(3), np.array(w), 400, 4.0) for w in turns]
+    seen = window_temperatures(trace, spans, windows)
+    every = 20.0 + 0.01 * np.mean([4.0, 10.0, 16.0, 32.0, 42.0])
+    assert seen["dwells_c"] == pytest.approx(20.07, abs=1e-12)
+    assert seen["windows_c"] == pytest.approx(every, abs=1e-12)
+    assert seen["gyro_scale_c"] == pytest.approx([20.16, every, 20.0 + 0.01 * (0.25 * 32 + 42) / 1.25], abs=1e-12)
+
+
+def _calibration(gyro_scale: list[float], accel_bias: list[float]) -> dict:
+    """A calibration at one temperature (calibration.json's form) knowing the gyros' scale factors (sigma 0.01 ppm)
+    and the accelerometers' biases (sigma 1 ug) alone."""
+    doc = {"sigma": {}, "unobservable": {}, "positions": [],
+           "turntable": {"zero_offset_arcsec": [None] * 3, "zero_offset_sigma_arcsec": [None] * 3}}
+    for block, keys in BLOCKS:
+        doc[block], doc["sigma"][block] = {}, {}
+        for key, part, _ in keys:
+            doc[block][key], doc["sigma"][block][key] = [None] * len(TERMS[part]), [None] * len(TERMS[part])
+    doc["gyro"]["scale_ppm"], doc["sigma"]["gyro"]["scale_ppm"] = gyro_scale, [0.01] * 3
+    doc["accel"]["bias_ug"], doc["sigma"]["accel"]["bias_ug"] = accel_bias, [1.0] * 3
+    return doc
+
+
+def test_each_thermal_term_is_fitted_at_the_temperature_of_the_windows_that_estimate_it():
+    """A sensor still warming through each schedule: the gyros' scale factors measured on plateaus 0.01-0.09 deg C
+    above the schedule's mean, the accelerometers' biases on dwells below it. Each polynomial through its terms at
+    their own windows' temperatures is the truth (scale 100 + 2 dT ppm, bias 50 + 3 dT ug about 40 deg C); at the
+    schedules' means it would be 0.1 ppm, ten sigma, off."""
+    points, documents = [], []
+    for k, imu_c in enumerate((20.0, 40.0, 60.0)):
+        plateaus = [imu_c + 0.01 * (k + 1) * axis for axis in (1, 2, 3)]
+        dwells = imu_c - 0.02 * (k + 1)
+        points.append({"set_point_c": imu_c - 2.0, "chamber_c": imu_c - 2.0, "soak_s": 100.0, "imu_c": imu_c,
+                       "dwells_c": dwells, "windows_c": imu_c, "gyro_scale_c": plateaus})
+        documents.append(_calibration([100.0 + 2.0 * (c - 40.0) for c in plateaus], [50.0 + 3.0 * (dwells - 40.0)] * 3))
+    terms = thermal_document(1, points, documents)["thermal"]["terms"]
+    assert set(terms) == {f"{name}.{i}" for name in ("gyro.scale_ppm", "accel.bias_ug") for i in range(3)}
+    for i in range(3):
+        assert terms[f"gyro.scale_ppm.{i}"]["coefficients"] == pytest.approx([100.0, 2.0], abs=1e-9)
+        assert terms[f"accel.bias_ug.{i}"]["coefficients"] == pytest.approx([50.0, 3.0], abs=1e-9)

@@ -2,12 +2,13 @@
 
 From the calibrations at each temperature (each a document as :func:`hil.outputs.calibration.calibration_document`
 gives it), every term with a value at every temperature gets its polynomial in T - ``reference_c``
-(:func:`hil.estimation.thermal_calibration.fit_polynomial`; ``reference_c`` the mean of the IMU's temperatures,
-to 0.1 deg C) under ``thermal.terms`` keyed ``block.key.index``, coefficients lowest order first in the key's unit
-per deg C^j; the ``accel`` and ``gyro`` blocks hold the constant terms (the calibration at ``reference_c``) with
-their sigmas, so that a reader without ``thermal`` still applies the calibration of the middle of the range. A term
-null at some temperature is null, its reasons under ``unobservable`` with the temperatures. ``positions`` lists
-every temperature's, each with the IMU's ``temperature_c``; the table's zero offsets are the weighted mean of the
+(:func:`hil.estimation.thermal_calibration.fit_polynomial`; each value at the IMU's temperature over the windows
+that estimate it, :func:`term_temperatures`; ``reference_c`` the mean of the IMU's temperatures, to 0.1 deg C) under
+``thermal.terms`` keyed ``block.key.index``, coefficients lowest order first in the key's unit per deg C^j; the
+``accel`` and ``gyro`` blocks hold the constant terms (the calibration at ``reference_c``) with their sigmas, so
+that a reader without ``thermal`` still applies the calibration of the middle of the range. A term null at some
+temperature is null, its reasons under ``unobservable`` with the temperatures. ``positions`` lists every
+temperature's, each with the IMU's ``temperature_c``; the table's zero offsets are the weighted mean of the
 temperatures'. An emulated IMU's truth gains ``thermal.terms`` (its ``imu.errors.thermal`` about ``reference_c``)
 and ``as_observed`` at ``reference_c``. calibration.html shows every polynomial's coefficients and, per key, each term
 against the IMU's temperature with its fit and the fit's 1-sigma band (:func:`thermal_section`).
@@ -42,9 +43,9 @@ def _known(value) -> bool:
 def thermal_document(order: int, points: list[dict], documents: list[dict], errors: ImuErrors | None = None,
                      zero_offset_arcsec: tuple[float, float, float] | None = None) -> dict:
     """The calibration.json mapping from ``documents``, the calibrations at the temperatures ``points``
-    (``{set_point_c, chamber_c, imu_c, soak_s}`` each), and the IMU's ``errors`` when emulated (module docstring)."""
-    temperatures = np.array([p["imu_c"] for p in points])
-    reference = round(float(np.mean(temperatures)), 1)
+    (``{set_point_c, chamber_c, imu_c, soak_s, dwells_c, windows_c, gyro_scale_c}`` each), and the IMU's ``errors``
+    when emulated (module docstring)."""
+    reference = round(float(np.mean([p["imu_c"] for p in points])), 1)
     doc: dict = {"sigma": {}}
     terms: dict[str, dict] = {}
     unobservable: dict[str, str] = {}
@@ -63,7 +64,7 @@ def thermal_document(order: int, points: list[dict], documents: list[dict], erro
                     values.append(None)
                     sigmas.append(None)
                     continue
-                c, cs = fit_polynomial(temperatures, np.array(v), np.array(s), order, reference)
+                c, cs = fit_polynomial(term_temperatures(points, name), np.array(v), np.array(s), order, reference)
                 terms[name] = {"coefficients": c.tolist(), "sigma": cs.tolist()}
                 values.append(float(c[0]))
                 sigmas.append(float(cs[0]))
@@ -80,6 +81,18 @@ def thermal_document(order: int, points: list[dict], documents: list[dict], erro
         doc["truth"]["as_observed"], doc["truth"]["thermal"] = thermal_truth(errors, zero_offset_arcsec, reference,
                                                                              order)
     return doc
+
+
+def term_temperatures(points: list[dict], name: str) -> np.ndarray:
+    """The IMU's temperature (deg C) at each of ``points`` that the term ``name`` (``block.key.index``) was estimated
+    at: the accelerometers' over the dwells, a gyro's scale factor over the plateaus that turned it, the gyros' other
+    terms over every window (:func:`hil.trial.calibration_thermal.window_temperatures`)."""
+    block, key, index = name.split(".")
+    if block == "accel":
+        return np.array([p["dwells_c"] for p in points])
+    if key == "scale_ppm":
+        return np.array([p["gyro_scale_c"][int(index)] for p in points])
+    return np.array([p["windows_c"] for p in points])
 
 
 def _reasons(name: str, points: list[dict], documents: list[dict]) -> str:
@@ -183,11 +196,12 @@ def thermal_figure(doc: dict) -> bytes:
                 continue
             values = np.array([p[block][name][i] for p in points])
             sigmas = np.array([p["sigma"][block][name][i] for p in points])
-            fit, band = polynomial_at(*polynomial_fit(temperatures, values, sigmas, thermal["order"],
-                                                      thermal["reference_c"]), thermal["reference_c"], grid)
+            at = term_temperatures(points, f"{key}.{i}")
+            fit, band = polynomial_at(*polynomial_fit(at, values, sigmas, thermal["order"], thermal["reference_c"]),
+                                      thermal["reference_c"], grid)
             line = ax.plot(grid, fit, label=axis)[0]
             ax.fill_between(grid, fit - band, fit + band, color=line.get_color(), alpha=0.25)
-            ax.errorbar(temperatures, values, yerr=sigmas, fmt="o", color=line.get_color(), ms=4)
+            ax.errorbar(at, values, yerr=sigmas, fmt="o", color=line.get_color(), ms=4)
         ax.set_title(key, fontsize=9)
         ax.set_xlabel("IMU temperature (°C)")
         ax.set_ylabel(UNITS.get(name, name))
