@@ -88,7 +88,7 @@ def test_a_shipped_plan_is_found_by_name_from_any_directory(tmp_path, capsys, mo
 
 def test_a_plan_killed_in_its_third_step_resumes_without_running_the_first_two_again(tmp_path):
     plan = write_plan(tmp_path, [{"swing": {"trial": {"duration_s": 5}}}, {"wait": {"s": 1}},
-                                 {"swing": {"trial": {"duration_s": 600}}}, {"wait": {"s": 1}}])
+                                 {"swing": {"trial": {"duration_s": 60}}}, {"wait": {"s": 1}}])  # killed at its start
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "hil.cli", "plan", str(plan), "--out", str(out), "--speed", "1", "--no-history",
             "--no-figures"]
