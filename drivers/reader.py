@@ -42,6 +42,7 @@ class DeviceReader:
         self.gather_s = gather_s if transport.byte_stream else 0.0
         self.outages = 0  # times the transport failed after it had been open
         self.down: str | None = None  # why the port is down (its failure, then the last reopen's); None while open
+        self.handing_over = False  # True while a chunk is with the listeners (one of them may hold it up)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -81,8 +82,12 @@ class DeviceReader:
                     self._stop.wait(next_tick(time.monotonic(), self.gather_s))
 
     def _handle(self, chunk: RawChunk) -> None:
-        for listener in self.raw_listeners:
-            listener.on_raw(chunk)
+        self.handing_over = True
+        try:
+            for listener in self.raw_listeners:
+                listener.on_raw(chunk)
+        finally:
+            self.handing_over = False
 
     def _event(self, event: StreamEventKind, detail: str = "") -> None:
         note = StreamEvent(self.transport.stream, time.time(), event, detail)

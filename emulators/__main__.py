@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="after the pulse train, keep the devices (the table's command port) up until stopped")
     args = parser.parse_args(argv)
     try:
-        return emulate(load_config(args.config), args, hold=args.hold)
+        return emulate(load_config(args.config, units=True), args, hold=args.hold)
     except (ConfigError, OSError) as exc:
         print(f"emulator: error: {exc}", file=sys.stderr)
         return 2

@@ -1,4 +1,4 @@
-"""The pulse-train bench: the emulated IMU and table of one run, driven by one sync pulse train.
+"""The pulse-train bench: the emulated IMUs and table of one run, driven by one sync pulse train.
 
 :class:`Bench` assembles the devices from the config (servo, frame streams of :mod:`emulators.sources`,
 ports of :mod:`emulators.ports`, writers of :mod:`emulators.paced_writer`, the emulated table's command server);
@@ -20,7 +20,7 @@ from drivers.codec import check_baudrate
 from drivers.tts1 import FRAME_SIZE as TTS1_BYTES
 from drivers.registry import imu_codec
 from emulators.chamber import EmulatedChamber, emulated_chamber
-from emulators.clocks import device_clocks
+from emulators.clocks import PowerLine, device_clocks
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.imu_commands import CommandedPty, Responder, responder_for
 from emulators.ports import CanPort, PtyPort
@@ -32,7 +32,7 @@ from emulators.paced_writer import DeviceWriter
 from emulators.scpi_supply import EmulatedSupply, powering
 from hil.config import Config
 from hil.units import ARCSEC
-from hil.vocabulary import Port
+from hil.vocabulary import UNIT_PREFIX, Port
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
 
@@ -87,88 +87,125 @@ class SyncClock:
         return not stop.wait(delay) if delay > 0 else not stop.is_set()
 
 
+def emulated_imus(cfg: Config) -> dict[str, Config]:
+    """The emulated IMUs of a config by their device name: ``imu``, or ``imu.<name>`` for each of its ``units``
+    (:data:`UNIT_PREFIX`), each with its one-unit config (:meth:`hil.config.Config.unit_configs`)."""
+    return {f"{UNIT_PREFIX}{name}": unit for name, unit in cfg.unit_configs().items()} or {Port.IMU: cfg}
+
+
 def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, DeviceStream]]:
-    """The table's servo and the frame streams (``imu``, ``turntable_data``) of a run of ``duration`` s:
-    what the emulated devices send, before any port or fault (frames of a powered-off device marked so)."""
-    rate = cfg.imu_rate_hz
-    sim = Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
-        update={"duration_s": duration})}))
-    imu_cfg = cfg.imu
-    imu_clock, table_clock = device_clocks(cfg)
-    seed = cfg.trial.seed
-    imu_source = ImuSource(imu_clock, seed, imu_codec(imu_cfg, rate), sim.errors, imu_cfg.faults,
-                           imu_cfg.errors.turn_on_bias_ug)
-    table_source = TableSource(table_clock, seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
-    streams = {name: DeviceStream(source, sim.truth, source.clock.ticks(duration),
-                                  max(1, round(CHUNK_S / source.clock.period)))
-               for name, source in ((Port.IMU, imu_source), (Port.TABLE_DATA, table_source))}
+    """The table's servo and the frame streams (each IMU's, ``turntable_data``) of a run of ``duration`` s:
+    what the emulated devices send, before any port or fault (frames of a powered-off device marked so). Every
+    IMU senses the one table motion through its own mounting, with its own errors, seed and counter start."""
+    sim = _simulation(cfg, duration)
+    _, table_clock = device_clocks(cfg)
+    imus = emulated_imus(cfg)
+    streams = {name: _imu_stream(unit, duration, sim if unit is cfg else None) for name, unit in imus.items()}
+    table_source = TableSource(table_clock, cfg.trial.seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
+    streams[Port.TABLE_DATA] = DeviceStream(table_source, sim.truth, table_clock.ticks(duration),
+                                            max(1, round(CHUNK_S / table_clock.period)))
+    rate = max(unit.imu_rate_hz for unit in imus.values())
     return Servo(cfg.turntable, rate, sim.truth.motion), streams
 
 
+def _simulation(cfg: Config, duration: float) -> Simulation:
+    return Simulation.from_config(cfg.model_copy(update={"trial": cfg.trial.model_copy(
+        update={"duration_s": duration})}))
+
+
+def _imu_stream(cfg: Config, duration: float, sim: Simulation | None) -> DeviceStream:
+    """The frames of the IMU of the one-unit ``cfg``: its errors and truth those of ``sim`` (None: its own)."""
+    sim = sim or _simulation(cfg, duration)
+    clock, _ = device_clocks(cfg)
+    imu = cfg.imu
+    source = ImuSource(clock, cfg.trial.seed, imu_codec(imu, cfg.imu_rate_hz), sim.errors, imu.faults,
+                       imu.errors.turn_on_bias_ug)
+    return DeviceStream(source, sim.truth, clock.ticks(duration), max(1, round(CHUNK_S / clock.period)))
+
+
 class Bench:
-    """The emulated IMU and table of one run: servo, frame streams, ports, writers, command server."""
+    """The emulated IMUs and table of one run: servo, frame streams, ports, writers, command server."""
 
     def __init__(self, cfg: Config, duration: float, speed: float | None, stop: threading.Event,
                  wait_readers: bool, link_dir: Path | None = None) -> None:
-        """``link_dir``: publish the serial ports as links ``imu`` and ``turntable_data`` there; without
-        it only a device configured to unplug gets a link, in a private directory."""
-        rate = cfg.imu_rate_hz
-        imu_cfg = cfg.imu
-        seed = cfg.trial.seed
+        """``link_dir``: publish the serial ports as links ``imu`` (``imu.<name>`` for each unit) and
+        ``turntable_data`` there; without it only a device configured to unplug gets a link, in a private
+        directory."""
+        self.imus = emulated_imus(cfg)
         self.servo, self.streams = device_streams(cfg, duration)
-        codec = self.streams["imu"].source.codec
-        self.synced = [n for n, s in self.streams.items() if not s.source.clock.timing.free_running] or ["imu"]
+        self.synced = [n for n, s in self.streams.items() if not s.source.clock.timing.free_running] or list(self.imus)
         self.ports: dict = {}
         self.writers: dict[str, DeviceWriter] = {}
         self.server: TableServer | None = None
         self.chamber: EmulatedChamber | None = None
         self.supply: EmulatedSupply | None = None
-        unplugging = [f.unplug_at_s is not None for f in (imu_cfg.faults, cfg.turntable.faults)]
-        private = any(unplugging) and link_dir is None
+        unplugging = [unit.imu.faults.unplug_at_s is not None for unit in self.imus.values()]
+        private = (any(unplugging) or cfg.turntable.faults.unplug_at_s is not None) and link_dir is None
         self._links = tempfile.TemporaryDirectory(prefix="hil-emulate-") if private else None
-
-        def pty(name: str, unplugs: bool, responder: Responder | None = None) -> PtyPort:
-            link = link_dir / name if link_dir is not None else Path(self._links.name) / name if unplugs else None
-            if responder is None:
-                return PtyPort(link)
-            supply = self.streams["imu"].source.clock.supply  # an unpowered IMU hears nothing
-            return CommandedPty(link, responder, lambda: supply is None or supply.on)
-
+        self._link_dir = link_dir
         try:
             if link_dir is not None:
                 link_dir.mkdir(parents=True, exist_ok=True)
-            if codec.link == "can":
-                imu_port, imu_damage, imu_baud = CanPort(imu_cfg.can.interface, imu_cfg.can.channel), CanDamage(), None
-            else:
-                check_baudrate("imu", codec.frame_bytes(), rate, imu_cfg.baudrate)
-                imu_port = pty("imu", unplugging[0], responder_for(codec))  # it answers its configuration queries
-                imu_damage, imu_baud = ByteDamage(), imu_cfg.baudrate
-            self.ports["imu"] = imu_port
+            for k, (name, unit) in enumerate(self.imus.items()):
+                self._open_imu(name, unit, speed, stop, wait_readers, unplugging[k])
             check_baudrate("turntable", TTS1_BYTES, cfg.trial.rate_hz, cfg.turntable.baudrate)  # it sends tts1
-            self.ports[Port.TABLE_DATA] = pty(Port.TABLE_DATA, unplugging[1])
+            table_faults = cfg.turntable.faults
+            self.ports[Port.TABLE_DATA] = self._pty(Port.TABLE_DATA, table_faults.unplug_at_s is not None)
+            self.writers[Port.TABLE_DATA] = DeviceWriter(
+                Port.TABLE_DATA, self.ports[Port.TABLE_DATA], FaultInjector(table_faults, ByteDamage(),
+                                                                            cfg.trial.seed, 1),
+                cfg.turntable.baudrate, speed, stop, wait_readers)
             self.server = TableServer(emulated_table(cfg, self.servo, log=True))
-            chamber = cfg.environment.chamber
-            if chamber is not None and chamber.source == "emulator":
-                self.chamber = emulated_chamber(chamber)
-                self.streams["imu"].source.state["errors"].follow_chamber(self.chamber.air_at)
-            line = self.streams["imu"].source.clock.supply
-            if line is not None:  # environment.power.source: emulator
-                self.supply = powering(cfg.environment.power, line, self.servo.lock)
-            for k, (name, damage, baud, faults) in enumerate((
-                    (Port.IMU, imu_damage, imu_baud, imu_cfg.faults),
-                    (Port.TABLE_DATA, ByteDamage(), cfg.turntable.baudrate, cfg.turntable.faults))):
-                self.writers[name] = DeviceWriter(name, self.ports[name], FaultInjector(faults, damage, seed, k),
-                                                  baud, speed, stop, wait_readers)
+            self._open_environment(cfg)
         except BaseException:
             self.close()
             raise
 
+    def _pty(self, name: str, unplugs: bool, responder: Responder | None = None,
+             supply: PowerLine | None = None) -> PtyPort:
+        """A serial device's port, published as a link where asked or where it unplugs; one with a ``responder``
+        answers its configuration queries while its ``supply`` powers it."""
+        links = self._link_dir or (Path(self._links.name) if unplugs else None)
+        link = links / name if links is not None else None
+        if responder is None:
+            return PtyPort(link)
+        return CommandedPty(link, responder, lambda: supply is None or supply.on)
+
+    def _open_imu(self, name: str, unit: Config, speed: float | None, stop: threading.Event, wait_readers: bool,
+                  unplugs: bool) -> None:
+        """The port and writer of the IMU ``name`` of the one-unit config ``unit``."""
+        imu, source = unit.imu, self.streams[name].source
+        if source.codec.link == "can":
+            port, damage, baud = CanPort(imu.can.interface, imu.can.channel), CanDamage(), None
+        else:
+            check_baudrate(name, source.codec.frame_bytes(), unit.imu_rate_hz, imu.baudrate)
+            port = self._pty(name, unplugs, responder_for(source.codec), source.clock.supply)
+            damage, baud = ByteDamage(), imu.baudrate
+        self.ports[name] = port
+        self.writers[name] = DeviceWriter(name, port, FaultInjector(imu.faults, damage, unit.trial.seed, 0), baud,
+                                          speed, stop, wait_readers)
+
+    def _open_environment(self, cfg: Config) -> None:
+        """The emulated chamber (every IMU's temperature follows its air) and supply (powering every IMU)."""
+        sources = [self.streams[name].source for name in self.imus]
+        chamber = cfg.environment.chamber
+        if chamber is not None and chamber.source == "emulator":
+            self.chamber = emulated_chamber(chamber)
+            for source in sources:
+                source.state["errors"].follow_chamber(self.chamber.air_at)
+        lines = [source.clock.supply for source in sources if source.clock.supply is not None]
+        if lines:  # environment.power.source: emulator
+            self.supply = powering(cfg.environment.power, lines, self.servo.lock)
+
     def names(self) -> dict:
-        """The ports JSON."""
+        """The ports JSON: ``imu``, or ``units: {<name>: {imu: ...}}``, and the table's and environment's."""
         chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
         power = {} if self.supply is None else {"power": self.supply.resource}
-        return {Port.IMU: self.ports[Port.IMU].path, Port.TABLE_DATA: self.ports[Port.TABLE_DATA].path,
-                Port.TABLE_CMD: self.server.url, **chamber, **power}
+        imus = {name: self.ports[name].path for name in self.imus}
+        if Port.IMU not in imus:
+            imus = {Port.UNITS: {name.removeprefix(UNIT_PREFIX): {Port.IMU: path} for name, path in imus.items()}}
+        return {**imus, Port.TABLE_DATA: self.ports[Port.TABLE_DATA].path, Port.TABLE_CMD: self.server.url,
+                **chamber, **power}
 
     def close(self) -> None:
         if self.server is not None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import socketserver
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -143,14 +143,15 @@ class EmulatedSupply:
         self._thread.join(5)
 
 
-def powering(cfg: PowerConfig, line: PowerLine, lock: threading.RLock) -> EmulatedSupply:
+def powering(cfg: PowerConfig, lines: Sequence[PowerLine], lock: threading.RLock) -> EmulatedSupply:
     """The emulated supply of ``environment.power`` for ``hil emulate``: the unit's output on at the configured
-    voltage and current limit from the start (the IMU streams as powered hardware does), then each switch of the
-    unit's power switching ``line`` with ``lock`` held (the lock the emulator's pulse loop takes)."""
+    voltage and current limit from the start (the IMUs stream as powered hardware does), then each switch of the
+    unit's power switching every IMU's ``lines`` with ``lock`` held (the lock the emulator's pulse loop takes)."""
 
     def switch(on: bool) -> None:
         with lock:
-            line.switch(on)
+            for line in lines:
+                line.switch(on)
 
     state = SupplyState(cfg.load_a, cfg.options.channel or 1)
     for command in (f"INST:NSEL {state.unit_channel}", f"VOLT {cfg.options.voltage_v:g}",

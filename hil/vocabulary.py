@@ -22,6 +22,10 @@ class Port(StrEnum):
     IMU = "imu"
     TABLE_DATA = "turntable_data"
     TABLE_CMD = "turntable_cmd"
+    UNITS = "units"  # ports.json of a units config: {"units": {<name>: {"imu": ...}}}
+
+
+UNIT_PREFIX = "imu."  # the emulator's device name of a unit's IMU: imu.<name>
 
 
 class Stream(StrEnum):

@@ -294,6 +294,20 @@ def test_folding_the_inner_zero_offset_gives_what_the_schedule_sees():
         assert np.allclose(fold_inner_rotation(theta(errors, ZERO), ZERO[2]), absorbed(errors, ZERO), rtol=0, atol=1e-15)
 
 
+def test_a_mounted_triad_sees_the_inner_zero_offset_as_a_turn_about_its_own_axis_along_the_inner_gimbal():
+    """Mounted by M (body to mount), the inner gimbal's axis is M^T y in the triad's axes: the zero offset is a turn
+    of -zero about that axis, K' = (I + S) C R(-zero, M^T y)."""
+    mounting = Rotation.from_euler("ZYX", [90.0, 0.0, 180.0], degrees=True).as_matrix()
+    for errors in (ACCEL, GYRO):
+        turn = Rotation.from_rotvec(-ZERO[2] * (mounting.T @ np.array([0.0, 1.0, 0.0]))).as_matrix()
+        k = np.diag(1.0 + errors["scale"]) @ paper_c_pa(*errors["mis"]) @ turn
+        scale = np.diag(k) - 1.0
+        c = k / (1.0 + scale)[:, None]
+        mis = np.array([-c[0, 2], c[0, 1], c[1, 2], -c[1, 0], -c[2, 1], c[2, 0]])
+        expected = theta({**errors, "scale": scale, "mis": mis}, np.array([ZERO[0], ZERO[1], 0.0]))
+        assert np.allclose(fold_inner_rotation(theta(errors, ZERO), ZERO[2], mounting), expected, rtol=0, atol=1e-15)
+
+
 def test_schedule_duration_adds_moves_at_the_limits_settling_and_windows():
     limits = LimitsConfig(rate_dps=(10, 10, 10), accel_dps2=(10, 10, 10))
     # a 90 deg inner move: 1 s ramps, 8 s cruising = 10 s, + 0.5 s arrival + 2 s settle + 20 s dwell

@@ -14,7 +14,8 @@ from hil.cli import main
 from hil.config import load_config
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
-from hil.trial.live import LatencyStats, LiveTrial, TrialAborted
+from hil.trial.latency_stats import LatencyStats
+from hil.trial.live import LiveTrial, TrialAborted
 from hil.trial.offline import replay_recording
 from tests.helpers import processed
 

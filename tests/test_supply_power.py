@@ -42,7 +42,7 @@ class Powered:
     def __init__(self, cfg) -> None:
         self.servo, streams = device_streams(cfg, 4.0)
         self.stream = streams["imu"]
-        self.server = powering(cfg.environment.power, self.stream.source.clock.supply, self.servo.lock)
+        self.server = powering(cfg.environment.power, [self.stream.source.clock.supply], self.servo.lock)
         options = cfg.environment.power.options
         self.driver = ScpiSupply(self.server.resource, SupplySettings(options.voltage_v, options.current_limit_a,
                                                                       options.channel)).open()

@@ -68,6 +68,6 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     from hil.inputs import InputError
 
     try:
-        return emulate(load_config(args.config), args)
+        return emulate(load_config(args.config, units=True), args)
     except OSError as exc:  # e.g. a --link-dir that cannot be written
         raise InputError(str(exc)) from None

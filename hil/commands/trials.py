@@ -11,17 +11,25 @@ from hil.commands.trial_outputs import claimed, finish, finish_units, trial_conf
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from hil.trial.live_runner import run_live
-
-    cfg, out = trial_config(args)
+    cfg, out = trial_config(args, units=True)
     with claimed(args, out, args.config):
+        if cfg.units:
+            from hil.trial.units_live import run_units_live
+
+            _no_units_viewer(args)
+            return finish_units(args, run_units_live(cfg, Path(args.config), out, args.duration, args.speed,
+                                                     args.quiet))
+        from hil.trial.live_runner import run_live
+
         return finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, viewer_options(args),
                                       args.quiet))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    cfg, out = trial_config(args)
+    cfg, out = trial_config(args, units=True)
     with claimed(args, out, args.config):
+        if cfg.units:
+            return _calibrate_units(args, cfg, out)
         if args.simulate:
             from hil.trial.calibration_simulation import run_calibration_simulation
 
@@ -33,6 +41,23 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                                              args.quiet))
 
 
+def _calibrate_units(args: argparse.Namespace, cfg, out: Path) -> int:
+    """``hil calibrate`` of a units config: one schedule for the fixture, a calibration per unit (docs/units.md);
+    ``--simulate``: each unit's calibration simulated in turn, in this process."""
+    _no_units_viewer(args)
+    if args.simulate:
+        from hil.trial.calibration_simulation import run_calibration_simulation
+        from hil.trial.units import run_units
+        from hil.trial.viewer_feed import ViewerOptions
+
+        cfg.emulated_only(args.config, "hil calibrate --simulate")
+        return finish_units(args, run_units(cfg, out, lambda unit, text, unit_out: run_calibration_simulation(
+            unit, text, unit_out, ViewerOptions())[0]))
+    from hil.trial.calibration_runner import run_units_calibration
+
+    return finish_units(args, run_units_calibration(cfg, Path(args.config), out, args.speed, args.quiet))
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     from hil.outputs.figure_process import FigureProcess  # started first: matplotlib loads while the trial runs
 
@@ -41,13 +66,31 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from hil.recording.replay import recording_path
         from hil.trial.offline import run_replay
 
-        recorded = recording_path(args.source).parent
+        from hil.trial.units import recorded_units
+
+        units = recorded_units(args.source)
+        recorded = Path(args.source) if units else recording_path(args.source).parent
         out = Path(args.out) if args.out else recorded / "replay"
         if out.resolve() == recorded.resolve():
             raise InputError(f"--out {out}: the recording's own directory; a replay writes beside it (default "
                              f"{recorded / 'replay'})")
         with claimed(args, out):
+            if units:
+                return _replay_units(args, out, *units)
             return finish(args, *run_replay(args.source, out, viewer_options(args)), figures)
+
+
+def _replay_units(args: argparse.Namespace, out: Path, name: str, recorded: dict[str, Path]) -> int:
+    """``hil replay`` of a units trial's directory: each unit's recording replayed into ``OUT/units/<name>/``, and
+    the trial's index (docs/units.md)."""
+    from hil.outputs.units_index import UNITS_DIR
+    from hil.trial.offline import run_replay
+    from hil.trial.units import FixtureOutcome
+    from hil.trial.viewer_feed import ViewerOptions
+
+    _no_units_viewer(args)
+    return finish_units(args, FixtureOutcome(name, out, {
+        unit: run_replay(source, out / UNITS_DIR / unit, ViewerOptions())[0] for unit, source in recorded.items()}))
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -69,15 +112,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def _simulate_units(args: argparse.Namespace, cfg, out: Path) -> int:
     """``hil simulate`` of a units config: each unit simulated and estimated in this process, one after the other
     (docs/units.md); no live view."""
-    from hil.inputs import InputError
     from hil.trial.offline import run_simulation
     from hil.trial.units import run_units
     from hil.trial.viewer_feed import ViewerOptions
 
-    if args.viewer != ViewerOptions.mode:
-        raise InputError(f"--viewer {args.viewer}: a units config is simulated without a live view so far")
+    _no_units_viewer(args)
     return finish_units(args, run_units(cfg, out, lambda unit, text, unit_out: run_simulation(
         unit, text, unit_out, ViewerOptions())[0]))
+
+
+def _no_units_viewer(args: argparse.Namespace) -> None:
+    """A units trial runs without a live view so far (docs/units.md): ``--viewer spawn|serve`` is refused, and
+    ``save`` saves no .rrd."""
+    from hil.inputs import InputError
+
+    if args.viewer in ("spawn", "serve"):
+        raise InputError(f"--viewer {args.viewer}: a units trial runs without a live view so far")
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:

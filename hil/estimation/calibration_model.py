@@ -143,12 +143,14 @@ def compensate(accel: np.ndarray, gyro: np.ndarray, dtheta: np.ndarray, dv: np.n
     return inverse(gyro, np.asarray(dtheta) / dt) * dt, inverse(accel, np.asarray(dv) / dt) * dt
 
 
-def fold_inner_rotation(theta: np.ndarray, inner_zero: float) -> np.ndarray:
+def fold_inner_rotation(theta: np.ndarray, inner_zero: float, body_to_mount: np.ndarray | None = None) -> np.ndarray:
     """theta with the inner gimbal's zero offset (rad) folded into the scale and misalignment terms: a turn
-    of the whole triad about the inner axis (y) that no table measurement tells from the misalignment,
-    ``K' = K Ry(-inner_zero)``; the terms a calibration finds with the inner zero offset taken as zero."""
+    of the whole triad about the inner axis (the mount's y) that no table measurement tells from the misalignment,
+    ``K' = K M^T Ry(-inner_zero) M`` with M the triad's mounting (``body_to_mount``, identity by default); the
+    terms a calibration finds with the inner zero offset taken as zero."""
     c, s = math.cos(inner_zero), math.sin(inner_zero)
-    k = triad_matrix(theta) @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    m = np.eye(3) if body_to_mount is None else np.asarray(body_to_mount, dtype=float)
+    k = triad_matrix(theta) @ m.T @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]]) @ m
     out = np.array(theta, dtype=float)
     out[SCALE] = np.diag(k) - 1.0
     normalised = k / np.diag(k)[:, None]

@@ -37,14 +37,17 @@ BLOCKS = (("accel", ACCEL_KEYS), ("gyro", GYRO_KEYS))
 ENCODER_RESOLUTION_ARCSEC = 1e-6 * 3600.0
 
 
-def observed_truth(errors: ImuErrors, zero_offset_arcsec: tuple[float, float, float]) -> dict:
-    """The document's ``accel``/``gyro``/``turntable`` blocks of the injected errors as the schedule sees them."""
+def observed_truth(errors: ImuErrors, zero_offset_arcsec: tuple[float, float, float],
+                   body_to_mount: np.ndarray | None = None) -> dict:
+    """The document's ``accel``/``gyro``/``turntable`` blocks of the injected errors as the schedule sees them,
+    for a triad mounted as ``body_to_mount`` says (:attr:`hil.frames.TableGeometry.body_to_mount_matrix`; identity
+    by default)."""
     out: dict = {}
     for block, keys in BLOCKS:
         theta = np.zeros(len(TERMS))
         for key, part, unit in keys:
             theta[part] = np.array(getattr(errors, f"{block}_{key}")) * unit
-        theta = fold_inner_rotation(theta, zero_offset_arcsec[2] * ARCSEC)
+        theta = fold_inner_rotation(theta, zero_offset_arcsec[2] * ARCSEC, body_to_mount)
         out[block] = {key: [float(v) for v in theta[part] / unit] for key, part, unit in keys}
     out["turntable"] = {"zero_offset_arcsec": [zero_offset_arcsec[0], zero_offset_arcsec[1], None]}
     return out

@@ -157,5 +157,5 @@ def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, 
     errors = cfg.imu.errors if truth else None
     document = calibration_document(accel, gyro, windows, errors, zero if truth else None)
     if errors is not None:
-        document["truth"]["as_observed"] = observed_truth(errors, zero)
+        document["truth"]["as_observed"] = observed_truth(errors, zero, geometry.body_to_mount_matrix)
     return document, window_residuals(windows, accel, gyro, earth, geometry)

@@ -22,6 +22,7 @@ from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.live import TrialHooks
 from hil.trial.live_runner import emulated, run_live
 from hil.trial.outcome import TrialSetupError
+from hil.trial.units import FixtureOutcome
 from hil.trial.viewer_feed import ViewerOptions
 
 QUEUE_ITEMS = 4  # keeps the emulated devices close behind the processing: commands act without lag
@@ -41,12 +42,10 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
 
     def commanded(control, cfg: Config, viewer, chamber) -> TrialHooks:
         control.client.apply_limits()
-        limits = (cfg.limits.missing_max, cfg.limits.gated_max)  # a window may lack what the trial may
-        lacking = 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
 
         def schedule_sequence(steps) -> CalibrationSequence:
             return CalibrationSequence(steps, control.client, 1.0 / cfg.imu_rate_hz,
-                                       **sequence_views(viewer, steps, cfg), lacking_max=lacking)
+                                       **sequence_views(viewer, steps, cfg), lacking_max=lacking_max(cfg))
 
         thermal = cfg.calibration.temperatures_c is not None
         sequence = ThermalSequence(cfg, schedule, control.client, chamber, schedule_sequence) if thermal \
@@ -62,3 +61,43 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
     for sequence in sequences:
         sequence.report_rest()  # the last window, when the data ended at its end, before the viewer closes
     return CalibrationOutcome.of_sequence(outcome, sequences[0] if sequences else None, is_emulated), viewer
+
+
+def lacking_max(cfg: Config) -> float:
+    """The fraction of a window's samples that may be missing: what the trial may lack (``output.limits``'s
+    missing and gated fractions), all of it where neither is limited."""
+    limits = (cfg.limits.missing_max, cfg.limits.gated_max)
+    return 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
+
+
+def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str, quiet: bool = False
+                          ) -> FixtureOutcome:
+    """The schedule run once for every unit on the table (docs/units.md): the first unit's sequence commands it,
+    each other unit's follows the reported angles by the same rules and cuts its own windows; each unit calibrated
+    on its own windows, through its own mounting."""
+    from hil.trial.units_live import UnitsCommand, run_units_live
+
+    schedule = checked_schedule(cfg, str(config_path))
+    if not cfg.turntable.command_port:
+        raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "
+                              "('emulator' for the emulated table)")
+    if cfg.calibration.temperatures_c is not None:
+        raise TrialSetupError("calibration.temperatures_c: a calibration over temperature takes one unit so far")
+    is_emulated = all(emulated(unit) for unit in cfg.unit_configs().values())
+    sequences: dict[str, CalibrationSequence] = {}
+
+    def unit(name: str, client, unit_cfg: Config) -> TrialHooks:
+        sequence = sequences[name] = CalibrationSequence(schedule, client, 1.0 / unit_cfg.imu_rate_hz,
+                                                         lacking_max=lacking_max(unit_cfg))
+        sequence.start()
+        return TrialHooks(motion_check=sequence, finished=lambda: sequence.done, queue_items=QUEUE_ITEMS)
+
+    command = UnitsCommand(arm=lambda control: control.client.apply_limits(), unit=unit,
+                           started=lambda control: control.client.sync_output(True))
+    fixture = run_units_live(cfg, config_path, out, emulated_length(cfg, schedule) if is_emulated else None, speed,
+                             quiet, command)
+    for sequence in sequences.values():
+        sequence.report_rest()
+    return FixtureOutcome(fixture.name, out, {name: CalibrationOutcome.of_sequence(outcome, sequences.get(name),
+                                                                                   is_emulated)
+                                              for name, outcome in fixture.units.items()})

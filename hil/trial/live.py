@@ -17,7 +17,6 @@ import queue
 import sys
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 from collections.abc import Callable
 from pathlib import Path
@@ -25,7 +24,6 @@ from typing import Any
 
 
 from drivers.codec import RawChunk, StreamEvent, check_baudrate
-from drivers.latency import LatencyHistogram
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from drivers.transport import Transport, open_transport
@@ -38,12 +36,12 @@ from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished, Health, Listener, Progress
 from hil.pipeline.stream_watch import StreamWatch
 from hil.trial.imu_config import check_imu_config
+from hil.trial.latency_stats import LatencyStats
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
 from hil.vocabulary import Port
 
-LATENCY_BINS = 100_000  # 10 us bins up to 1 s; the maximum is kept exactly
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 SYNC_CHECK_S = 10.0  # trial s between the checks of the streams' lag (a cross-correlation over up to 60 s of data)
 TABLE_WATCHDOG_S = 1.0  # no data from a table the harness commands for this long stops it
@@ -63,6 +61,7 @@ class Fanout(RawListener):
         self._recorder = recorder
         self._queue = hand_off
         self._lock = threading.Lock()
+        self._closed = False
         self.last_arrival = 0.0  # monotonic time of the last chunk with data
         self.last_by_stream: dict[str, float] = {}
 
@@ -75,65 +74,38 @@ class Fanout(RawListener):
 
     def _put(self, item: RawChunk | StreamEvent) -> None:
         with self._lock:
+            if self._closed:
+                return
             self._recorder.write(item)
             self._queue.put(item)
 
-
-class LatencyStats:
-    """How fresh the estimate is (ms), in constant memory however long the trial:
-
-    - ``latency``: from the arrival of the chunk that completed a block of samples to the estimator
-      having taken the block;
-    - ``age``: from the arrival of the chunk that completed the oldest sample the estimator took then
-      (a sample left over from a block waits for the next one, and its age counts from its own chunk).
-    """
-
-    def __init__(self) -> None:
-        self.latency = LatencyHistogram(bins=LATENCY_BINS)
-        self.age = LatencyHistogram(bins=LATENCY_BINS)
-        self._arrivals: deque[tuple[float, int]] = deque()  # (chunk arrival, samples aligned once it was fed)
-        self._taken = 0  # samples aligned before the estimator's last update
-        self._last = (0.0, 0)  # (arrival, samples aligned) of the chunk fed last
-
-    def fed(self, arrival: float, aligned: int) -> None:
-        """A chunk that arrived at ``arrival`` has been fed; ``aligned`` samples are now aligned in all. Only
-        chunks that completed samples are kept, and only until the estimator has taken those."""
-        self._last = (arrival, aligned)
-        if aligned > (self._arrivals[-1][1] if self._arrivals else self._taken):
-            self._arrivals.append((arrival, aligned))
-
-    def updated(self, waiting: int) -> None:
-        """The estimator took every aligned sample but ``waiting`` with the chunk fed last."""
-        now = time.time()
-        arrival, aligned = self._last
-        oldest = next((t for t, done in self._arrivals if done > self._taken), arrival)
-        self.latency.add(now - arrival)
-        self.age.add(now - oldest)
-        self._taken = aligned - waiting
-        while self._arrivals and self._arrivals[0][1] <= self._taken:
-            self._arrivals.popleft()
-
-    def percentiles_ms(self) -> dict[str, float]:
-        if not self.latency.count:
-            return {}
-        out = {}
-        for name, values in (("latency", self.latency), ("age", self.age)):
-            p50, p99 = values.percentiles_ms([50, 99])
-            out.update({f"{name}_p50_ms": p50, f"{name}_p99_ms": p99, f"{name}_max_ms": values.max_ms()})
-        return out
+    def close(self, drain: Callable[[], None]) -> None:
+        """Take nothing more (a reader shared with other trials goes on), with ``drain`` emptying the queue
+        meanwhile: a hand-over waiting for room completes before this returns."""
+        self._closed = True
+        drain()
+        with self._lock:  # the last hand-over, if one was under way
+            pass
+        drain()
 
 
-def transports(cfg: Config, ports: dict[str, Any] | None = None) -> dict[str, Transport]:
-    """The IMU and table transports, from the emulator's ports (ports.json) or from the config."""
+def transports(cfg: Config, ports: dict[str, Any] | None = None, table: Transport | None = None
+               ) -> dict[str, Transport]:
+    """The IMU and table transports, from the emulator's ports (ports.json) or from the config; ``table``: the
+    table's, already made (shared by several units)."""
     ports = ports or {}
     imu_port = ports.get(Port.IMU) or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
-    table_port = ports.get(Port.TABLE_DATA, cfg.turntable.data_port)
     if not imu_port:
         raise TrialAborted("imu: no port (set imu.port, or imu.source: emulator)")
+    return {IMU: open_transport(imu_port, IMU, cfg.imu.baudrate), TABLE: table or table_transport(cfg, ports)}
+
+
+def table_transport(cfg: Config, ports: dict[str, Any]) -> Transport:
+    """The table's data transport, from the emulator's ports (ports.json) or from the config."""
+    table_port = ports.get(Port.TABLE_DATA, cfg.turntable.data_port)
     if not table_port:
         raise TrialAborted("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
-    return {IMU: open_transport(imu_port, IMU, cfg.imu.baudrate),
-            TABLE: open_transport(table_port, TABLE, cfg.turntable.baudrate)}
+    return open_transport(table_port, TABLE, cfg.turntable.baudrate)
 
 
 def _warn(text: str) -> None:
@@ -157,7 +129,9 @@ class TrialHooks:
     harness commands).
     ``queue_items`` bounds the processing queue: a small one holds the emulated devices close behind the
     processing (the table then answers a command without lag). ``early_end`` is polled every step: a reason ends
-    the trial early (a calibration's soak that did not settle).
+    the trial early (a calibration's soak that did not settle). ``table_reader``: the table's reader, shared by the
+    trials of several units on one table (docs/units.md); its owner starts and stops it, and this trial listens
+    to it until it ends, when a stream silent for ``output.outage_limit_s`` ends it too.
     """
 
     motion_check: MotionCheck | None = None
@@ -170,6 +144,7 @@ class TrialHooks:
     finished: Callable[[], bool] = lambda: False
     queue_items: int = QUEUE_ITEMS
     early_end: Callable[[], str | None] = lambda: None
+    table_reader: DeviceReader | None = None
 
 
 class LiveTrial:
@@ -203,7 +178,8 @@ class LiveTrial:
             listeners.append(self._check_motion)
         self.processor = TrialProcessor(cfg, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
-        opened = transports(cfg, ports)
+        shared = hooks.table_reader
+        opened = transports(cfg, ports, None if shared is None else shared.transport)
         codecs = stream_codecs(cfg)
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
             check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
@@ -214,7 +190,10 @@ class LiveTrial:
                                  record=start_record(cfg, config_text, ports, imu_config))  # once the trial can start
         self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
-        self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()]
+        self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()
+                        if shared is None or t is not shared.transport]
+        if shared is not None:
+            shared.raw_listeners = [*shared.raw_listeners, self.fanout]  # a new list: the reader may be iterating
 
     def run(self) -> str:
         """Run to the end; how it ended: ``completed``, ``early: <reason>`` or ``interrupted: <signal>``; the
@@ -241,8 +220,8 @@ class LiveTrial:
             self.hooks.on_end()
             for reader in self.readers:
                 reader.stop()
-            while not self.queue.empty():  # what the readers handed over last: the replay sees it too
-                self.processor.feed(self.queue.get_nowait())
+            self._leave_shared()
+            self._drain()
             if started:
                 self.recorder.close(str(ended))
             else:
@@ -250,6 +229,18 @@ class LiveTrial:
             self.finished = self.processor.finish()
             if self.viewer is not None:
                 self.viewer.close()
+
+    def _drain(self) -> None:
+        """Process what the readers handed over last: the replay sees it too."""
+        while not self.queue.empty():
+            self.processor.feed(self.queue.get_nowait())
+
+    def _leave_shared(self) -> None:
+        """Stop listening to the shared table reader, which goes on for the other units."""
+        shared = self.hooks.table_reader
+        if shared is not None:
+            shared.raw_listeners = [listener for listener in shared.raw_listeners if listener is not self.fanout]
+            self.fanout.close(self._drain)
 
     def _check_motion(self, progress: Progress) -> None:
         """The motion check's listener while the table is commanded: the backlog processed after the table is
@@ -324,14 +315,37 @@ class LiveTrial:
             return
         if last == 0.0 and now - started > START_TIMEOUT_S:
             raise TrialAborted(f"no data from the devices within {START_TIMEOUT_S:.0f} s")
-        table_last = self.fanout.last_by_stream.get(TABLE)
+        table_last = self._last_arrival(TABLE, now)
         if self.hooks.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
             raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
         limit = self.cfg.output.outage_limit_s
+        if self.hooks.table_reader is not None:
+            self._check_streams(now - started, now, limit)
         if last and now - last > limit:
             why = "; ".join(reader.down for reader in self.readers if reader.down)
             message = f"no data from any device for {limit:g} s (output.outage_limit_s)"
             raise TrialAborted(f"{message}: {why}" if why else message)
+
+
+    def _last_arrival(self, stream: str, now: float) -> float | None:
+        """When the stream's last chunk arrived (monotonic s; None: none yet); ``now`` while the shared table
+        reader is handing a chunk over (another unit's full queue holds it up: the table is not silent)."""
+        shared = self.hooks.table_reader
+        last = self.fanout.last_by_stream.get(stream)
+        return now if last and shared is not None and stream == TABLE and shared.handing_over else last
+
+    def _check_streams(self, since_start: float, now: float, limit: float) -> None:
+        """A trial of one of several units: its IMU, or the table, silent for ``limit`` s (or from the start for
+        ``START_TIMEOUT_S``) ends it; the other units' streams keep its fan-out busy."""
+        for reader in (*self.readers, self.hooks.table_reader):
+            stream, address = reader.transport.stream, reader.transport.address
+            last = self._last_arrival(stream, now)
+            why = f": {reader.down}" if reader.down else ""
+            if last and now - last > limit:
+                raise TrialAborted(f"no data from the {stream} ({address}) for {limit:g} s (output.outage_limit_s)"
+                                   f"{why}")
+            if not last and since_start > START_TIMEOUT_S:
+                raise TrialAborted(f"no data from the {stream} ({address}) within {START_TIMEOUT_S:.0f} s{why}")
 
 
 def lag_warning(offset: float | None, rate_hz: float) -> str | None:

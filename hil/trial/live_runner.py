@@ -78,11 +78,11 @@ def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, durati
         viewer = open_viewer(options, cfg, out, blocking=False)
         if chamber is not None:  # its readings and set points to the viewer too
             chamber = watched_chamber(chamber, cfg.environment.chamber.set_point_c, viewer)
-        command_url = _command_url(cfg, ports)
+        url = command_url(cfg, ports)
         with ConsoleProgress(duration, quiet=quiet) as progress:
             hooks = TrialHooks()
-            if command_url is not None:
-                control = TableControl(command_url, cfg.turntable)
+            if url is not None:
+                control = TableControl(url, cfg.turntable)
                 control.open()
                 hooks = dataclasses.replace(commanded(control, cfg, viewer, chamber), on_end=control.stop)
             if emulator is not None:
@@ -121,7 +121,7 @@ def _arm(control, cfg: Config, viewer, chamber) -> TrialHooks:
     return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))
 
 
-def _command_url(cfg: Config, ports: dict | None) -> str | None:
+def command_url(cfg: Config, ports: dict | None) -> str | None:
     """The table's command port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
     url = cfg.turntable.command_port
     if url == "emulator":

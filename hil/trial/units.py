@@ -3,6 +3,7 @@ on its own config (:meth:`hil.config.Config.unit_configs`) into ``OUT/units/<nam
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,17 +20,17 @@ RunUnit = Callable[[Config, str, Path], TrialOutcome]
 
 @dataclass
 class FixtureOutcome:
-    """A finished trial of several units: the units config, the trial's directory, each unit's outcome by name."""
+    """A finished trial of several units: the trial's name and directory, each unit's outcome by name."""
 
-    cfg: Config
+    name: str
     out: Path
     units: dict[str, TrialOutcome]
 
     def write_index(self) -> int:
         """Write OUT/result.json, report.html and junit.xml over the units' written outputs; the exit code
         (:func:`~hil.outputs.units_index.units_exit_code`)."""
-        doc = write_units_index(self.out, self.cfg.trial.name, [unit_entry(name, outcome.result)
-                                                                 for name, outcome in self.units.items()])
+        doc = write_units_index(self.out, self.name, [unit_entry(name, outcome.result)
+                                                      for name, outcome in self.units.items()])
         return units_exit_code(unit["verdict"] for unit in doc["units"])
 
 
@@ -39,7 +40,20 @@ def run_units(cfg: Config, out: Path, run_unit: RunUnit) -> FixtureOutcome:
     units = {}
     for name, unit_cfg in cfg.unit_configs().items():
         units[name] = run_unit(unit_cfg, unit_config_text(name, unit_cfg), out / UNITS_DIR / name)
-    return FixtureOutcome(cfg, out, units)
+    return FixtureOutcome(cfg.trial.name, out, units)
+
+
+def recorded_units(source: str | Path) -> tuple[str, dict[str, Path]] | None:
+    """The trial name and each unit's directory (its recording.mcap) of a units trial's directory, by the index
+    result.json it wrote; None for any other source."""
+    index = Path(source) / "result.json"
+    try:
+        doc = json.loads(index.read_text()) if index.is_file() else {}
+    except (OSError, ValueError):
+        return None
+    if not isinstance(doc, dict) or not isinstance(doc.get("units"), list):
+        return None
+    return doc["trial"]["name"], {unit["name"]: Path(source) / unit["out_dir"] for unit in doc["units"]}
 
 
 def unit_config_text(name: str, cfg: Config) -> str:

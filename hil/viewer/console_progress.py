@@ -4,6 +4,7 @@ a terminal (a log file, CI) a plain line is printed every ``PLAIN_S`` instead of
 
 from __future__ import annotations
 
+import threading
 import time
 
 from rich.console import Console
@@ -58,7 +59,13 @@ class ConsoleProgress:
             then, before = self._last
             rates = {name: (frames[name] - before[name]) / max(now - then, 1e-9) for name in frames}
         self._last = (now, frames)
-        line = fitted(self.parts(trial_time, snap, health, rates), self.console.width)
+        self.show(trial_time, self.parts(trial_time, snap, health, rates))
+
+    def show(self, trial_time: float, parts: list[str]) -> None:
+        """The status line of ``parts`` at ``trial_time`` (s): live on a terminal (as many parts as fit), else a
+        plain line of every part every ``PLAIN_S``."""
+        now = time.monotonic()
+        line = fitted(parts, self.console.width) if self.live else SEPARATOR.join(parts)
         if self.live:
             self._progress.update(self._task, completed=trial_time, description=line)
         elif not self.quiet and now >= self._next_plain:
@@ -76,13 +83,41 @@ class ConsoleProgress:
         for name in ("imu", "table"):
             faults = "".join(f" {key[0]}{health[name][key]:.0f}" for key in ("corrupt", "missing") if health[name][key])
             streams.append(f"{name} {rates[name]:.0f}Hz{faults}")
-        if snap is None:
-            estimate = "acquiring"
-        elif snap.full.bias is None:
-            estimate = f"rank {snap.full.observability.rank}/12: bias not observable yet"
-        else:
-            bias = " ".join(f"{b / UG:+.1f}+-{s / UG:.1f}" for b, s in zip(snap.full.bias, snap.full.bias_sigma))
-            estimate = f"bias ug {bias} rank {snap.full.observability.rank}"
         p99 = health["aligner"].get("age_p99_ms")
-        return [" ".join(streams), f"{trial_time:.0f}/{self.duration or 0:.0f} s", estimate,
+        return [" ".join(streams), f"{trial_time:.0f}/{self.duration or 0:.0f} s", estimate_text(snap),
                 *([f"age p99 {p99:.1f} ms"] if p99 is not None else [])]
+
+
+def estimate_text(snap: Snapshot | None, compact: bool = False) -> str:
+    """The live estimate in a few words: the bias +- sigma (ug) and the observability's rank (``compact``: the
+    bias alone, to whole ug)."""
+    if snap is None:
+        return "acquiring"
+    if snap.full.bias is None:
+        return f"rank {snap.full.observability.rank}/12" + ("" if compact else ": bias not observable yet")
+    digits = 0 if compact else 1
+    bias = " ".join(f"{b / UG:+.{digits}f}+-{s / UG:.1f}" for b, s in zip(snap.full.bias, snap.full.bias_sigma))
+    return bias if compact else f"bias ug {bias} rank {snap.full.observability.rank}"
+
+
+class UnitsProgress:
+    """One status line for the units of a trial (docs/units.md): the trial time, then each unit's name and live
+    bias (ug). Each unit's trial calls :meth:`updater`'s function from its own thread."""
+
+    def __init__(self, progress: ConsoleProgress, names: list[str]) -> None:
+        self.progress = progress
+        self._estimates = dict.fromkeys(names, "acquiring")
+        self._times = dict.fromkeys(names, 0.0)
+        self._lock = threading.Lock()
+
+    def updater(self, name: str):
+        """The progress hook of the unit ``name`` (:attr:`hil.trial.live.TrialHooks.on_progress`)."""
+
+        def update(trial_time: float, snap: Snapshot | None, health: dict) -> None:
+            with self._lock:
+                self._times[name], self._estimates[name] = trial_time, estimate_text(snap, compact=True)
+                latest = max(self._times.values())
+                units = [f"{unit} {text}" for unit, text in self._estimates.items()]
+                self.progress.show(latest, [f"{latest:.0f}/{self.progress.duration or 0:.0f} s", *units])
+
+        return update

@@ -1,0 +1,236 @@
+"""The live trial of several units on one table (``hil run`` of a ``units`` config, docs/units.md).
+
+One reader of the table's data, shared: each unit's :class:`~hil.trial.live.LiveTrial` listens to it beside its
+own IMU's reader, pairs its IMU with the table on its own, estimates, records (its own recording.mcap, the table's
+bytes with its IMU's) and ends on its own, each in its own thread. A unit whose IMU goes silent ends early while the
+others go on; the table's loss ends every unit. The table is armed once and sent Off when the last unit ends, and on
+every way out; the emulated devices (``hil emulate`` of the units config) run in their own process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+from drivers.reader import DeviceReader
+from drivers.table_controller import InterlockError, LimitError, TableError
+from drivers.transport import TransportError
+from emulators.process import EmulatorError, parse_speed, spawn_emulator, stop_emulator
+from hil.config import Config
+from hil.outputs.units_index import UNITS_DIR
+from hil.trial.chamber import open_chamber, release_chamber
+from hil.trial.live import LiveTrial, TrialHooks, table_transport
+from hil.trial.live_runner import command_url, emulated
+from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
+from hil.trial.stop_signals import StopSignals
+from hil.trial.table_control import MotionCheck, TableControl
+from hil.trial.units import FixtureOutcome, unit_config_text
+from hil.viewer.console_progress import ConsoleProgress, UnitsProgress
+from hil.vocabulary import Port
+
+JOIN_S = 0.2  # how often the main thread looks up from the units' threads (signals are taken meanwhile)
+
+
+class ListeningClient:
+    """What a unit's trial but the first gets for the table's controller: the same gimbals, every command heard and
+    not sent. The first unit's trial commands the table; the others follow its reported angles by the same rules."""
+
+    def __init__(self, client) -> None:
+        self.gimbals = client.gimbals
+
+    def demand_position(self, gimbal: str, deg: float) -> None:
+        """Not sent: the first unit's trial commands the table."""
+
+    def demand_rate(self, gimbal: str, dps: float) -> None:
+        """Not sent."""
+
+    def set_mode(self, gimbal: str, mode: str) -> None:
+        """Not sent."""
+
+
+@dataclasses.dataclass(frozen=True)
+class UnitsCommand:
+    """How the harness drives the table in a units trial: ``arm`` with the open :class:`TableControl` before the
+    units' trials are made, ``unit(name, client, cfg)`` each unit's hooks (``client`` the table's controller for
+    the first unit, a :class:`ListeningClient` for the others; ``cfg`` the unit's config), ``started`` once every
+    unit's trial is made. The default: ``hil run``'s configured motion, each unit checking it."""
+
+    arm: Callable[[TableControl], None] = lambda control: control.arm()
+    unit: Callable[[str, object, Config], TrialHooks] = lambda name, client, cfg: TrialHooks(
+        motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))
+    started: Callable[[TableControl], None] = lambda control: None
+
+
+@dataclasses.dataclass(frozen=True)
+class UnitTrial:
+    """One unit's live trial: its name, one-unit config, config text and output directory, and the trial."""
+
+    name: str
+    cfg: Config
+    config_text: str
+    out: Path
+    trial: LiveTrial
+
+
+def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
+                   quiet: bool = False, command: UnitsCommand = UnitsCommand()) -> FixtureOutcome:
+    """Acquire, record and estimate every unit until each ends, the table driven as ``command`` says; their
+    outcomes."""
+    units = cfg.unit_configs()
+    is_emulated = all(emulated(unit) for unit in units.values())
+    duration = duration if duration is not None else cfg.trial.duration_s
+    if is_emulated and duration is None:
+        raise TrialSetupError("an emulated trial needs trial.duration_s or --duration")
+    time_scale = parse_speed(speed) if is_emulated else 1.0
+    out.mkdir(parents=True, exist_ok=True)
+    with StopSignals() as signals:
+        trials, ended = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet, is_emulated,
+                                        command), lambda: signals.received)
+    return FixtureOutcome(cfg.trial.name, out, {
+        unit.name: TrialOutcome.of(unit.trial.finished, unit.cfg, unit.config_text, unit.out, ended[unit.name],
+                                   emulated_truth(unit.cfg)) for unit in trials})
+
+
+@dataclasses.dataclass(frozen=True)
+class _Setup:
+    """What :func:`run_units_live` was asked for."""
+
+    cfg: Config
+    config_path: Path
+    out: Path
+    duration: float | None
+    speed: str
+    time_scale: float | None
+    quiet: bool
+    emulated: bool
+    command: UnitsCommand
+
+
+def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, str]]:
+    """Emulator (if emulated), table control, the shared table reader and every unit's trial, run to their ends;
+    the trials and how each ended."""
+    cfg, out = setup.cfg, setup.out
+    emulator, ports, control, chamber, table = None, None, None, None, None
+    try:
+        if setup.emulated:
+            try:
+                emulator, ports = spawn_emulator(setup.config_path, out / "ports.json", setup.speed, setup.duration,
+                                                 stats_file=out / "emulator.json", log_file=out / "emulator.log",
+                                                 hold=True)
+            except EmulatorError as exc:
+                raise TrialSetupError(f"{setup.config_path}: {exc}") from None
+        chamber = open_chamber(cfg.environment.chamber, ports)  # before the table moves
+        url = command_url(cfg, ports)
+        with ConsoleProgress(setup.duration, quiet=setup.quiet) as progress:
+            hooks = TrialHooks(on_warning=progress.warn, stop_requested=stop_requested)
+            if emulator is not None:
+                hooks = dataclasses.replace(hooks, source_done=lambda: emulator.poll() is not None
+                                            or (out / "emulator.json").exists())
+            table = DeviceReader(table_transport(cfg, ports or {}),
+                                 gather_s=cfg.read_s if setup.time_scale is not None else 0.0)
+            if url is not None:
+                control = TableControl(url, cfg.turntable)
+                control.open()
+                setup.command.arm(control)
+            trials = _unit_trials(setup, ports, dataclasses.replace(hooks, table_reader=table), control,
+                                  UnitsProgress(progress, list(cfg.unit_configs())))
+            if control is not None:
+                setup.command.started(control)
+            return trials, _run(trials, table, control)
+    except (TableError, LimitError, InterlockError) as exc:
+        raise TrialSetupError(str(exc)) from None
+    finally:
+        if table is not None:
+            table.stop()
+        if control is not None:
+            control.stop()
+            if control.stop_error:
+                print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
+        if chamber is not None:  # after the table is off
+            release_chamber(chamber, cfg.environment.chamber)
+        if emulator is not None:
+            stop_emulator(emulator)
+
+
+def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: TableControl | None,
+                 progress: UnitsProgress) -> list[UnitTrial]:
+    """Each unit's trial on its own IMU port and the shared table reader: where the table is commanded, its hooks
+    from the command (the first unit's commanding the table), its warnings named by the unit, its progress in the
+    console's one line.
+    A unit whose port cannot be opened is refused naming the unit and the port."""
+    trials = []
+    for k, (name, unit) in enumerate(setup.cfg.unit_configs().items()):
+        unit_ports = None
+        if ports is not None:
+            unit_ports = {Port.IMU: ports[Port.UNITS][name][Port.IMU], Port.TABLE_DATA: ports[Port.TABLE_DATA]}
+        unit_hooks = hooks
+        if control is not None:
+            client = control.client if k == 0 else ListeningClient(control.client)
+            commanded = setup.command.unit(name, client, unit)
+            unit_hooks = dataclasses.replace(hooks, motion_check=commanded.motion_check, finished=commanded.finished,
+                                             queue_items=commanded.queue_items, early_end=commanded.early_end)
+        unit_hooks = dataclasses.replace(
+            unit_hooks, on_warning=lambda text, name=name: hooks.on_warning(f"unit {name}: {text}"),
+            on_progress=progress.updater(name))
+        unit_out = setup.out / UNITS_DIR / name
+        unit_out.mkdir(parents=True, exist_ok=True)
+        text = unit_config_text(name, unit)
+        try:
+            trial = LiveTrial(unit, text, unit_out, setup.duration, unit_ports, None, setup.time_scale, unit_hooks)
+            _check_opens(trial)
+        except TransportError as exc:
+            raise TrialSetupError(f"units[{k}] ({name}): {exc}") from None
+        trials.append(UnitTrial(name, unit, text, unit_out, trial))
+    return trials
+
+
+def _check_opens(trial: LiveTrial) -> None:
+    """Open and close the trial's own ports: one that cannot be opened refuses the trial before anything starts."""
+    for reader in trial.readers:
+        reader.transport.open()
+        reader.transport.close()
+
+
+def _run(trials: list[UnitTrial], table: DeviceReader, control: TableControl | None) -> dict[str, str]:
+    """Run every unit's trial in its own thread, the table's reader with them; the table Off once the last unit's
+    acquisition has ended. How each ended, by unit."""
+    ended: dict[str, str] = {}
+    failed: list[BaseException] = []
+    running = threading.Semaphore(0)
+    left = [len(trials)]
+    lock = threading.Lock()
+
+    def acquisition_ended() -> None:
+        with lock:
+            left[0] -= 1
+            if left[0] == 0 and control is not None:
+                control.stop()
+
+    def run(unit: UnitTrial) -> None:
+        try:
+            ended[unit.name] = unit.trial.run()
+        except BaseException as exc:  # raised again in the main thread
+            failed.append(exc)
+        finally:
+            running.release()
+
+    for unit in trials:
+        unit.trial.hooks = dataclasses.replace(unit.trial.hooks, on_end=acquisition_ended)
+    try:
+        table.start()
+    except TransportError as exc:
+        raise TrialSetupError(f"turntable.data_port: {exc}") from None
+    threads = [threading.Thread(target=run, args=(unit,), name=f"unit-{unit.name}", daemon=True) for unit in trials]
+    for thread in threads:
+        thread.start()
+    for _ in threads:
+        while not running.acquire(timeout=JOIN_S):
+            pass
+    for thread in threads:
+        thread.join()
+    if failed:
+        raise failed[0]
+    return ended

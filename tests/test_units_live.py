@@ -1,0 +1,220 @@
+"""Several units on one table, live (docs/units.md): ``hil emulate`` of a units config streams a port per unit,
+and ``hil run`` pairs, estimates, records and ends each unit on its own against the one table stream."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from emulators.bench import device_streams
+from hil.cli import main
+from hil.config import parse_config
+from tests.lab_form import SWING, Emulator
+
+# a lab-form test runs real-time devices in their own process: opt-in, on a host not also running the suite
+lab_tests = pytest.mark.skipif(not os.environ.get("HIL_LAB_TESTS"), reason="lab form: set HIL_LAB_TESTS=1")
+TRUTHS = {"kvh-a": [60.0, 150.0, 260.0], "kvh-b": [-120.0, 40.0, 310.0], "xsens": [200.0, -90.0, 500.0]}
+
+
+def units_config(duration_s: float = 20.0, **faults: dict) -> dict:
+    """Three emulated units (two KVH 1750, mounted apart, and an Xsens upside down) on one swinging table; ``faults``
+    by unit name."""
+    units = [{"name": name, "record": {"dut_serial": name.upper()}, "mounting_deg": mounting,
+              "imu": {"protocol": protocol, "errors": {"accel_bias_ug": TRUTHS[name], "accel_noise_ug": [50] * 3,
+                                                       "gyro_bias_dph": [0.01] * 3, "gyro_noise_dph": [0.01] * 3},
+                      **({"faults": faults[name]} if name in faults else {})}}
+             for name, mounting, protocol in (("kvh-a", [0, 0, 0], "kvh1750"), ("kvh-b", [90, 0, 0], "kvh1750"),
+                                              ("xsens", [0, 180, 0], "xsens-mtdata2"))]
+    return {"trial": {"name": "units-live", "duration_s": duration_s, "rate_hz": 200.0, "seed": 5},
+            "site": {"latitude_deg": 32.0, "longitude_deg": 118.0, "height_m": 10.0},
+            "turntable": {"latch_delay_us": 50, "motion": {"kind": "swing", "axes": SWING}},
+            "units": units, "estimator": {"solve_rate_hz": 1}, "output": {"limits": {}}}
+
+
+def write(tmp: Path, cfg: dict, name: str = "units.yaml") -> Path:
+    path = tmp / name
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def unit_results(out: Path) -> dict[str, dict]:
+    return {name: json.loads((out / "units" / name / "result.json").read_text()) for name in TRUTHS}
+
+
+def within(doc: dict, truth: list[float], sigmas: float = 5.0) -> bool:
+    estimate = doc["estimate"]
+    return all(abs(b - t) <= sigmas * s for b, t, s in zip(estimate["accel_bias_ug"], truth,
+                                                          estimate["accel_bias_sigma_ug"], strict=True))
+
+
+def test_each_emulated_unit_streams_what_its_own_one_unit_config_streams_alone():
+    """Every IMU senses the one table motion through its own mounting, with its own errors, noise and counter
+    start: its frames are those of its one-unit config (OUT/units/<name>/config.yaml) emulated alone."""
+    cfg = parse_config(units_config(), units=True)
+    servo, streams = device_streams(cfg, 2.0)
+    assert list(streams) == ["imu.kvh-a", "imu.kvh-b", "imu.xsens", "turntable_data"]
+    frames = {name: [stream.pop(servo).payload for _ in range(50)] for name, stream in streams.items()}
+    for name, unit in cfg.unit_configs().items():
+        alone_servo, alone = device_streams(unit, 2.0)
+        assert [alone["imu"].pop(alone_servo).payload for _ in range(50)] == frames[f"imu.{name}"]
+    assert len({tuple(f) for f in frames.values()}) == 4
+    counters = {name: int(stream.source.clock.counters(np.arange(1, 2))[0]) for name, stream in streams.items()}
+    assert len(set(counters.values())) == 4  # each device counts from its own start
+
+
+def test_a_units_trial_runs_live_each_unit_on_its_own_and_replays_bit_for_bit(tmp_path):
+    out = tmp_path / "run"
+    code = main(["run", str(write(tmp_path, units_config())), "--speed", "max", "--out", str(out), "--no-history",
+                 "--no-figures", "--quiet"])
+    index = json.loads((out / "result.json").read_text())
+    assert code == 0 and index["ended"] == "completed", index
+    live = unit_results(out)
+    for name, doc in live.items():
+        assert doc["ended"] == "completed" and doc["record"]["dut_serial"] == name.upper()
+        assert doc["streams"]["sync"]["paired_by"] == "motion"
+        assert within(doc, TRUTHS[name]), (name, doc["estimate"]["accel_bias_ug"])
+        assert (out / "units" / name / "recording.mcap").stat().st_size > 0
+    again = tmp_path / "again"
+    assert main(["replay", str(out), "--out", str(again), "--no-history", "--no-figures"]) == 0
+    replayed = unit_results(again)
+    for name in TRUTHS:
+        assert {k: v for k, v in replayed[name].items() if k != "record"} == \
+            {k: v for k, v in live[name].items() if k != "record"}
+
+
+def test_a_unit_whose_imu_goes_silent_ends_early_on_its_own_and_the_others_complete(tmp_path):
+    cfg = units_config(30.0, **{"kvh-b": {"power_cycle_at_s": 8.0, "power_cycle_s": 1000.0}})
+    cfg["output"]["outage_limit_s"] = 3.0
+    out = tmp_path / "run"
+    code = main(["run", str(write(tmp_path, cfg)), "--speed", "max", "--out", str(out), "--no-history",
+                 "--no-figures", "--quiet"])
+    docs = unit_results(out)
+    assert code == 1
+    # on the host's clock its IMU is silent for 3 s, or (at --speed max) the devices' run ends first
+    assert docs["kvh-b"]["ended"] in ("early: the emulated devices stopped at 8.0 s of 30.0 s",) or \
+        docs["kvh-b"]["ended"].startswith("early: no data from the imu (")
+    assert docs["kvh-b"]["streams"]["aligned"] <= 8.0 * 200
+    assert [docs[name]["ended"] for name in ("kvh-a", "xsens")] == ["completed", "completed"]
+    index = json.loads((out / "result.json").read_text())
+    assert index["ended"] == "early: unit kvh-b did not complete"
+
+
+def test_a_unit_whose_port_cannot_be_opened_is_refused_naming_the_unit_and_the_port(tmp_path, capsys):
+    cfg = units_config()
+    cfg["turntable"].update(source="serial", data_port="/dev/null")
+    for k, unit in enumerate(cfg["units"]):
+        unit["imu"] = {"protocol": unit["imu"]["protocol"], "source": "serial", "port": f"/dev/hil-absent-{k}",
+                       "options": {"check_config": False}}
+    code = main(["run", str(write(tmp_path, cfg)), "--duration", "5", "--out", str(tmp_path / "run"),
+                 "--no-history", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "units[0] (kvh-a)" in err and "/dev/hil-absent-0" in err and "Traceback" not in err
+
+
+def lab_units(cfg: dict, ports: dict) -> dict:
+    """The units config in the lab form: each unit's IMU on its port of the running emulator, the table's data
+    port, no emulated truth."""
+    lab = copy.deepcopy(cfg)
+    lab["turntable"].update(source="serial", data_port=ports["turntable_data"])
+    for unit in lab["units"]:
+        unit["imu"] = {"protocol": unit["imu"]["protocol"], "source": "serial",
+                       "port": ports["units"][unit["name"]]["imu"]}
+    return lab
+
+
+@lab_tests
+def test_lab_form_units_attached_late_each_paired_and_one_power_cycled_on_its_own(tmp_path):
+    """``hil emulate`` of three units in its own process, streaming; the harness attached seconds later; kvh-b
+    loses power for 1 s mid-trial and counts from zero: it alone is re-paired, every unit completes within 5
+    sigma of its own truth."""
+    cfg = units_config(60.0, **{"kvh-b": {"power_cycle_at_s": 12.0, "power_cycle_s": 1.0}})
+    with Emulator(tmp_path, cfg) as emulator:
+        lab = write(tmp_path, lab_units(cfg, emulator.ports), "lab.yaml")
+        time.sleep(max(0.0, 3.0 - (time.monotonic() - emulator.started)))
+        out = tmp_path / "run"
+        code = main(["run", str(lab), "--duration", "30", "--out", str(out), "--no-history", "--no-figures",
+                     "--quiet"])
+    docs = unit_results(out)
+    assert code == 0, {name: doc["ended"] for name, doc in docs.items()}
+    for name, doc in docs.items():
+        sync = doc["streams"]["sync"]
+        assert sync["paired_by"] == "motion", (name, sync)
+        assert within(doc, TRUTHS[name]), (name, doc["estimate"])
+        assert (len(sync["repairs"]) >= 1) == (name == "kvh-b"), (name, sync["repairs"])
+
+
+
+def test_a_units_trial_ends_a_unit_whose_imu_or_the_table_is_silent_for_the_outage_limit(tmp_path):
+    """The other units' data keep a unit's fan-out busy: its own IMU, or the shared table, silent for
+    ``output.outage_limit_s`` (or silent from the start for 15 s) ends its trial, naming the stream and port."""
+    from drivers.reader import DeviceReader
+    from drivers.transport import open_transport
+    from hil.trial.live import LiveTrial, TrialAborted, TrialHooks
+
+    cfg = parse_config(units_config(), units=True).unit_configs()["kvh-a"]
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"outage_limit_s": 3.0}),
+                                 "imu": cfg.imu.model_copy(update={"options": {"check_config": False}})})
+    table = DeviceReader(open_transport("/dev/table", "table", 115200))
+    trial = LiveTrial(cfg, "", tmp_path, None, {"imu": "/dev/imu-a", "turntable_data": "/dev/table"},
+                      hooks=TrialHooks(table_reader=table))
+    try:
+        assert [r.transport.stream for r in trial.readers] == ["imu"] and table.raw_listeners == [trial.fanout]
+        trial.fanout.last_arrival = trial.fanout.last_by_stream["table"] = 100.0
+        with pytest.raises(TrialAborted, match=r"^no data from the imu \(/dev/imu-a\) within 15 s$"):
+            trial._check_alive(100.5, started=80.0)
+        trial.fanout.last_by_stream["imu"] = 97.0
+        trial._check_alive(99.9, started=80.0)  # 2.9 s: it goes on
+        with pytest.raises(TrialAborted, match=r"^no data from the imu \(/dev/imu-a\) for 3 s \(output.outage_limit_s\)$"):
+            trial._check_alive(100.1, started=80.0)
+        trial.fanout.last_by_stream.update(imu=110.0, table=106.0)
+        trial.fanout.last_arrival = 110.0
+        with pytest.raises(TrialAborted, match=r"^no data from the table \(/dev/table\) for 3 s"):
+            trial._check_alive(110.1, started=80.0)
+        trial._leave_shared()
+        assert table.raw_listeners == []
+    finally:
+        trial.recorder.close()
+
+
+def test_the_console_shows_every_unit_in_one_line():
+    import io
+
+    from rich.console import Console
+
+    from hil.viewer.console_progress import ConsoleProgress, UnitsProgress
+
+    text = io.StringIO()
+    with ConsoleProgress(60.0, console=Console(file=text, width=120, force_terminal=False)) as console:
+        units = UnitsProgress(console, ["kvh-a", "xsens"])
+        units.updater("xsens")(12.4, None, {})
+    assert text.getvalue().strip() == "12/60 s | kvh-a acquiring | xsens acquiring"
+
+
+@pytest.mark.slow
+def test_three_units_are_calibrated_in_one_schedule_each_through_its_own_mounting(tmp_path):
+    """configs/calibration_units.yaml on a shorter schedule: the first unit commands the table, the others follow;
+    every term of every unit within 4 sigma of its own truth, each unit's calibration.json, the table Off at the
+    end."""
+    from hil.outputs.calibration_report import comparison
+
+    cfg = yaml.safe_load(Path("configs/calibration_units.yaml").read_text())
+    cfg["turntable"]["limits"] = {"rate_dps": [60, 60, 60], "accel_dps2": [120, 120, 120]}
+    cfg["calibration"] = {"positions": 18, "dwell_s": 4, "settle_s": 0.5, "plateau_rate_dps": 30, "plateau_s": 10}
+    out = tmp_path / "run"
+    code = main(["calibrate", str(write(tmp_path, cfg)), "--speed", "max", "--out", str(out), "--no-history",
+                 "--no-figures", "--quiet"])
+    index = json.loads((out / "result.json").read_text())
+    assert code == 0, index
+    for unit in cfg["units"]:
+        doc = json.loads((out / "units" / unit["name"] / "calibration.json").read_text())
+        judged = [row for row in comparison(doc) if row["error_sigma"] is not None]
+        assert len(judged) > 30 and all(abs(row["error_sigma"]) < 4.0 for row in judged), \
+            (unit["name"], [(row["term"], row["error_sigma"]) for row in judged if abs(row["error_sigma"]) >= 4.0])
+    assert json.loads((out / "emulator.json").read_text())["table_modes"] == "Off,Off,Off"
