@@ -79,7 +79,7 @@ def test_imu_beside_units_is_refused_naming_both(tmp_path, capsys):
     assert "units: a config gives its IMUs either in units or in imu" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("command", [["noise"], ["ratetest", "scale-factor"]])
+@pytest.mark.parametrize("command", [["ratetest", "scale-factor"]])
 def test_a_one_unit_command_refuses_a_units_config_in_one_line(tmp_path, capsys, command):
     assert main([*command, str(UNITS_CONFIG), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err

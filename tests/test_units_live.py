@@ -218,3 +218,18 @@ def test_three_units_are_calibrated_in_one_schedule_each_through_its_own_mountin
         assert len(judged) > 30 and all(abs(row["error_sigma"]) < 4.0 for row in judged), \
             (unit["name"], [(row["term"], row["error_sigma"]) for row in judged if abs(row["error_sigma"]) >= 4.0])
     assert json.loads((out / "emulator.json").read_text())["table_modes"] == "Off,Off,Off"
+
+
+def test_the_noise_of_each_unit_of_an_emulated_units_config_is_analysed_on_its_own(tmp_path):
+    """``hil noise`` of a units config: each unit's record, its own noise.json in OUT/units/<name>/, its angle random
+    walk its own noise's, sigma / sqrt(rate) (1 deg/h at 200 Hz: 60 / 3600 / sqrt(200) deg/sqrt(h))."""
+    cfg = units_config(300.0)
+    cfg["turntable"]["motion"] = {"kind": "static"}
+    cfg["units"][2]["imu"]["errors"]["gyro_noise_dph"] = [1.0, 1.0, 1.0]
+    out = tmp_path / "noise"
+    assert main(["noise", str(write(tmp_path, cfg)), "--out", str(out), "--no-history", "--no-figures"]) == 0
+    for name, gyro_noise_dph in (("kvh-a", 0.01), ("kvh-b", 0.01), ("xsens", 1.0)):
+        doc = json.loads((out / "units" / name / "noise.json").read_text())
+        assert doc["record"]["dut_serial"] == name.upper() and doc["trial"]["name"] == f"units-live.{name}"
+        arw = gyro_noise_dph * 60.0 / 3600.0 / np.sqrt(200.0)
+        assert np.allclose(doc["gyro"]["arw_deg_per_sqrt_h"], arw, rtol=0.05), (name, doc["gyro"])
