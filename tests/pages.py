@@ -108,6 +108,33 @@ def wait_for(condition, timeout_s: float, every_s: float = 1.0):
         time.sleep(every_s)
 
 
+def recorded_rows(path: Path) -> dict[str, int]:
+    """The rows of each entity of the (first) recording of a .rrd, static data left out; none without a recording."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    rows: dict[str, int] = {}
+    for recording in reader.recordings()[:1]:
+        for chunk in reader.stream(store=recording):
+            if not chunk.is_static:
+                rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    return rows
+
+
+def wait_for_recording(page, rrd: Path, into: Path, timeout_s: float) -> Path:
+    """``into``: the viewer's active recording (.rrd) once it holds every row of ``rrd``, the one its data came from."""
+    expected = recorded_rows(rrd)
+
+    def holds_every_row() -> bool:
+        encoded = viewer_encoded(page, "recording")
+        if encoded is not None:
+            into.write_bytes(encoded)
+        return encoded is not None and recorded_rows(into) == expected
+
+    wait_for(holds_every_row, timeout_s, every_s=2.0)
+    return into
+
+
 def settled_screenshot(page, window: tuple[int, int], timeout_s: float) -> bytes:
     """The page (PNG) drawn in a ``window`` (width, height px): screenshots until two in a row are the same."""
     page.set_viewport_size({"width": window[0], "height": window[1]})

@@ -23,13 +23,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+from playwright.sync_api import sync_playwright
 from rerun.chunk import RrdReader
 
 from hil.config import load_config
 from hil.outputs.measurements import FAIL, PASS, measurements
 from hil.viewer.blueprint import AXIS_COLORS, LIMIT_COLOR, TIMELINE, TRUTH_COLOR
 from tests.pages import (CHROMIUM, SOFTWARE_GL, needs_chromium, open_viewer, settled_screenshot, viewer_encoded,
-                         viewer_times, viewer_views, wait_for)
+                         viewer_times, viewer_views, wait_for_recording)
 from tests.test_viewer_record import _blueprint_views, _rows
 
 pytestmark = [needs_chromium, pytest.mark.xdist_group("viewer_web")]  # one trial and one browser for the module
@@ -95,37 +96,21 @@ class Seen:
 
 @pytest.fixture(scope="module")
 def seen(served, tmp_path_factory) -> Seen:
-    from playwright.sync_api import sync_playwright
-
+    """The served trial's page: loaded in a small window, drawn full size once it holds the whole recording."""
     url, out = served
     folder = tmp_path_factory.mktemp("seen")
-    blueprint, recording = folder / "blueprint.rrd", folder / "recording.rrd"
-    expected = _row_counts(out / "recording.rrd")
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=list(SOFTWARE_GL))
         try:
             page = open_viewer(browser, url, LOADING_WINDOW, TIMEOUT_S)
-
-            def holds_the_whole_recording() -> bool:
-                encoded = viewer_encoded(page, "recording")
-                if encoded is not None:
-                    recording.write_bytes(encoded)
-                return encoded is not None and _row_counts(recording) == expected
-
-            wait_for(holds_the_whole_recording, TIMEOUT_S, every_s=2.0)
+            recording = wait_for_recording(page, out / "recording.rrd", folder / "recording.rrd", TIMEOUT_S)
             shot = settled_screenshot(page, WINDOW, TIMEOUT_S)
+            blueprint = folder / "blueprint.rrd"
             blueprint.write_bytes(viewer_encoded(page, "blueprint"))
             pixels = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB")).astype(int)
             return Seen(out, blueprint, recording, viewer_encoded(page, "state"), pixels)  # its views as drawn
         finally:
             browser.close()
-
-
-def _row_counts(path: Path) -> dict[str, int]:
-    """The rows of each entity of a .rrd's recording (none while the viewer has no recording yet)."""
-    if not RrdReader(path).recordings():
-        return {}
-    return {entity: len(rows) for entity, rows in _rows(path).items()}
 
 
 def _contents(path: Path) -> dict[str, list[str]]:
@@ -157,8 +142,9 @@ def _shown(expressions: list[str], origin: str, entities: set[str]) -> set[str]:
 
 def test_the_viewer_takes_in_every_row_the_trial_recorded(seen):
     # the wait ends on it; here what it means: the viewer's recording is the .rrd's, entity by entity
-    assert _row_counts(seen.recording) == _row_counts(seen.out / "recording.rrd")
-    assert _row_counts(seen.recording)["/bias/x/estimate"] >= 5
+    recorded = {entity: len(rows) for entity, rows in _rows(seen.out / "recording.rrd").items()}
+    assert {entity: len(rows) for entity, rows in _rows(seen.recording).items()} == recorded
+    assert recorded["/bias/x/estimate"] >= 5 and recorded["/verdict"] >= 2
 
 
 def test_the_viewer_lays_out_the_trials_blueprint_and_every_view_shows_data(seen):
