@@ -2,17 +2,19 @@
 
     apt-get install chromium                    (Debian's package: /usr/bin/chromium)
     .venv/bin/pip install -e '.[webcheck]'      (Python Playwright; its own browsers are not needed)
-    .venv/bin/python benchmarks/web_viewer_check.py [--wait 20] [--layout trial] [--out web_viewer.png]
+    .venv/bin/python benchmarks/web_viewer_check.py [--layout trial] [--out web_viewer.png] [--timeout 600]
 
 Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
 through a serving ``TrialViewer`` with the default trial's ``output.limits`` (the verdict so far)
 (``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``;
 ``--layout plan``: a plan's view at its second step and that step's own view in the same viewer),
 checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
-Chromium at 1600x1000 with software WebGL (``--use-gl=angle --use-angle=swiftshader
---enable-unsafe-swiftshader``), waits for the viewer's WebAssembly to load and draw, and saves a
-screenshot (docs/viewer.md's, ``docs/images/viewer_<layout>.png``). ``chromium --headless --screenshot``
-alone fires before the WebAssembly has loaded, hence Playwright and the wait.
+Chromium with software WebGL (``--use-gl=angle --use-angle=swiftshader --enable-unsafe-swiftshader``,
+tests/pages.py's ``SOFTWARE_GL``) and saves a screenshot at 1600x1000 (docs/viewer.md's,
+``docs/images/viewer_<layout>.png``). The page takes in the data in a small window, where a frame costs
+little, until the viewer's recording holds every row of the .rrd on screen (the trial's, the noise view's, a
+plan's step's); it is then drawn full size, and the screenshot taken once two in a row are the same. No fixed
+wait: ``--timeout`` bounds each of the three.
 
 Requests the page makes to hosts other than 127.0.0.1 are blocked (the check needs no network)
 and listed: the Rerun web viewer itself asks for a web font, its release and example lists and
@@ -30,21 +32,26 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from emulators.simulation import Simulation
-from hil.config import load_config
-from hil.estimation.calibration_schedule import default_schedule
-from hil.estimation.online import OnlineEstimator
-from hil.outputs.noise import ADEV_UNITS
-from hil.trial.noise_runner import analyse_record, show_forming, simulated
-from hil.units import UG
-from hil.viewer.allan_view import AllanView
-from hil.viewer.plan_view import PlanView, plan_markdown
-from hil.viewer.bias_view import BiasTruth
-from hil.viewer.modes import ViewerOptions
-from hil.viewer.trial_viewer import TrialViewer
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from emulators.simulation import Simulation  # noqa: E402
+from hil.config import load_config  # noqa: E402
+from hil.estimation.calibration_schedule import default_schedule  # noqa: E402
+from hil.estimation.online import OnlineEstimator  # noqa: E402
+from hil.outputs.noise import ADEV_UNITS  # noqa: E402
+from hil.trial.noise_runner import analyse_record, show_forming, simulated  # noqa: E402
+from hil.units import UG  # noqa: E402
+from hil.viewer.allan_view import AllanView  # noqa: E402
+from hil.viewer.plan_view import PlanView, plan_markdown  # noqa: E402
+from hil.viewer.bias_view import BiasTruth  # noqa: E402
+from hil.viewer.modes import ViewerOptions  # noqa: E402
+from hil.viewer.trial_viewer import TrialViewer  # noqa: E402
+from tests.pages import SOFTWARE_GL, open_viewer, settled_screenshot, wait_for_recording  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
-GL_ARGS = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+LOADING_WINDOW = (400, 250)  # px: the page takes in the data here, where a frame of software rendering costs little
+WINDOW = (1600, 1000)  # px: the page drawn, once it holds the data
 
 
 def listening_addresses(port: int) -> set[str]:
@@ -126,7 +133,8 @@ def log_calibration(viewer: TrialViewer) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load and draw (default 20)")
+    parser.add_argument("--timeout", type=float, default=600.0,
+                        help="seconds to wait for the page to load, take in the data and draw, each (default 600)")
     parser.add_argument("--layout", choices=("trial", "calibration", "noise", "plan"), default="trial",
                         help="blueprint layout")
     parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
@@ -144,34 +152,23 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         own = {"noise": log_noise, "plan": log_plan}.get(args.layout)
         viewer = own(Path(tmp)) if own is not None else log_trial(Path(tmp), args.layout)
+        shown = Path(tmp) / "02-swing" / "recording.rrd" if args.layout == "plan" else viewer.rrd_path  # on screen
         try:
             web_port = urlsplit(viewer.url).port
             grpc_port = urlsplit(parse_qs(urlsplit(viewer.url).query)["url"][0]).port
             for name, port in (("web viewer", web_port), ("gRPC", grpc_port)):
                 print(f"{name} port {port} listens on {sorted(listening_addresses(port))}")
-            blocked: set[str] = set()
+            refused: set[str] = set()
+            errors: list[str] = []
             with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=args.chromium, headless=True, args=GL_ARGS)
-                page = browser.new_page(viewport={"width": 1600, "height": 1000})
-
-                def route(request_route):
-                    host = urlsplit(request_route.request.url).hostname
-                    if host in ("127.0.0.1", "localhost", "::1"):
-                        request_route.continue_()
-                    else:
-                        blocked.add(f"{urlsplit(request_route.request.url).scheme}://{host}")
-                        request_route.abort()
-
-                page.route("**/*", route)
-                errors: list[str] = []
-                page.on("pageerror", lambda exc: errors.append(str(exc)))
-                page.goto(viewer.url)
-                page.wait_for_timeout(args.wait * 1000)
+                browser = p.chromium.launch(executable_path=args.chromium, headless=True, args=list(SOFTWARE_GL))
+                page = open_viewer(browser, viewer.url, LOADING_WINDOW, args.timeout, refused, errors)
+                wait_for_recording(page, shown, Path(tmp) / "in-viewer.rrd", args.timeout)
+                args.out.write_bytes(settled_screenshot(page, WINDOW, args.timeout))
                 title = page.title()
-                page.screenshot(path=str(args.out))
                 browser.close()
             print(f"page {viewer.url}\n  title {title!r}, screenshot {args.out}")
-            print(f"  blocked requests to: {', '.join(sorted(blocked)) or 'none'}")
+            print(f"  blocked requests to: {', '.join(sorted(refused)) or 'none'}")
             if errors:
                 print(f"  page errors: {len(errors)}, first: {errors[0][:200]}")
         finally:

@@ -67,7 +67,7 @@ def clipped_columns(page: Path, tmp_path: Path, window_px: int = WINDOW_PX) -> l
 # viewer's active blueprint and recording as .rrd (``save_blueprint``, ``save_recording``) and its state as a
 # ``GetViewerStateResponse`` of viewer_control.proto (``viewer_state``).
 SOFTWARE_GL = ("--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
-LOOPBACK = ("127.0.0.1", "localhost", "[::1]")
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
 _ENCODED = """what => {
   let bytes;
   try { bytes = what === 'state' ? window._handle.viewer_state() : what === 'blueprint'
@@ -78,13 +78,26 @@ _ENCODED = """what => {
 }"""
 
 
-def open_viewer(browser, url: str, window: tuple[int, int], timeout_s: float):
+def open_viewer(browser, url: str, window: tuple[int, int], timeout_s: float, refused: set[str] | None = None,
+                errors: list[str] | None = None):
     """A page of ``browser`` (Playwright) at ``url`` in a ``window`` (width, height px), once the viewer has started
-    (its WebAssembly loaded); requests to other hosts than this one are refused (the page asks for a web font,
-    release lists and its usage analytics, none of which it needs)."""
+    (its WebAssembly loaded). Requests to other hosts than this one are refused (the page asks for a web font,
+    release lists and its usage analytics, none of which it needs) and added to ``refused``; the page's errors
+    to ``errors``."""
     page = browser.new_page(viewport={"width": window[0], "height": window[1]})
-    page.route("**/*", lambda route: route.continue_() if urlsplit(route.request.url).netloc.rsplit(":", 1)[0]
-               in LOOPBACK else route.abort())
+
+    def route(request) -> None:
+        parts = urlsplit(request.request.url)
+        if parts.hostname in LOOPBACK:
+            request.continue_()
+        else:
+            request.abort()
+            if refused is not None:
+                refused.add(f"{parts.scheme}://{parts.hostname}")
+
+    page.route("**/*", route)
+    if errors is not None:
+        page.on("pageerror", lambda error: errors.append(str(error)))
     page.goto(url)
     page.wait_for_function("window._handle !== undefined", timeout=timeout_s * 1000, polling=250)
     return page
