@@ -205,7 +205,7 @@ def test_a_table_latching_every_nth_pulse_is_interpolated_at_every_imu_instant(n
     assert np.max(np.abs(np.array([s.angles for s in samples]) - swing(t))) < 1e-9
 
 
-@pytest.mark.parametrize("imu_rate, step, duration", [(RATE, 1, 120.0), (2 * RATE, 1, 60.0), (2 * RATE, 2, 60.0)])
+@pytest.mark.parametrize("imu_rate, step, duration", [(RATE, 1, 60.0), (2 * RATE, 1, 60.0), (2 * RATE, 2, 60.0)])
 def test_free_running_devices_are_aligned_through_their_clock_models(imu_rate, step, duration):
     """No common sync: the IMU counts on a +30 ppm clock, the table latches at 200 Hz on its own -20 ppm clock
     from another origin, counting in steps of ``step``; host receive times are late by 0.3 ms plus
