@@ -13,7 +13,6 @@ MAX_PARAMETERS = 8  # self and cls not counted; more are grouped in the small se
 # functions that still take more, each with why; a function brought within the bound leaves this list
 EMULATOR_OPTIONS = "the emulator process's options, until the rig's emulated devices take them"
 PARAMETER_EXCEPTIONS = {
-    "hil/trial/live_runner.py::_acquire": "the live trial's devices and viewer, built here until the rig holds them",
     "emulators/process.py::run_emulator": EMULATOR_OPTIONS,
     "emulators/process.py::spawn_emulator": EMULATOR_OPTIONS,
 }

@@ -56,13 +56,25 @@ def written(args: argparse.Namespace, outcome, figures=None):
 
 
 def finish_units(args: argparse.Namespace, fixture) -> int:
-    """Write and file every unit's trial of a :class:`~hil.trial.units.FixtureOutcome` (:func:`written`), then the
-    trial's index (result.json, report.html, junit.xml); the exit code of the worst unit."""
-    verdicts = {name: written(args, outcome).verdict for name, outcome in fixture.units.items()}
+    """Write and file every unit's trial of a :class:`~hil.trial.units.FixtureOutcome` (:func:`written`), its
+    judgement shown in its view, then the trial's index (result.json, report.html, junit.xml); the units' views
+    finished (a served web viewer then kept up until Ctrl-C); the exit code of the worst unit."""
+    from hil.trial.viewer_feed import finish_viewer, show_verdict
+
+    verdicts = {}
     for name, outcome in fixture.units.items():
-        if outcome.exit_code(verdicts[name]) == 1:
+        judged = written(args, outcome)
+        show_verdict(fixture.viewers.get(name), judged)
+        verdicts[name] = judged.verdict
+        if outcome.exit_code(judged.verdict) == 1:
             print(f"hil: unit {name}: trial {outcome.ended}", file=sys.stderr)
-    return fixture.write_index()
+    code = fixture.write_index()
+    views = list(fixture.viewers.values())
+    for view in views[1:]:  # connected to the first one's viewer
+        view.close()
+    if views:
+        finish_viewer(views[0])
+    return code
 
 
 def record_options(args: argparse.Namespace) -> dict[str, str | None]:

@@ -14,11 +14,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg, out = trial_config(args, units=True)
     with claimed(args, out, args.config):
         if cfg.units:
-            from hil.trial.units_live import run_units_live
+            from hil.trial.units_live import UnitsCommand, run_units_live
 
-            _no_units_viewer(args)
             return finish_units(args, run_units_live(cfg, Path(args.config), out, args.duration, args.speed,
-                                                     args.quiet))
+                                                     args.quiet, UnitsCommand(), viewer_options(args)))
         from hil.trial.live_runner import run_live
 
         return finish(args, *run_live(cfg, Path(args.config), out, args.duration, args.speed, viewer_options(args),

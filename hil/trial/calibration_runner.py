@@ -20,7 +20,8 @@ from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, 
 from hil.trial.calibration_sequence import CalibrationSequence
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.live import TrialHooks
-from hil.trial.live_runner import emulated, run_live
+from hil.trial.live_runner import run_live
+from hil.trial.rig import emulated
 from hil.trial.outcome import TrialSetupError
 from hil.trial.units import FixtureOutcome
 from hil.trial.viewer_feed import ViewerOptions
@@ -83,7 +84,7 @@ def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str,
                               "('emulator' for the emulated table)")
     if cfg.calibration.temperatures_c is not None:
         raise TrialSetupError("calibration.temperatures_c: a calibration over temperature takes one unit so far")
-    is_emulated = all(emulated(unit) for unit in cfg.unit_configs().values())
+    is_emulated = emulated(cfg)
     sequences: dict[str, CalibrationSequence] = {}
 
     def unit(name: str, client, unit_cfg: Config) -> TrialHooks:

@@ -5,29 +5,19 @@ viewer closed and the emulator reaped on every way out, signals included."""
 from __future__ import annotations
 
 import dataclasses
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from drivers.table_controller import InterlockError, LimitError, TableError
-from emulators.process import EmulatorError, parse_speed, spawn_emulator, stop_emulator
+from emulators.process import parse_speed
 from hil.config import Config
-from hil.trial.chamber import open_chamber, release_chamber
 from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
+from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
-from hil.trial.table_control import MotionCheck, TableControl, check_controller, motion_needs
+from hil.trial.table_control import MotionCheck, check_controller, motion_needs
 from hil.trial.viewer_feed import ViewerOptions, open_viewer, watched_chamber
 from hil.viewer.console_progress import ConsoleProgress
-from hil.vocabulary import Port
-
-
-def emulated(cfg: Config) -> bool:
-    """Both devices emulated (a mixed config is refused)."""
-    sources = {cfg.imu.source, cfg.turntable.source}
-    if "emulator" in sources and sources != {"emulator"}:
-        raise TrialSetupError("imu.source and turntable.source: emulate both devices or neither")
-    return sources == {"emulator"}
 
 
 # Given the open table control, the config, the viewer (or None) and the open chamber controller (or None), starts
@@ -56,55 +46,51 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     out.mkdir(parents=True, exist_ok=True)
     config_text = config_path.read_text()
     with StopSignals() as signals:
-        trial, ended = _acquire(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet,
+        trial, ended = _acquire(_Request(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet),
                                 lambda: signals.received, commanded or _arm)
         outcome = TrialOutcome.of(trial.finished, cfg, config_text, out, ended, emulated_truth(cfg))
     return outcome, trial.viewer
 
 
-def _acquire(cfg: Config, config_path: Path, config_text: str, out: Path, duration: float | None, speed: str,
-             time_scale: float | None, options: ViewerOptions, quiet: bool, stop_requested, commanded: Commanded):
-    """Emulator (if emulated), viewer, table control and the trial; returns the finished trial and how it ended."""
-    emulator, ports, control, viewer, chamber = None, None, None, None, None
+@dataclasses.dataclass(frozen=True)
+class _Request:
+    """What :func:`run_live` was asked for."""
+
+    cfg: Config
+    config_path: Path
+    config_text: str
+    out: Path
+    duration: float | None
+    speed: str
+    time_scale: float | None
+    viewer: ViewerOptions
+    quiet: bool
+
+
+def _acquire(request: _Request, stop_requested, commanded: Commanded):
+    """The rig (:class:`~hil.trial.rig.Rig`), the viewer and the trial; returns the finished trial and how it
+    ended."""
+    cfg, out, duration = request.cfg, request.out, request.duration
+    viewer = None
     try:
-        if emulated(cfg):
-            try:
-                emulator, ports = spawn_emulator(config_path, out / "ports.json", speed, duration,
-                                                 stats_file=out / "emulator.json", log_file=out / "emulator.log",
-                                                 hold=True)
-            except EmulatorError as exc:
-                raise TrialSetupError(f"{config_path}: {exc}") from None
-        chamber = open_chamber(cfg.environment.chamber, ports)  # before the table moves
-        viewer = open_viewer(options, cfg, out, blocking=False)
-        if chamber is not None:  # its readings and set points to the viewer too
-            chamber = watched_chamber(chamber, cfg.environment.chamber.set_point_c, viewer)
-        url = command_url(cfg, ports)
-        with ConsoleProgress(duration, quiet=quiet) as progress:
-            hooks = TrialHooks()
-            if url is not None:
-                control = TableControl(url, cfg.turntable)
-                control.open()
-                hooks = dataclasses.replace(commanded(control, cfg, viewer, chamber), on_end=control.stop)
-            if emulator is not None:
-                hooks = dataclasses.replace(hooks, source_done=lambda: emulator.poll() is not None
-                                            or (out / "emulator.json").exists())
-            hooks = dataclasses.replace(hooks, on_progress=progress.update, on_warning=progress.warn,
-                                        stop_requested=stop_requested)
-            trial = LiveTrial(cfg, config_text, out, duration, ports, viewer, time_scale, hooks)
-            return trial, trial.run()
+        with Rig(cfg, request.config_path, out, request.speed, duration) as rig:
+            viewer = open_viewer(request.viewer, cfg, out, blocking=False)
+            chamber = watched_chamber(rig.chamber, cfg.environment.chamber.set_point_c, viewer) \
+                if rig.chamber is not None else None  # its readings and set points to the viewer too
+            with ConsoleProgress(duration, quiet=request.quiet) as progress:
+                hooks = TrialHooks()
+                if rig.table is not None:
+                    hooks = dataclasses.replace(commanded(rig.table, cfg, viewer, chamber), on_end=rig.table.stop)
+                hooks = dataclasses.replace(hooks, source_done=rig.source_done, on_progress=progress.update,
+                                            on_warning=progress.warn, stop_requested=stop_requested)
+                trial = LiveTrial(cfg, request.config_text, out, duration, rig.ports, viewer, request.time_scale,
+                                  hooks)
+                return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None
     finally:
         if viewer is not None:
             viewer.close()  # the trial closes it too; closing twice is harmless
-        if control is not None:
-            control.stop()
-            if control.stop_error:
-                print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
-        if chamber is not None:  # after the table is off
-            release_chamber(chamber, cfg.environment.chamber)
-        if emulator is not None:
-            stop_emulator(emulator)
 
 
 def _check_motion(cfg: Config) -> None:
@@ -119,13 +105,3 @@ def _arm(control, cfg: Config, viewer, chamber) -> TrialHooks:
     """``hil run``: the configured motion, checked against what the table reports."""
     control.arm()
     return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))
-
-
-def command_url(cfg: Config, ports: dict | None) -> str | None:
-    """The table's command port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
-    url = cfg.turntable.command_port
-    if url == "emulator":
-        if ports is None or Port.TABLE_CMD not in ports:
-            raise TrialSetupError("turntable.command_port: 'emulator' needs turntable.source: emulator")
-        return ports[Port.TABLE_CMD]
-    return url

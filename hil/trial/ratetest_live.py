@@ -22,7 +22,8 @@ from drivers.controllers import make_controller
 from hil.config import Config
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.trial.live import TrialHooks
-from hil.trial.live_runner import emulated, run_live
+from hil.trial.live_runner import run_live
+from hil.trial.rig import emulated
 from hil.trial.outcome import TrialSetupError
 from hil.trial.rate_steps import RateSequence, RateStep
 from hil.trial.viewer_feed import ViewerOptions

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
@@ -20,11 +20,13 @@ RunUnit = Callable[[Config, str, Path], TrialOutcome]
 
 @dataclass
 class FixtureOutcome:
-    """A finished trial of several units: the trial's name and directory, each unit's outcome by name."""
+    """A finished trial of several units: the trial's name and directory, each unit's outcome by name, and each
+    unit's live view (a :class:`~hil.viewer.trial_viewer.TrialViewer`, the first one the viewer's owner) if any."""
 
     name: str
     out: Path
     units: dict[str, TrialOutcome]
+    viewers: dict[str, object] = field(default_factory=dict)
 
     def write_index(self) -> int:
         """Write OUT/result.json, report.html and junit.xml over the units' written outputs; the exit code

@@ -10,7 +10,6 @@ every way out; the emulated devices (``hil emulate`` of the units config) run in
 from __future__ import annotations
 
 import dataclasses
-import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -18,16 +17,16 @@ from pathlib import Path
 from drivers.reader import DeviceReader
 from drivers.table_controller import InterlockError, LimitError, TableError
 from drivers.transport import TransportError
-from emulators.process import EmulatorError, parse_speed, spawn_emulator, stop_emulator
+from emulators.process import parse_speed
 from hil.config import Config
 from hil.outputs.units_index import UNITS_DIR
-from hil.trial.chamber import open_chamber, release_chamber
 from hil.trial.live import LiveTrial, TrialHooks, table_transport
-from hil.trial.live_runner import command_url, emulated
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
+from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
 from hil.trial.table_control import MotionCheck, TableControl
 from hil.trial.units import FixtureOutcome, unit_config_text
+from hil.trial.viewer_feed import ViewerOptions, open_viewer
 from hil.viewer.console_progress import ConsoleProgress, UnitsProgress
 from hil.vocabulary import Port
 
@@ -76,11 +75,12 @@ class UnitTrial:
 
 
 def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
-                   quiet: bool = False, command: UnitsCommand = UnitsCommand()) -> FixtureOutcome:
-    """Acquire, record and estimate every unit until each ends, the table driven as ``command`` says; their
-    outcomes."""
-    units = cfg.unit_configs()
-    is_emulated = all(emulated(unit) for unit in units.values())
+                   quiet: bool = False, command: UnitsCommand = UnitsCommand(),
+                   viewer: ViewerOptions = ViewerOptions()) -> FixtureOutcome:
+    """Acquire, record and estimate every unit until each ends, the table driven as ``command`` says, each unit
+    in its own view where ``viewer`` asks for one (its .rrd in its directory; live, each unit's recording in the one
+    viewer the first unit's view starts); their outcomes."""
+    is_emulated = emulated(cfg)
     duration = duration if duration is not None else cfg.trial.duration_s
     if is_emulated and duration is None:
         raise TrialSetupError("an emulated trial needs trial.duration_s or --duration")
@@ -88,10 +88,11 @@ def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | 
     out.mkdir(parents=True, exist_ok=True)
     with StopSignals() as signals:
         trials, ended = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet, is_emulated,
-                                        command), lambda: signals.received)
+                                        command, viewer), lambda: signals.received)
     return FixtureOutcome(cfg.trial.name, out, {
         unit.name: TrialOutcome.of(unit.trial.finished, unit.cfg, unit.config_text, unit.out, ended[unit.name],
-                                   emulated_truth(unit.cfg)) for unit in trials})
+                                   emulated_truth(unit.cfg)) for unit in trials},
+        {unit.name: unit.trial.viewer for unit in trials if unit.trial.viewer is not None})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,52 +108,31 @@ class _Setup:
     quiet: bool
     emulated: bool
     command: UnitsCommand
+    viewer: ViewerOptions
 
 
 def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, str]]:
-    """Emulator (if emulated), table control, the shared table reader and every unit's trial, run to their ends;
+    """The rig (:class:`~hil.trial.rig.Rig`), the shared table reader and every unit's trial, run to their ends;
     the trials and how each ended."""
-    cfg, out = setup.cfg, setup.out
-    emulator, ports, control, chamber, table = None, None, None, None, None
+    cfg = setup.cfg
     try:
-        if setup.emulated:
-            try:
-                emulator, ports = spawn_emulator(setup.config_path, out / "ports.json", setup.speed, setup.duration,
-                                                 stats_file=out / "emulator.json", log_file=out / "emulator.log",
-                                                 hold=True)
-            except EmulatorError as exc:
-                raise TrialSetupError(f"{setup.config_path}: {exc}") from None
-        chamber = open_chamber(cfg.environment.chamber, ports)  # before the table moves
-        url = command_url(cfg, ports)
-        with ConsoleProgress(setup.duration, quiet=setup.quiet) as progress:
-            hooks = TrialHooks(on_warning=progress.warn, stop_requested=stop_requested)
-            if emulator is not None:
-                hooks = dataclasses.replace(hooks, source_done=lambda: emulator.poll() is not None
-                                            or (out / "emulator.json").exists())
-            table = DeviceReader(table_transport(cfg, ports or {}),
+        with Rig(cfg, setup.config_path, setup.out, setup.speed, setup.duration) as rig, \
+                ConsoleProgress(setup.duration, quiet=setup.quiet) as progress:
+            hooks = TrialHooks(on_warning=progress.warn, stop_requested=stop_requested, source_done=rig.source_done)
+            table = DeviceReader(table_transport(cfg, rig.ports or {}),
                                  gather_s=cfg.read_s if setup.time_scale is not None else 0.0)
-            if url is not None:
-                control = TableControl(url, cfg.turntable)
-                control.open()
-                setup.command.arm(control)
-            trials = _unit_trials(setup, ports, dataclasses.replace(hooks, table_reader=table), control,
-                                  UnitsProgress(progress, list(cfg.unit_configs())))
-            if control is not None:
-                setup.command.started(control)
-            return trials, _run(trials, table, control)
+            try:
+                if rig.table is not None:
+                    setup.command.arm(rig.table)
+                trials = _unit_trials(setup, rig.ports, dataclasses.replace(hooks, table_reader=table), rig.table,
+                                      UnitsProgress(progress, list(cfg.unit_configs())))
+                if rig.table is not None:
+                    setup.command.started(rig.table)
+                return trials, _run(trials, table, rig.table)
+            finally:
+                table.stop()
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None
-    finally:
-        if table is not None:
-            table.stop()
-        if control is not None:
-            control.stop()
-            if control.stop_error:
-                print(f"hil: WARNING: could not confirm the turntable is off: {control.stop_error}", file=sys.stderr)
-        if chamber is not None:  # after the table is off
-            release_chamber(chamber, cfg.environment.chamber)
-        if emulator is not None:
-            stop_emulator(emulator)
 
 
 def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: TableControl | None,
@@ -178,10 +158,16 @@ def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: 
         unit_out = setup.out / UNITS_DIR / name
         unit_out.mkdir(parents=True, exist_ok=True)
         text = unit_config_text(name, unit)
+        options = setup.viewer  # the first unit's view starts the viewer; the others' connect to it
+        if trials and trials[0].trial.viewer is not None and trials[0].trial.viewer.grpc_url is not None:
+            options = dataclasses.replace(options, connect=trials[0].trial.viewer.grpc_url)
+        view = open_viewer(options, unit, unit_out, blocking=False)
         try:
-            trial = LiveTrial(unit, text, unit_out, setup.duration, unit_ports, None, setup.time_scale, unit_hooks)
+            trial = LiveTrial(unit, text, unit_out, setup.duration, unit_ports, view, setup.time_scale, unit_hooks)
             _check_opens(trial)
         except TransportError as exc:
+            if view is not None:
+                view.close()
             raise TrialSetupError(f"units[{k}] ({name}): {exc}") from None
         trials.append(UnitTrial(name, unit, text, unit_out, trial))
     return trials

@@ -88,6 +88,7 @@ class TrialViewer:
         self.blocking = blocking
         self.rrd_path: Path | None = None
         self.url: str | None = None  # the web viewer's address in serve mode
+        self.grpc_url: str | None = None  # the running viewer's, where another trial's view can connect too
         self.viewer_process: subprocess.Popen | None = None
         self.dropped = 0  # calls not logged because the logging thread was behind
         self.error: BaseException | None = None  # the first error the logging thread met
@@ -117,10 +118,11 @@ class TrialViewer:
         self._file.save(self.rrd_path)  # its blueprint at the end, with the converged estimate's ranges
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
         if mode != "save" or options.connect is not None:  # connect: a viewer already running (a plan's), any mode
-            self.viewer_process, grpc_url, self.url = (start_viewer(mode, options.bind, telemetry_requested())
-                                                       if options.connect is None else (None, options.connect, None))
+            self.viewer_process, self.grpc_url, self.url = (
+                start_viewer(mode, options.bind, telemetry_requested()) if options.connect is None
+                else (None, options.connect, None))
             self._view = _recording_stream(recording_id)
-            self._view.set_sinks(rr.GrpcSink(grpc_url), default_blueprint=blueprint)
+            self._view.set_sinks(rr.GrpcSink(self.grpc_url), default_blueprint=blueprint)
             self._columns.append(Columns(self._view, 0.0))
         self._rec = Streams([self._file] + ([self._view] if self._view is not None else []))
         for rec in self._rec.recs:
