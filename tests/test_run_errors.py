@@ -90,7 +90,7 @@ def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_k
 
 
 def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(tmp_path, capsys, monkeypatch):
-    import hil.trial.live_runner
+    import hil.trial.rig
     import hil.viewer.trial_viewer
 
     def broken(*args, **kwargs):
@@ -103,7 +103,7 @@ def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(
         return spawned[-1]
 
     monkeypatch.setattr(hil.viewer.trial_viewer, "TrialViewer", broken)
-    monkeypatch.setattr(hil.trial.live_runner, "spawn_emulator", spawn)
+    monkeypatch.setattr(hil.trial.rig, "spawn_emulator", spawn)
     out = tmp_path / "out"
     code = main(["run", str(ROOT / "configs" / "emulated_swing.yaml"), "--duration", "5", "--speed", "max",
                  "--quiet", "--viewer", "save", "--no-figures", "--out", str(out)])
