@@ -98,13 +98,13 @@ def device_streams(cfg: Config, duration: float) -> tuple[Servo, dict[str, Devic
     what the emulated devices send, before any port or fault (frames of a powered-off device marked so). Every
     IMU senses the one table motion through its own mounting, with its own errors, seed and counter start."""
     sim = _simulation(cfg, duration)
-    _, table_clock = device_clocks(cfg)
     imus = emulated_imus(cfg)
+    rate = max(unit.imu_rate_hz for unit in imus.values())  # the sync pulse train's: the units share one rate
+    _, table_clock = device_clocks(cfg.model_copy(update={"imu": cfg.imu.model_copy(update={"rate_hz": rate})}))
     streams = {name: _imu_stream(unit, duration, sim if unit is cfg else None) for name, unit in imus.items()}
     table_source = TableSource(table_clock, cfg.trial.seed, np.array(cfg.turntable.zero_offset_arcsec) * ARCSEC)
     streams[Port.TABLE_DATA] = DeviceStream(table_source, sim.truth, table_clock.ticks(duration),
                                             max(1, round(CHUNK_S / table_clock.period)))
-    rate = max(unit.imu_rate_hz for unit in imus.values())
     return Servo(cfg.turntable, rate, sim.truth.motion), streams
 
 

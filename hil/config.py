@@ -281,6 +281,13 @@ class Config(Model):
                 raise ValueError(f"{key}.rate_hz: {rate:g} Hz is not an integer multiple of trial.rate_hz "
                                  f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
                                  "table latches every n-th pulse")
+        rates = {key: imu.rate_hz or self.trial.rate_hz for key, imu in self.imus.items()}
+        first = next(iter(rates))
+        for key, rate in rates.items():
+            if rate != rates[first] and not self.turntable.timing.free_running:
+                raise ValueError(f"{key}.rate_hz: {rate:g} Hz differs from {first}.rate_hz ({rates[first]:g} Hz): the "
+                                 "table counts one sync pulse train, at one rate; units at different rates need a "
+                                 "free-running table (turntable.timing.free_running: true)")
         return self
 
     @model_serializer(mode="wrap")

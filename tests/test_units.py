@@ -58,6 +58,8 @@ BAD_BLOCKS = [
      "units[1].imu.can: the CAN message IMU_DThetaX of configs/imu_lab_highres.dbc on udp_multicast 239.74.163.2 is "
      "also units[0].imu.can"),
     ("imu_key", lambda u: [u[0], {**u[1], "imu": {"rate_hz": 150}}], "units[1].imu.rate_hz: 150 Hz is not an integer"),
+    ("rates_differ", lambda u: [u[0], {**u[1], "imu": {"rate_hz": 400}}],
+     "units[1].imu.rate_hz: 400 Hz differs from units[0].imu.rate_hz (200 Hz): the table counts one sync pulse train"),
     ("unknown_key", lambda u: [u[0], {**u[1], "mounting": [0, 0, 0]}], "units[1].mounting: unknown key"),
     ("empty", lambda u: [], "units: List should have at least 1 item"),
     ("read_from_a_port", lambda u: [u[0], {**u[1], "imu": {"source": "serial", "port": "/dev/ttyUSB1"}}],

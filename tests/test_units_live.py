@@ -69,6 +69,19 @@ def test_each_emulated_unit_streams_what_its_own_one_unit_config_streams_alone()
     assert len(set(counters.values())) == 4  # each device counts from its own start
 
 
+def test_the_table_counts_the_pulse_train_of_units_faster_than_its_latches():
+    """Units at 1 kHz on a table latching at 200 Hz: the table's counter steps by 5 pulses a frame, as each unit's
+    one-unit config expects of it."""
+    data = units_config()
+    for unit in data["units"]:
+        unit["imu"]["rate_hz"] = 1000.0
+    cfg = parse_config(data, units=True)
+    servo, streams = device_streams(cfg, 1.0)
+    table = streams["turntable_data"].source.clock
+    steps = np.diff(table.counters(np.arange(1, 12)))
+    assert set(steps) == {5} and {u.table_counts_per_frame for u in cfg.unit_configs().values()} == {5}
+
+
 def test_a_units_trial_runs_live_each_unit_on_its_own_and_replays_bit_for_bit(tmp_path):
     out = tmp_path / "run"
     code = main(["run", str(write(tmp_path, units_config())), "--speed", "max", "--out", str(out), "--no-history",
