@@ -13,8 +13,6 @@ factor and misalignment times the rate of an axis the table turns at a steady ra
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 
 from hil.frames import Earth, TableGeometry
@@ -33,10 +31,9 @@ class TimeOffsetEstimator:
         self.earth = earth
         self.geometry = geometry
         self.rate_hz = rate_hz
-        size = int(WINDOW_S * rate_hz)
-        self._t: deque[float] = deque(maxlen=size)
-        self._dtheta: deque[list[float]] = deque(maxlen=size)
-        self._angles: deque[list[float]] = deque(maxlen=size)
+        self._rows = np.empty((int(WINDOW_S * rate_hz), 7))  # a ring of [t, dtheta (3), angles (3)]
+        self._count = 0  # rows held, the newest ending at ``_next``
+        self._next = 0
         self._done: list[tuple[np.ndarray, int]] = []  # ([offset s, rate errors rad/s], samples) of finished windows
 
     def add(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
@@ -45,21 +42,30 @@ class TimeOffsetEstimator:
         missing = np.flatnonzero(np.isnan(angles[:, 0]))
         start = 0
         for stop in [*missing.tolist(), len(t)]:
-            self._t.extend(t[start:stop].tolist())
-            self._dtheta.extend(dtheta[start:stop].tolist())
-            self._angles.extend(angles[start:stop].tolist())
+            self._keep(np.column_stack((t[start:stop], dtheta[start:stop], angles[start:stop])))
             if stop < len(t):
                 self.restart()
             start = stop + 1
+
+    def _keep(self, rows: np.ndarray) -> None:
+        """Append rows to the ring, the oldest overwritten beyond its size."""
+        size = len(self._rows)
+        rows = rows[-size:]
+        at = (self._next + np.arange(len(rows))) % size
+        self._rows[at] = rows
+        self._next = (self._next + len(rows)) % size
+        self._count = min(self._count + len(rows), size)
+
+    def _window(self) -> np.ndarray:
+        """The rows held, oldest first."""
+        return self._rows[(self._next - self._count + np.arange(self._count)) % len(self._rows)]
 
     def restart(self) -> None:
         """A discontinuity (gap): keep the estimate of the window so far, and start a new one."""
         fit = self._window_estimate()
         if fit is not None:
-            self._done.append((fit, len(self._t)))
-        self._t.clear()
-        self._dtheta.clear()
-        self._angles.clear()
+            self._done.append((fit, self._count))
+        self._count = self._next = 0
 
     def estimate(self) -> float | None:
         """The lag of the table behind the IMU (s): the sample-weighted mean over the continuous windows
@@ -78,7 +84,7 @@ class TimeOffsetEstimator:
         results = list(self._done)
         fit = self._window_estimate()
         if fit is not None:
-            results.append((fit, len(self._t)))
+            results.append((fit, self._count))
         if not results:
             return None
         return np.average([r for r, _ in results], axis=0, weights=[n for _, n in results])
@@ -87,13 +93,13 @@ class TimeOffsetEstimator:
         """[offset s, rate error x, y, z rad/s] of the current window; None when it is too short or still."""
         from scipy.interpolate import CubicSpline  # here, not with the module: 0.2 s of every trial's start-up
 
-        n = len(self._t)
-        if n < MIN_WINDOW_S * self.rate_hz:
+        if self._count < MIN_WINDOW_S * self.rate_hz:
             return None
-        t = np.array(self._t)
+        rows = self._window()
+        t = rows[:, 0]
         dt = np.diff(t)
-        gyro = np.array(self._dtheta)[1:] / dt[:, None]  # mean rate over each interval
-        angles = np.unwrap(np.array(self._angles), axis=0)
+        gyro = rows[1:, 1:4] / dt[:, None]  # mean rate over each interval
+        angles = np.unwrap(rows[:, 4:7], axis=0)
         # the table's body rate over the same intervals (angle chord) plus the earth rate seen in the body
         mid = 0.5 * (angles[1:] + angles[:-1])
         c_bn, middle_inner, inner = self.geometry.attitude_matrix(mid)
