@@ -255,6 +255,7 @@ class UnitConfig(Model):
     record: RecordConfig = RecordConfig()
     mounting_deg: Vec3 = ZERO3  # as turntable.mounting_deg, this unit's
     imu: ImuConfig
+    optional: bool = False  # a port that cannot be opened leaves the unit absent, not the trial refused
 
 
 class Config(Model):

@@ -7,6 +7,7 @@ import copy
 import json
 import os
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +15,10 @@ import pytest
 import yaml
 
 from emulators.bench import device_streams
+from emulators.process import spawn_emulator, stop_emulator
 from hil.cli import main
 from hil.config import parse_config
+from hil.outputs.result_schema import UnitsResult
 from tests.lab_form import SWING, Emulator
 
 # a lab-form test runs real-time devices in their own process: opt-in, on a host not also running the suite
@@ -129,6 +132,35 @@ def test_a_unit_whose_port_cannot_be_opened_is_refused_naming_the_unit_and_the_p
                  "--no-history", "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and "units[0] (kvh-a)" in err and "/dev/hil-absent-0" in err and "Traceback" not in err
+
+
+def test_an_optional_unit_whose_port_cannot_be_opened_is_filed_absent_and_the_others_run(tmp_path, capsys):
+    """``units[i].optional``: the unit is left out with its port's error, the others run attached late to the
+    devices streaming in their own process, and the index files it as ABSENT, a skipped test in junit.xml."""
+    cfg = units_config(duration_s=60.0)
+    devices = write(tmp_path, {**cfg, "units": [cfg["units"][0], cfg["units"][2]]}, "devices.yaml")
+    proc, ports = spawn_emulator(devices, tmp_path / "ports.json", "1", 30.0, wait_readers=False)
+    try:
+        lab = lab_units({**cfg, "units": [cfg["units"][0], cfg["units"][2]]}, ports)
+        absent = {**cfg["units"][1], "optional": True,
+                  "imu": {"protocol": "kvh1750", "source": "serial", "port": "/dev/hil-absent-1"}}
+        lab["units"].insert(1, absent)
+        out = tmp_path / "run"
+        code = main(["run", str(write(tmp_path, lab, "lab.yaml")), "--duration", "6", "--out", str(out),
+                     "--no-history", "--no-figures", "--quiet", "--viewer", "none"])
+    finally:
+        stop_emulator(proc)
+    err = capsys.readouterr().err
+    index = json.loads((out / "result.json").read_text())
+    UnitsResult.model_validate(index, strict=True)
+    lines = {unit["name"]: unit for unit in index["units"]}
+    assert code in (0, 3) and index["ended"] == "completed", (index, err)
+    assert lines["kvh-b"]["verdict"] == "ABSENT" and lines["kvh-b"]["out_dir"] is None
+    assert lines["kvh-b"]["ended"].startswith("absent: ") and "/dev/hil-absent-1" in lines["kvh-b"]["ended"]
+    assert "unit kvh-b: absent (units[1].optional)" in err and not (out / "units" / "kvh-b").exists()
+    assert all(lines[name]["ended"] == "completed" for name in ("kvh-a", "xsens"))
+    skipped = [s for s in ET.parse(out / "junit.xml").getroot() if s.get("name") == "units-live/kvh-b"]
+    assert len(skipped) == 1 and skipped[0].find("testcase/skipped") is not None
 
 
 def lab_units(cfg: dict, ports: dict) -> dict:

@@ -129,10 +129,10 @@ class UnitLine(_Block):
     """A unit's line of the index: where its outputs are, how it ended, its verdict and headline figures (µg, s)."""
 
     name: str
-    out_dir: str  # relative to the index's directory: units/<name>
+    out_dir: str | None  # relative to the index's directory: units/<name>; None for an absent unit
     dut_serial: str | None
-    ended: str
-    verdict: Verdict
+    ended: str  # "absent: <why>" for an optional unit that was not there
+    verdict: Verdict | Literal["ABSENT"]
     accel_bias_ug: Vector3 | None
     accel_bias_sigma_ug: Vector3 | None
     converged_at_s: float | None

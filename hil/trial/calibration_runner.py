@@ -101,4 +101,5 @@ def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str,
         sequence.report_rest()
     return FixtureOutcome(fixture.name, out, {name: CalibrationOutcome.of_sequence(outcome, sequences.get(name),
                                                                                    is_emulated)
-                                              for name, outcome in fixture.units.items()})
+                                              for name, outcome in fixture.units.items()},
+                          absent=fixture.absent)

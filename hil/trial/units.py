@@ -11,7 +11,7 @@ from pathlib import Path
 import yaml
 
 from hil.config import Config
-from hil.outputs.units_index import UNITS_DIR, unit_entry, units_exit_code, write_units_index
+from hil.outputs.units_index import UNITS_DIR, absent_entry, unit_entry, units_exit_code, write_units_index
 from hil.trial.outcome import TrialOutcome
 
 # runs one unit's trial: its one-unit config, that config's text (its config.yaml) and its output directory
@@ -27,12 +27,14 @@ class FixtureOutcome:
     out: Path
     units: dict[str, TrialOutcome]
     viewers: dict[str, object] = field(default_factory=dict)
+    absent: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # optional units: (dut_serial, why)
 
     def write_index(self) -> int:
-        """Write OUT/result.json, report.html and junit.xml over the units' written outputs; the exit code
-        (:func:`~hil.outputs.units_index.units_exit_code`)."""
-        doc = write_units_index(self.out, self.name, [unit_entry(name, outcome.result)
-                                                      for name, outcome in self.units.items()])
+        """Write OUT/result.json, report.html and junit.xml over the units' written outputs and the absent units;
+        the exit code (:func:`~hil.outputs.units_index.units_exit_code`)."""
+        doc = write_units_index(self.out, self.name, [
+            *(unit_entry(name, outcome.result) for name, outcome in self.units.items()),
+            *(absent_entry(name, serial, why) for name, (serial, why) in self.absent.items())])
         return units_exit_code(unit["verdict"] for unit in doc["units"])
 
 
@@ -55,7 +57,8 @@ def recorded_units(source: str | Path) -> tuple[str, dict[str, Path]] | None:
         return None
     if not isinstance(doc, dict) or not isinstance(doc.get("units"), list):
         return None
-    return doc["trial"]["name"], {unit["name"]: Path(source) / unit["out_dir"] for unit in doc["units"]}
+    return doc["trial"]["name"], {unit["name"]: Path(source) / unit["out_dir"] for unit in doc["units"]
+                                  if unit["out_dir"]}
 
 
 def unit_config_text(name: str, cfg: Config) -> str:

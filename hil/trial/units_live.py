@@ -10,6 +10,7 @@ every way out; the emulated devices (``hil emulate`` of the units config) run in
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -87,12 +88,12 @@ def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | 
     time_scale = parse_speed(speed) if is_emulated else 1.0
     out.mkdir(parents=True, exist_ok=True)
     with StopSignals() as signals:
-        trials, ended = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet, is_emulated,
-                                        command, viewer), lambda: signals.received)
+        trials, absent, ended = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet,
+                                                is_emulated, command, viewer), lambda: signals.received)
     return FixtureOutcome(cfg.trial.name, out, {
         unit.name: TrialOutcome.of(unit.trial.finished, unit.cfg, unit.config_text, unit.out, ended[unit.name],
                                    emulated_truth(unit.cfg)) for unit in trials},
-        {unit.name: unit.trial.viewer for unit in trials if unit.trial.viewer is not None})
+        {unit.name: unit.trial.viewer for unit in trials if unit.trial.viewer is not None}, absent)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,9 +112,10 @@ class _Setup:
     viewer: ViewerOptions
 
 
-def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, str]]:
-    """The rig (:class:`~hil.trial.rig.Rig`), the shared table reader and every unit's trial, run to their ends;
-    the trials and how each ended."""
+def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, tuple[str | None, str]],
+                                                     dict[str, str]]:
+    """The rig (:class:`~hil.trial.rig.Rig`), the shared table reader and every present unit's trial, run to
+    their ends; the trials, the absent optional units (:attr:`FixtureOutcome.absent`) and how each trial ended."""
     cfg = setup.cfg
     try:
         with Rig(cfg, setup.config_path, setup.out, setup.speed, setup.duration) as rig, \
@@ -124,11 +126,12 @@ def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, 
             try:
                 if rig.table is not None:
                     setup.command.arm(rig.table)
+                absent: dict[str, tuple[str | None, str]] = {}
                 trials = _unit_trials(setup, rig.ports, dataclasses.replace(hooks, table_reader=table), rig.table,
-                                      UnitsProgress(progress, list(cfg.unit_configs())))
+                                      UnitsProgress(progress, list(cfg.unit_configs())), absent)
                 if rig.table is not None:
                     setup.command.started(rig.table)
-                return trials, _run(trials, table, rig.table)
+                return trials, absent, _run(trials, table, rig.table)
             finally:
                 table.stop()
     except (TableError, LimitError, InterlockError) as exc:
@@ -136,19 +139,20 @@ def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, 
 
 
 def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: TableControl | None,
-                 progress: UnitsProgress) -> list[UnitTrial]:
+                 progress: UnitsProgress, absent: dict[str, tuple[str | None, str]]) -> list[UnitTrial]:
     """Each unit's trial on its own IMU port and the shared table reader: where the table is commanded, its hooks
-    from the command (the first unit's commanding the table), its warnings named by the unit, its progress in the
-    console's one line.
-    A unit whose port cannot be opened is refused naming the unit and the port."""
-    trials = []
+    from the command (the first present unit's commanding the table), its warnings named by the unit, its progress
+    in the console's one line.
+    A unit whose port cannot be opened is refused naming the unit and the port; an optional one is left out, added
+    to ``absent`` with its port's error, and warned of (every unit absent refuses the trial)."""
+    trials: list[UnitTrial] = []
     for k, (name, unit) in enumerate(setup.cfg.unit_configs().items()):
         unit_ports = None
         if ports is not None:
             unit_ports = {Port.IMU: ports[Port.UNITS][name][Port.IMU], Port.TABLE_DATA: ports[Port.TABLE_DATA]}
         unit_hooks = hooks
         if control is not None:
-            client = control.client if k == 0 else ListeningClient(control.client)
+            client = ListeningClient(control.client) if trials else control.client
             commanded = setup.command.unit(name, client, unit)
             unit_hooks = dataclasses.replace(hooks, motion_check=commanded.motion_check, finished=commanded.finished,
                                              queue_items=commanded.queue_items, early_end=commanded.early_end)
@@ -168,8 +172,15 @@ def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: 
         except TransportError as exc:
             if view is not None:
                 view.close()
-            raise TrialSetupError(f"units[{k}] ({name}): {exc}") from None
+            if not setup.cfg.units[k].optional:
+                raise TrialSetupError(f"units[{k}] ({name}): {exc}") from None
+            shutil.rmtree(unit_out, ignore_errors=True)
+            absent[name] = (unit.record.dut_serial, str(exc))
+            hooks.on_warning(f"unit {name}: absent (units[{k}].optional): {exc}")
+            continue
         trials.append(UnitTrial(name, unit, text, unit_out, trial))
+    if not trials:
+        raise TrialSetupError(f"units: every unit is absent ({', '.join(absent)})")
     return trials
 
 
