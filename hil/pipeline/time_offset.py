@@ -13,6 +13,8 @@ factor and misalignment times the rate of an axis the table turns at a steady ra
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from hil.frames import Earth, TableGeometry
@@ -21,6 +23,7 @@ WINDOW_S = 60.0  # a continuous stretch contributes its last minute
 MIN_WINDOW_S = 4.0  # shorter stretches (between IMU gaps) are not used
 MAX_LAG = 20  # samples searched either side by the cross-correlation
 NEWTON_STEPS = 4
+ONE_WINDOW_AT_A_TIME = threading.Lock()  # every estimator of the process: :meth:`TimeOffsetEstimator._window_fit`
 
 
 class TimeOffsetEstimator:
@@ -34,6 +37,8 @@ class TimeOffsetEstimator:
         self._rows = np.empty((int(WINDOW_S * rate_hz), 7))  # a ring of [t, dtheta (3), angles (3)]
         self._count = 0  # rows held, the newest ending at ``_next``
         self._next = 0
+        self._added = 0  # rows ever added: with ``_count``, what the window's fit was taken of
+        self._fitted: tuple[tuple[int, int], np.ndarray | None] | None = None
         self._done: list[tuple[np.ndarray, int]] = []  # ([offset s, rate errors rad/s], samples) of finished windows
 
     def add(self, t: np.ndarray, dtheta: np.ndarray, angles: np.ndarray) -> None:
@@ -54,6 +59,7 @@ class TimeOffsetEstimator:
         at = (self._next + np.arange(len(rows))) % size
         self._rows[at] = rows
         self._next = (self._next + len(rows)) % size
+        self._added += len(rows)
         self._count = min(self._count + len(rows), size)
 
     def _window(self) -> np.ndarray:
@@ -62,7 +68,7 @@ class TimeOffsetEstimator:
 
     def restart(self) -> None:
         """A discontinuity (gap): keep the estimate of the window so far, and start a new one."""
-        fit = self._window_estimate()
+        fit = self._window_fit()
         if fit is not None:
             self._done.append((fit, self._count))
         self._count = self._next = 0
@@ -82,12 +88,21 @@ class TimeOffsetEstimator:
     def _fit(self) -> np.ndarray | None:
         """[offset s, rate error x, y, z rad/s], the windows' sample-weighted mean; None without one."""
         results = list(self._done)
-        fit = self._window_estimate()
+        fit = self._window_fit()
         if fit is not None:
             results.append((fit, self._count))
         if not results:
             return None
         return np.average([r for r, _ in results], axis=0, weights=[n for _, n in results])
+
+    def _window_fit(self) -> np.ndarray | None:
+        """:meth:`_window_estimate`, taken once for the rows held. The pipelines of several units in one process
+        take theirs one at a time: each holds some 50 MB while it runs at 1 kHz, which would otherwise add up."""
+        key = (self._added, self._count)
+        if self._fitted is None or self._fitted[0] != key:
+            with ONE_WINDOW_AT_A_TIME:
+                self._fitted = key, self._window_estimate()
+        return self._fitted[1]
 
     def _window_estimate(self) -> np.ndarray | None:
         """[offset s, rate error x, y, z rad/s] of the current window; None when it is too short or still."""
