@@ -282,16 +282,139 @@ def test_the_noise_of_each_unit_of_an_emulated_units_config_is_analysed_on_its_o
         assert np.allclose(doc["gyro"]["arw_deg_per_sqrt_h"], arw, rtol=0.05), (name, doc["gyro"])
 
 
-def test_each_units_view_is_saved_beside_its_outputs_and_ends_with_its_own_verdict(tmp_path):
+@pytest.fixture(scope="module")
+def saved_views(tmp_path_factory) -> Path:
+    """The output directory of a 20 s units trial run as fast as it goes with ``--viewer save``."""
+    tmp = tmp_path_factory.mktemp("units-views")
+    out = tmp / "run"
+    main(["run", str(write(tmp, units_config())), "--speed", "max", "--duration", "20", "--out", str(out),
+          "--no-history", "--no-figures", "--quiet", "--viewer", "save"])  # fmt: skip
+    return out
+
+
+def test_each_units_view_is_saved_beside_its_outputs_and_ends_with_its_own_verdict(saved_views):
     """``hil run --viewer save`` of a units config: each unit's .rrd in OUT/units/<name>/, named by the unit's trial,
     its bias against its own truth, its /verdict ending as its result.json judges."""
     from tests.test_viewer_record import _rows
 
-    out = tmp_path / "run"
-    main(["run", str(write(tmp_path, units_config(12.0))), "--speed", "max", "--out", str(out), "--no-history",
-          "--no-figures", "--quiet", "--viewer", "save"])
+    out = saved_views
     for name, truth in TRUTHS.items():
         rows = _rows(out / "units" / name / "recording.rrd")
         result = json.loads((out / "units" / name / "result.json").read_text())
         assert rows["/verdict"][-1][1][0].startswith(f"## Verdict: {result['verdict']}\n")
         assert [value[0] for _, value in rows["/bias/x/truth"]][-1] == pytest.approx(truth[0])
+
+
+def test_the_fixtures_overview_holds_exactly_the_entities_docs_viewer_names_for_every_unit(saved_views):
+    """OUT/fixture.rrd: docs/viewer.md's table of the overview, ``<name>`` each unit, and nothing else."""
+    from tests.test_viewer_record import _recorded, documented
+
+    overview = documented()[5]
+    assert "/fixture" in overview and "/units/<name>/verdict" in overview
+    assert _recorded(saved_views / "fixture.rrd") == {path.replace("<name>", name) for path in overview
+                                                      for name in TRUTHS}
+
+
+def test_the_fixtures_overview_has_every_units_bias_as_it_converged_and_each_units_verdict(saved_views):
+    """Every unit's estimate, 3-sigma band and truth per axis in the overview, the rows of its own view (the last
+    estimate result.json's); each unit's verdict the text its own /verdict ends with, naming result.json's
+    verdict; the fixture's table a row per unit as the index has it; a column of views per unit."""
+    from tests.test_viewer_record import _blueprint_views, _rows
+
+    rows = _rows(saved_views / "fixture.rrd")
+    index = json.loads((saved_views / "result.json").read_text())
+    for name, truth in TRUTHS.items():
+        result = json.loads((saved_views / "units" / name / "result.json").read_text())
+        own = _rows(saved_views / "units" / name / "recording.rrd")
+        bias, sigma = result["estimate"]["accel_bias_ug"], result["estimate"]["accel_bias_sigma_ug"]
+        for k, axis in enumerate("xyz"):
+            series = {kind: rows[f"/units/{name}/bias/{axis}/{kind}"]
+                      for kind in ("estimate", "sigma3_upper", "sigma3_lower", "truth")}
+            assert len(series["estimate"]) >= 10  # 1 Hz, from the time the bias is observable to 20 s
+            for kind, values in series.items():
+                assert values == own[f"/bias/{axis}/{kind}"], (name, axis, kind)  # the unit's own rows, as they came
+            last = {kind: values[-1][1][0] for kind, values in series.items()}
+            assert series["estimate"][-1][0] == 20.0
+            assert last["estimate"] == pytest.approx(bias[k], abs=1e-9)  # float64 scalars
+            assert last["sigma3_upper"] - last["sigma3_lower"] == pytest.approx(6 * sigma[k], rel=1e-9)
+            assert last["truth"] == pytest.approx(truth[k], rel=1e-12)
+        ((t, (text,)),) = rows[f"/units/{name}/verdict"]
+        assert result["verdict"] in ("PASS", "FAIL") and text.startswith(f"## Verdict: {result['verdict']}\n")
+        assert (t, text) == (own["/verdict"][-1][0], own["/verdict"][-1][1][0])
+    start, end = (value[0] for _, value in rows["/fixture"])
+    assert start.startswith("## Fixture units-live: running\n") and "| kvh-a | KVH-A | running | — |" in start
+    assert end.startswith(f"## Fixture units-live: {index['verdict']} ({index['ended']})\n")
+    for unit in index["units"]:
+        assert f"| {unit['name']} | {unit['dut_serial']} | {unit['ended']} | {unit['verdict']} |" in end
+    origins = {view["origin"] for view in _blueprint_views(saved_views / "fixture.rrd").values()}
+    assert origins == {"/fixture"} | {f"/units/{name}/{part}" for name in TRUTHS
+                                      for part in ("bias/x", "bias/y", "bias/z", "verdict")}
+
+
+def _recordings(path: Path) -> dict[str, tuple[str, set[str]]]:
+    """Each recording of a .rrd by its name (``RecordingInfo:name``): its application id and entity paths."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    found = {}
+    for recording in reader.recordings():
+        name, paths = None, set()
+        for chunk in reader.stream(store=recording):
+            batch = chunk.to_record_batch()
+            if chunk.entity_path == "/__properties" and "RecordingInfo:name" in batch.schema.names:
+                name = batch.column("RecordingInfo:name").to_pylist()[-1][0]
+            paths.add(chunk.entity_path)
+        found[name] = (recording.application_id, paths - {"/__properties"})
+    return found
+
+
+def test_the_fixtures_overview_is_a_recording_named_after_the_trial_beside_the_units(saved_views):
+    (app,) = {app for app, _ in _recordings(saved_views / "fixture.rrd").values()}
+    assert app == "turntable-hil" and list(_recordings(saved_views / "fixture.rrd")) == ["units-live"]
+    for name in TRUTHS:
+        assert {name: app for name, (app, _) in _recordings(saved_views / "units" / name / "recording.rrd").items()} \
+            == {f"units-live.{name}": "turntable-hil"}
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # what the server saves as it goes
+def test_the_fixtures_overview_goes_live_to_the_viewer_the_first_units_view_connects_to(tmp_path):
+    """Live, the overview joins the units' recordings in the one viewer: a Rerun server saving what it is sent
+    (``rerun --save``) gets every unit's recording and the fixture's, the overview ending with the fixture's table."""
+    import argparse
+    import signal
+    import socket
+    import subprocess
+    from datetime import datetime, timezone
+
+    from hil.commands.trial_outputs import finish_units
+    from hil.config import load_config
+    from hil.trial.units_live import run_units_live
+    from hil.viewer.modes import ViewerOptions
+    from hil.viewer.rerun_process import rerun_executable
+    from tests.test_viewer_record import _rows
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    received = tmp_path / "received.rrd"
+    server = subprocess.Popen([rerun_executable(), "--bind", "127.0.0.1", "--port", str(port), "--save", str(received)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env={**os.environ, "CI": "1"})
+    try:
+        config = write(tmp_path, units_config(8.0))
+        out = tmp_path / "run"
+        fixture = run_units_live(load_config(config, True), config, out, None, "max", quiet=True,
+                                 viewer=ViewerOptions("save", connect=f"rerun+http://127.0.0.1:{port}/proxy"))
+        args = argparse.Namespace(started=datetime.now(timezone.utc), no_figures=True, no_history=True)
+        assert finish_units(args, fixture) == 0
+        size = -1
+        while size != (size := received.stat().st_size if received.exists() else 0):  # until the server has
+            time.sleep(1.0)  # written all it was sent
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(timeout=30)
+    live = _recordings(received)
+    assert {name: app for name, (app, _) in live.items()} == {name: "turntable-hil" for name in (
+        "units-live", "units-live.kvh-a", "units-live.kvh-b", "units-live.xsens")}
+    assert live["units-live"][1] == _recordings(out / "fixture.rrd")["units-live"][1]  # every entity, live too
+    (end,) = [value[0] for _, value in _rows(out / "fixture.rrd")["/fixture"]][1:]
+    assert end.startswith("## Fixture units-live: PASS (completed)\n")

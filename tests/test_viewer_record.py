@@ -34,12 +34,14 @@ def _recorded(path: Path) -> set[str]:
     return {chunk.entity_path for chunk in reader.stream(store=recording)} - {"/__properties"}
 
 
-PARTS = ("`hil calibrate` adds", "**With a chamber**", "**`hil noise`**", "**`hil plan`**")  # after the trial's
+PARTS = ("`hil calibrate` adds", "**With a chamber**", "**`hil noise`**", "**`hil plan`**",
+         "**Units: the fixture's overview**")  # after the trial's
 
 
 def documented() -> list[set[str]]:
     """The entity paths docs/viewer.md's "Entity paths" names: the trial's table, then ``hil calibrate``'s, a
-    chamber's, ``hil noise``'s and ``hil plan``'s (``PARTS``)."""
+    chamber's, ``hil noise``'s, ``hil plan``'s and a units trial's overview (``PARTS``; its paths name each unit
+    ``<name>``)."""
     text = DOCS.read_text().split("## Entity paths", 1)[1].split("\n## ", 1)[0]
     sections = []
     for marker in PARTS:
@@ -49,7 +51,7 @@ def documented() -> list[set[str]]:
 
     def paths(text: str) -> set[str]:
         cells = [line.split("|")[1] for line in text.splitlines() if line.startswith("| `/")]
-        return {p for cell in cells for p in re.findall(r"`(/[^`<>…]*)`", cell)}
+        return {p for cell in cells for p in re.findall(r"`(/[^`…]*)`", cell)}
 
     return [paths(part) for part in sections]
 

@@ -57,18 +57,25 @@ def written(args: argparse.Namespace, outcome, figures=None):
 
 def finish_units(args: argparse.Namespace, fixture) -> int:
     """Write and file every unit's trial of a :class:`~hil.trial.units.FixtureOutcome` (:func:`written`), its
-    judgement shown in its view, then the trial's index (result.json, report.html, junit.xml); the units' views
-    finished (a served web viewer then kept up until Ctrl-C); the exit code of the worst unit."""
+    judgement shown in its view and in the fixture's overview, then the trial's index (result.json, report.html,
+    junit.xml), the overview's table of units; the units' views finished (a served web viewer then kept up until
+    Ctrl-C); the exit code of the worst unit."""
     from hil.trial.viewer_feed import finish_viewer, show_verdict
+    from hil.viewer.verdict import final_markdown
 
     verdicts = {}
+    overview = fixture.overview
     for name, outcome in fixture.units.items():
         judged = written(args, outcome)
         show_verdict(fixture.viewers.get(name), judged)
+        if overview is not None:
+            overview.unit_verdict(name, final_markdown(judged))
         verdicts[name] = judged.verdict
         if outcome.exit_code(judged.verdict) == 1:
             print(f"hil: unit {name}: trial {outcome.ended}", file=sys.stderr)
     code = fixture.write_index()
+    if overview is not None:
+        overview.end(fixture.index)
     views = list(fixture.viewers.values())
     for view in views[1:]:  # connected to the first one's viewer
         view.close()

@@ -19,7 +19,7 @@ from hil.outputs.figures import FIGURES
 LOCK_NAME = ".hil.lock"
 # what a trial writes (docs/contracts.md, "Output files"), and a noise characterisation
 TRIAL_OUTPUTS = ("result.json", "series.csv", "report.html", "junit.xml", "config.yaml", *FIGURES, "recording.mcap",
-                 "recording.rrd", "emulator.json", "emulator.log", "ports.json", "calibration.json",
+                 "recording.rrd", "fixture.rrd", "emulator.json", "emulator.log", "ports.json", "calibration.json",
                  "calibration.html", "calibration_residuals.png", "units")
 NOISE_OUTPUTS = ("noise.json", "allan.png", "report.html", "noise.rrd", "acquisition")
 RECORDS = ("result.json", "recording.mcap", "noise.json")  # what another command could take for a trial's

@@ -20,19 +20,23 @@ RunUnit = Callable[[Config, str, Path], TrialOutcome]
 
 @dataclass
 class FixtureOutcome:
-    """A finished trial of several units: the trial's name and directory, each unit's outcome by name, and each
-    unit's live view (a :class:`~hil.viewer.trial_viewer.TrialViewer`, the first one the viewer's owner) if any."""
+    """A finished trial of several units: the trial's name and directory, each unit's outcome by name, each
+    unit's live view (a :class:`~hil.viewer.trial_viewer.TrialViewer`, the first one the viewer's owner) if any, the
+    fixture's overview (a :class:`~hil.viewer.fixture_view.FixtureView`) if any, and once written the index
+    result.json."""
 
     name: str
     out: Path
     units: dict[str, TrialOutcome]
     viewers: dict[str, object] = field(default_factory=dict)
     absent: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # optional units: (dut_serial, why)
+    overview: object | None = None
+    index: dict | None = None  # OUT/result.json, once :meth:`write_index` wrote it
 
     def write_index(self) -> int:
         """Write OUT/result.json, report.html and junit.xml over the units' written outputs and the absent units;
         the exit code (:func:`~hil.outputs.units_index.units_exit_code`)."""
-        doc = write_units_index(self.out, self.name, [
+        doc = self.index = write_units_index(self.out, self.name, [
             *(unit_entry(name, outcome.result) for name, outcome in self.units.items()),
             *(absent_entry(name, serial, why) for name, (serial, why) in self.absent.items())])
         return units_exit_code(unit["verdict"] for unit in doc["units"])

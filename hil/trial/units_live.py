@@ -27,7 +27,7 @@ from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
 from hil.trial.table_control import MotionCheck, TableControl
 from hil.trial.units import FixtureOutcome, unit_config_text
-from hil.trial.viewer_feed import ViewerOptions, open_viewer
+from hil.trial.viewer_feed import ViewerOptions, bias_truth, fixture_view, open_viewer
 from hil.viewer.console_progress import ConsoleProgress, UnitsProgress
 from hil.vocabulary import Port
 
@@ -80,7 +80,8 @@ def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | 
                    viewer: ViewerOptions = ViewerOptions()) -> FixtureOutcome:
     """Acquire, record and estimate every unit until each ends, the table driven as ``command`` says, each unit
     in its own view where ``viewer`` asks for one (its .rrd in its directory; live, each unit's recording in the one
-    viewer the first unit's view starts); their outcomes."""
+    viewer the first unit's view starts), and the fixture's overview beside them (:mod:`hil.viewer.fixture_view`,
+    OUT/fixture.rrd); their outcomes."""
     is_emulated = emulated(cfg)
     duration = duration if duration is not None else cfg.trial.duration_s
     if is_emulated and duration is None:
@@ -88,12 +89,12 @@ def run_units_live(cfg: Config, config_path: Path, out: Path, duration: float | 
     time_scale = parse_speed(speed) if is_emulated else 1.0
     out.mkdir(parents=True, exist_ok=True)
     with StopSignals() as signals:
-        trials, absent, ended = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet,
-                                                is_emulated, command, viewer), lambda: signals.received)
+        trials, absent, ended, overview = _acquire(_Setup(cfg, config_path, out, duration, speed, time_scale, quiet,
+                                                          is_emulated, command, viewer), lambda: signals.received)
     return FixtureOutcome(cfg.trial.name, out, {
         unit.name: TrialOutcome.of(unit.trial.finished, unit.cfg, unit.config_text, unit.out, ended[unit.name],
                                    emulated_truth(unit.cfg)) for unit in trials},
-        {unit.name: unit.trial.viewer for unit in trials if unit.trial.viewer is not None}, absent)
+        {unit.name: unit.trial.viewer for unit in trials if unit.trial.viewer is not None}, absent, overview)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,10 +114,12 @@ class _Setup:
 
 
 def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, tuple[str | None, str]],
-                                                     dict[str, str]]:
+                                                     dict[str, str], object | None]:
     """The rig (:class:`~hil.trial.rig.Rig`), the shared table reader and every present unit's trial, run to
-    their ends; the trials, the absent optional units (:attr:`FixtureOutcome.absent`) and how each trial ended."""
+    their ends; the trials, the absent optional units (:attr:`FixtureOutcome.absent`), how each trial ended and the
+    fixture's overview (None: none, or it did not start)."""
     cfg = setup.cfg
+    overview = fixture_view(setup.viewer, cfg, setup.out)
     try:
         with Rig(cfg, setup.config_path, setup.out, setup.speed, setup.duration) as rig, \
                 ConsoleProgress(setup.duration, quiet=setup.quiet) as progress:
@@ -128,21 +131,24 @@ def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, 
                     setup.command.arm(rig.table)
                 absent: dict[str, tuple[str | None, str]] = {}
                 trials = _unit_trials(setup, rig.ports, dataclasses.replace(hooks, table_reader=table), rig.table,
-                                      UnitsProgress(progress, list(cfg.unit_configs())), absent)
+                                      UnitsProgress(progress, list(cfg.unit_configs())), absent, overview)
+                overview = _opened(overview, trials, progress.warn)
                 if rig.table is not None:
                     setup.command.started(rig.table)
-                return trials, absent, _run(trials, table, rig.table)
+                return trials, absent, _run(trials, table, rig.table), overview
             finally:
                 table.stop()
+                if overview is not None:
+                    overview.close()  # the units' verdicts and the fixture's table come with the outputs
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None
 
 
 def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: TableControl | None,
-                 progress: UnitsProgress, absent: dict[str, tuple[str | None, str]]) -> list[UnitTrial]:
+                 progress: UnitsProgress, absent: dict[str, tuple[str | None, str]], overview) -> list[UnitTrial]:
     """Each unit's trial on its own IMU port and the shared table reader: where the table is commanded, its hooks
     from the command (the first present unit's commanding the table), its warnings named by the unit, its progress
-    in the console's one line.
+    in the console's one line, its snapshots to the fixture's ``overview`` too (None: none).
     A unit whose port cannot be opened is refused naming the unit and the port; an optional one is left out, added
     to ``absent`` with its port's error, and warned of (every unit absent refuses the trial)."""
     trials: list[UnitTrial] = []
@@ -159,6 +165,9 @@ def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: 
         unit_hooks = dataclasses.replace(
             unit_hooks, on_warning=lambda text, name=name: hooks.on_warning(f"unit {name}: {text}"),
             on_progress=progress.updater(name))
+        if overview is not None:
+            unit_hooks = dataclasses.replace(unit_hooks, listeners=(
+                *unit_hooks.listeners, overview.listener(name, unit.record.dut_serial, bias_truth(unit))))
         unit_out = setup.out / UNITS_DIR / name
         unit_out.mkdir(parents=True, exist_ok=True)
         text = unit_config_text(name, unit)
@@ -182,6 +191,20 @@ def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: 
     if not trials:
         raise TrialSetupError(f"units: every unit is absent ({', '.join(absent)})")
     return trials
+
+
+def _opened(overview, trials: list[UnitTrial], warn: Callable[[str], None]):
+    """The fixture's overview (None: none) opened with the units that run, live in the viewer the first unit's view
+    started; one that does not start is warned of and left out (None), the units' views go on."""
+    if overview is None:
+        return None
+    first = trials[0].trial.viewer
+    try:
+        overview.open([unit.name for unit in trials], None if first is None else first.grpc_url)
+    except Exception as exc:  # noqa: BLE001 - whatever rerun did, the units' trials go on
+        warn(f"the fixture's overview did not start: {exc}")
+        return None
+    return overview
 
 
 def _check_opens(trial: LiveTrial) -> None:

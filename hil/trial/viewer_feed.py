@@ -55,22 +55,40 @@ def open_viewer(options: ViewerOptions, cfg: Config, out: Path, blocking: bool) 
     does not start."""
     if options.mode == "none":
         return None
-    from hil.viewer.bias_view import BiasTruth
     from hil.viewer.trial_viewer import (
         TrialViewer,  # rerun only when a viewer is asked for
     )
 
-    truth = emulated_truth(cfg)
-    bias = None if truth is None else BiasTruth(np.array(truth["accel_bias_ug"]) * UG,
-                                                np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR)
+    truth = bias_truth(cfg)
     try:
-        viewer = TrialViewer(options, out, geometry=TableGeometry.from_config(cfg.turntable), truth=bias,
+        viewer = TrialViewer(options, out, geometry=TableGeometry.from_config(cfg.turntable), truth=truth,
                              limits=cfg.limits, recording_name=cfg.trial.name, blocking=blocking, verdict_at_end=True)
     except Exception as exc:  # noqa: BLE001 - whatever the viewer's process or port did, say it in one line
         raise TrialSetupError(f"--viewer {options.mode}: the viewer did not start: {exc}") from None
     if viewer.url:
         print(f"web viewer: {viewer.url}", file=sys.stderr)
     return viewer
+
+
+def bias_truth(cfg: Config):
+    """An emulated trial's accelerometer bias as its view draws it (a :class:`~hil.viewer.bias_view.BiasTruth`);
+    None for a real device."""
+    truth = emulated_truth(cfg)
+    if truth is None:
+        return None
+    from hil.viewer.bias_view import BiasTruth
+
+    return BiasTruth(np.array(truth["accel_bias_ug"]) * UG, np.array(truth["accel_drift_ug_per_h"]) * UG / HOUR)
+
+
+def fixture_view(options: ViewerOptions, cfg: Config, out: Path):
+    """The fixture's overview of a trial of several units, ``cfg`` its units config, saved in ``out`` (a
+    :class:`~hil.viewer.fixture_view.FixtureView`, to open once the units' views are); None for ``none``."""
+    if options.mode == "none":
+        return None
+    from hil.viewer.fixture_view import FixtureView  # rerun only when a viewer is asked for
+
+    return FixtureView(options, out, cfg.trial.name)
 
 
 def started_view(make: Callable[[], OwnView], mode: str) -> OwnView:

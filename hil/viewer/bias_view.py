@@ -39,13 +39,14 @@ def series_color(axis: str, series: str) -> tuple[int, int, int]:
     return TRUTH_COLOR if series == "truth" else REFERENCE_COLOR
 
 
-def log_bias_styles(rec, with_truth: bool) -> None:
-    """The static name, colour and width of every bias series."""
+def log_bias_styles(rec, with_truth: bool, prefix: str = "", series: tuple[str, ...] = tuple(SERIES)) -> None:
+    """The static name, colour and width of every bias series (of ``series``), at ``<prefix>bias/<axis>/<series>``."""
     for a in AXES:
-        for series, (name, width) in SERIES.items():
-            if series != "truth" or with_truth:
-                rec.log(f"bias/{a}/{series}", rr.SeriesLines(names=name, colors=series_color(a, series), widths=width),
-                        static=True)  # fmt: skip
+        for kind in series:
+            name, width = SERIES[kind]
+            if kind != "truth" or with_truth:
+                rec.log(f"{prefix}bias/{a}/{kind}",
+                        rr.SeriesLines(names=name, colors=series_color(a, kind), widths=width), static=True)
 
 
 def bias_rows(snaps: list[Snapshot], truth_bias: np.ndarray | None, truth_drift: np.ndarray | None

@@ -104,10 +104,10 @@ class JudgedView:
             scalars("sigma/converged_by", np.full(2, deadline), np.array([0.0, self._sigma_max]))
 
 
-def log_verdict(rec, t: float, markdown: str) -> None:
-    """``/verdict`` at trial time t."""
+def log_verdict(rec, t: float, markdown: str, entity: str = "verdict") -> None:
+    """``/verdict`` (or ``entity``) at trial time t."""
     rec.set_time(TIMELINE, duration=t)
-    rec.log("verdict", rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))
+    rec.log(entity, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))
 
 
 def log_plan(rec, plan: str | None) -> None:

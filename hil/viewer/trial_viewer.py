@@ -114,14 +114,14 @@ class TrialViewer:
         blueprint = self._judged.blueprint(None)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.rrd_path = self.out_dir / RRD_NAME
-        self._file = _recording_stream(recording_id, FILE_FLUSH_S)
+        self._file = recording_stream(recording_id, FILE_FLUSH_S)
         self._file.save(self.rrd_path)  # its blueprint at the end, with the converged estimate's ranges
         self._columns = [Columns(self._file, FILE_FLUSH_S)]
         if mode != "save" or options.connect is not None:  # connect: a viewer already running (a plan's), any mode
             self.viewer_process, self.grpc_url, self.url = (
                 start_viewer(mode, options.bind, telemetry_requested()) if options.connect is None
                 else (None, options.connect, None))
-            self._view = _recording_stream(recording_id)
+            self._view = recording_stream(recording_id)
             self._view.set_sinks(rr.GrpcSink(self.grpc_url), default_blueprint=blueprint)
             self._columns.append(Columns(self._view, 0.0))
         self._rec = Streams([self._file] + ([self._view] if self._view is not None else []))
@@ -379,7 +379,7 @@ class TrialViewer:
             self._scalars(path, np.array([t]), row[None, :])
 
 
-def _recording_stream(recording_id: uuid.UUID, flush_s: float | None = None) -> rr.RecordingStream:
+def recording_stream(recording_id: uuid.UUID, flush_s: float | None = None) -> rr.RecordingStream:
     """A stream of the trial's recording, on trial time alone; what it is logged (not sent as columns) is merged
     into chunks every ``flush_s`` s (None: rerun's default, 0.2 s)."""
     config = None if flush_s is None else rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=flush_s))

@@ -1,0 +1,226 @@
+"""The fixture's overview of a trial of several units (docs/units.md, docs/viewer.md): one more Rerun recording
+beside the units' own, named after the trial (the units' are ``<trial.name>.<unit>``), with every unit's bias
+convergence side by side and, at the end, each unit's verdict and the fixture's table of units.
+
+Per unit and axis ``/units/<name>/bias/<axis>/estimate``, ``sigma3_upper``, ``sigma3_lower`` and (emulated) ``truth``
+in µg on ``trial_time``, the rows of :func:`hil.viewer.bias_view.bias_rows` of each unit's snapshots as its pipeline
+publishes them; at the end ``/units/<name>/verdict`` (the markdown the unit's own ``/verdict`` ends with) and
+``/fixture`` (a row per unit: name, serial, how it ended, verdict; logged at the start with every unit running).
+
+Saved as ``OUT/fixture.rrd``; live (``spawn``, ``serve``) in the viewer the first unit's view started. Made before
+the units' trials (each unit's pipeline listener from :meth:`FixtureView.listener`), opened once they are
+(:meth:`FixtureView.open`). As :class:`~hil.viewer.trial_viewer.TrialViewer`, logging never blocks a unit's
+thread: the snapshots are handed to one background thread, and dropped and counted when it falls behind.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import uuid
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from hil.estimation.online import Snapshot
+from hil.pipeline.progress import Listener, Progress
+from hil.viewer.bias_view import BiasTruth, bias_rows, log_bias_styles
+from hil.viewer.blueprint import AXES, TIMELINE
+from hil.viewer.chunks import Columns, Streams
+from hil.viewer.judged_view import log_verdict
+from hil.viewer.modes import ViewerOptions
+from hil.viewer.trial_viewer import FILE_FLUSH_S, QUEUE_ITEMS, recording_stream
+
+log = logging.getLogger(__name__)
+
+FIXTURE_RRD = "fixture.rrd"
+FIXTURE_SERIES = ("estimate", "sigma3_upper", "sigma3_lower", "truth")  # of bias_view.SERIES; truth: emulated
+
+
+@dataclass(frozen=True)
+class _Unit:
+    serial: str | None
+    truth: BiasTruth | None
+
+
+def unit_entity(name: str) -> str:
+    """The entity of unit ``name`` in the overview: ``units/<name>``."""
+    return f"units/{rr.escape_entity_path_part(name)}"
+
+
+def fixture_markdown(name: str, rows: list[Mapping], ended: str | None = None, verdict: str | None = None) -> str:
+    """``/fixture``: the trial's head (running, or how it ended and its verdict) and a row per unit of ``rows``
+    (the index's ``units``: ``name``, ``dut_serial``, ``ended``, ``verdict``)."""
+    head = f"## Fixture {name}: running" if ended is None else f"## Fixture {name}: {verdict} ({ended})"
+    lines = [head, "", "| unit | serial | ended | verdict |", "|---|---|---|---|"]
+    for row in rows:
+        cells = [row["name"], row.get("dut_serial") or "—", row.get("ended") or "running", row.get("verdict") or "—"]
+        lines.append("| " + " | ".join(str(cell).replace("|", "\\|") for cell in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def fixture_blueprint(units: list[str]) -> rrb.Blueprint:
+    """A column per unit (its three bias axes over its verdict), the fixture's table under them."""
+    columns = [rrb.Vertical(
+        *(rrb.TimeSeriesView(origin=f"/{unit_entity(name)}/bias/{a}", name=f"{name}: bias {a} (µg)",
+                             plot_legend=rrb.PlotLegend(visible=a == "x")) for a in AXES),
+        rrb.TextDocumentView(origin=f"/{unit_entity(name)}/verdict", name=f"{name}: verdict"),
+        row_shares=[3, 3, 3, 2], name=name) for name in units]  # fmt: skip
+    return rrb.Blueprint(
+        rrb.Vertical(rrb.Horizontal(*columns), rrb.TextDocumentView(origin="/fixture", name="fixture: units, verdicts"),
+                     row_shares=[5, 1]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+    )
+
+
+class FixtureView:
+    """The overview of the trial ``name`` writing to ``out`` as ``options`` ask (``none``: nothing); see the module
+    docstring. ``blocking``: waits for room rather than drops (a benchmark's full cost)."""
+
+    def __init__(self, options: ViewerOptions, out: Path, name: str, blocking: bool = False) -> None:
+        self.options = options
+        self.out = Path(out)
+        self.name = name
+        self.blocking = blocking
+        self.rrd_path: Path | None = None
+        self.dropped = 0  # snapshots not logged because the logging thread was behind
+        self.error: BaseException | None = None  # the first error the logging thread met
+        self._units: dict[str, _Unit] = {}
+        self._t_latest: dict[str, float] = {}
+        self._lock = threading.Lock()
+        self._rec: Streams | None = None
+        self._file: rr.RecordingStream | None = None
+        self._view: rr.RecordingStream | None = None
+        self._columns: list[Columns] = []
+        self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
+        self._worker: threading.Thread | None = None
+        self._closed = self._ended = False
+
+    def listener(self, unit: str, serial: str | None, truth: BiasTruth | None) -> Listener:
+        """Unit ``unit`` (its ``serial``, an emulated unit's ``truth``) and its pipeline's listener: its snapshots
+        to the overview once it is open."""
+        self._units[unit] = _Unit(serial, truth)
+        return lambda progress: self._progress(unit, progress)
+
+    def open(self, units: list[str], connect: str | None) -> None:
+        """Start the recording with the columns of ``units`` (the units that run); ``connect``: the gRPC URL of the
+        viewer the first unit's view started (None: the .rrd alone)."""
+        if self.options.mode == "none" or self._worker is not None:
+            return
+        self._units = {name: self._units[name] for name in units}
+        recording_id = uuid.uuid4()
+        blueprint = fixture_blueprint(units)
+        self.out.mkdir(parents=True, exist_ok=True)
+        file = recording_stream(recording_id, FILE_FLUSH_S)
+        file.save(self.out / FIXTURE_RRD, default_blueprint=blueprint)
+        recs, columns = [file], [Columns(file, FILE_FLUSH_S)]
+        if connect is not None:
+            view = recording_stream(recording_id)
+            view.set_sinks(rr.GrpcSink(connect), default_blueprint=blueprint)
+            recs.append(view)
+            columns.append(Columns(view, 0.0))
+        rec = Streams(recs)
+        for stream in recs:
+            stream.send_recording_name(self.name)
+        for unit, info in self._units.items():
+            log_bias_styles(rec, info.truth is not None, prefix=f"{unit_entity(unit)}/", series=FIXTURE_SERIES)
+        rows = [{"name": unit, "dut_serial": info.serial} for unit, info in self._units.items()]
+        _text(rec, "fixture", 0.0, fixture_markdown(self.name, rows))
+        self.rrd_path, self._file, self._columns = self.out / FIXTURE_RRD, file, columns
+        self._view = recs[1] if len(recs) > 1 else None
+        self._worker = threading.Thread(target=self._work, name="rerun-fixture", daemon=True)
+        self._worker.start()
+        self._rec = rec  # logging from here on
+
+    def log_snapshots(self, unit: str, snaps: list[Snapshot]) -> None:
+        """Unit ``unit``'s new snapshots; returns at once (dropped and counted when the logging thread is behind)."""
+        if self._rec is None or self._closed or unit not in self._units or not snaps:
+            return
+        snaps = list(snaps)
+        try:
+            self._queue.put(lambda: self._write(unit, snaps), block=self.blocking)
+        except queue.Full:
+            with self._lock:
+                self.dropped += 1
+
+    def unit_verdict(self, unit: str, markdown: str) -> None:
+        """Unit ``unit``'s verdict and judged measurements (result.json's, the markdown its own ``/verdict`` ends
+        with) to ``/units/<name>/verdict`` at its last trial time; closes the live logging first."""
+        if self._rec is None or self._ended or unit not in self._units:
+            return
+        self.close()
+        self._run(lambda: log_verdict(self._rec, self._t_latest.get(unit, 0.0), markdown,
+                                      f"{unit_entity(unit)}/verdict"))
+
+    def end(self, index: Mapping) -> None:
+        """``/fixture`` from the trial's index result.json (its ``units``, ``ended`` and ``verdict``) at the last
+        trial time, and the .rrd finished."""
+        if self._rec is None or self._ended:
+            return
+        self.close()
+        t = max(self._t_latest.values(), default=0.0)
+        markdown = fixture_markdown(self.name, list(index["units"]), index["ended"], index["verdict"])
+        self._run(lambda: _text(self._rec, "fixture", t, markdown))
+        self._ended = True
+        self._file.flush()
+        self._file.disconnect()  # the .rrd is complete
+        if self._view is not None:
+            self._view.flush()
+
+    def close(self) -> None:
+        """Log what is queued and flush; the .rrd is finished by :meth:`end` (or the end of the process)."""
+        if self._rec is None or self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._worker.join()
+        if self.error is not None:
+            log.warning("Rerun logging of the fixture's overview failed: %s", self.error)
+        for rec in self._rec.recs:
+            rec.flush()
+
+    # -- the logging thread --
+
+    def _progress(self, unit: str, progress: Progress) -> None:
+        if progress.snapshots:
+            self.log_snapshots(unit, progress.snapshots)
+
+    def _work(self) -> None:
+        while (job := self._queue.get()) is not None:
+            self._run(job)
+            t = max(self._t_latest.values(), default=0.0)
+            for columns in self._columns:
+                self._run(lambda c=columns: c.due(t))
+        for columns in self._columns:
+            self._run(columns.flush)
+
+    def _run(self, job: Callable[[], object]) -> None:
+        try:
+            job()
+        except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
+            if self.error is None:
+                self.error = exc
+                log.warning("Rerun logging error in the fixture's overview (further errors not reported): %s", exc)
+
+    def _write(self, unit: str, snaps: list[Snapshot]) -> None:
+        truth = self._units[unit].truth
+        rows = bias_rows(snaps, None if truth is None else np.asarray(truth.bias, dtype=float),
+                         None if truth is None or truth.drift is None else np.asarray(truth.drift, dtype=float))
+        for path, (t, values) in rows.items():
+            if path.rsplit("/", 1)[1] in FIXTURE_SERIES:
+                for columns in self._columns:
+                    columns.scalars(f"{unit_entity(unit)}/{path}", t, values)
+        self._t_latest[unit] = max(self._t_latest.get(unit, 0.0), max(s.t for s in snaps))
+
+
+def _text(rec, path: str, t: float, markdown: str) -> None:
+    """A markdown document at ``path`` at trial time t."""
+    rec.set_time(TIMELINE, duration=t)
+    rec.log(path, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))
