@@ -158,6 +158,7 @@ def test_an_optional_unit_whose_port_cannot_be_opened_is_filed_absent_and_the_ot
     assert lines["kvh-b"]["verdict"] == "ABSENT" and lines["kvh-b"]["out_dir"] is None
     assert lines["kvh-b"]["ended"].startswith("absent: ") and "/dev/hil-absent-1" in lines["kvh-b"]["ended"]
     assert "unit kvh-b: absent (units[1].optional)" in err and not (out / "units" / "kvh-b").exists()
+    assert not (out / "fixture.rrd").exists()  # --viewer none: no overview either
     assert all(lines[name]["ended"] == "completed" for name in ("kvh-a", "xsens"))
     skipped = [s for s in ET.parse(out / "junit.xml").getroot() if s.get("name") == "units-live/kvh-b"]
     assert len(skipped) == 1 and skipped[0].find("testcase/skipped") is not None
