@@ -20,7 +20,7 @@ from hil.cli import main
 from hil.estimation.calibration_schedule import Dwell, default_schedule
 from hil.frames import Earth, TableGeometry
 from hil.units import ARCSEC, DEG, G0, PPM, UG
-from hil.viewer import calibration_view, trial_viewer
+from hil.viewer import calibration_view, log_jobs
 from hil.viewer.modes import ViewerOptions
 from hil.viewer.trial_viewer import TrialViewer
 
@@ -114,7 +114,7 @@ class _FullForLiveCalls(queue.Queue):
 
 def test_a_live_viewer_fallen_behind_still_logs_every_calibration_step_and_window(tmp_path, monkeypatch):
     steps = list(default_schedule().dwells)
-    monkeypatch.setattr(trial_viewer, "queue", SimpleNamespace(Queue=_FullForLiveCalls, Full=queue.Full))
+    monkeypatch.setattr(log_jobs, "queue", SimpleNamespace(Queue=_FullForLiveCalls, Full=queue.Full))
     viewer = TrialViewer(ViewerOptions("save", layout="calibration"), tmp_path,
                          geometry=TableGeometry())  # live: never blocks
     viewer.log_table(np.array([0.0]), np.zeros((1, 3)))  # a live call: dropped and counted

@@ -225,7 +225,7 @@ def test_the_imus_temperature_is_logged_once_a_second_of_trial_time_as_the_pipel
     seen = json.loads((trial_rrd.parent / "result.json").read_text())["streams"]["imu_temperature_c"]
     times = [t for t, _ in rows]
     seconds = [int(t) for t in times]  # the first progress of each second of trial time: one a second at most
-    assert seconds == sorted(set(seconds)) and times[0] == 0.0 and times[-1] >= 59.0
+    assert seconds == sorted(set(seconds)) and times[0] < 10.0 and times[-1] >= 59.0
     assert len(rows) >= 10  # at --speed max a loaded host's reads may hold seconds of trial time each
     assert all(seen["min"] <= value[0] <= seen["max"] for _, value in rows)
 

@@ -17,7 +17,7 @@ from emulators.simulation import Simulation
 from hil.config import ReportLimits
 from hil.estimation.online import OnlineEstimator
 from hil.units import DEG, UG
-from hil.viewer import blueprint, rerun_process, trial_viewer
+from hil.viewer import blueprint, log_jobs, rerun_process, trial_viewer
 from hil.viewer.bias_view import BiasTruth, follow_ranges
 from hil.viewer.verdict import PENDING, VerdictSoFar
 from hil.viewer.modes import default_viewer_mode
@@ -230,7 +230,7 @@ def test_saved_recording_carries_the_blueprint_and_passes_rrd_verify(saved, tmp_
 
 def test_live_calls_never_wait_for_a_stalled_logging_thread(trial, tmp_path, monkeypatch):
     sim, snapshots, _ = trial
-    monkeypatch.setattr(trial_viewer, "QUEUE_ITEMS", 4)
+    monkeypatch.setattr(log_jobs, "QUEUE_ITEMS", 4)
     viewer = TrialViewer(ViewerOptions("save"), tmp_path, geometry=sim.truth.geometry)
     release = threading.Event()
     viewer._submit(release.wait)  # the logging thread is stuck in this job

@@ -16,10 +16,9 @@ thread: the snapshots are handed to one background thread, and dropped and count
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +33,8 @@ from hil.viewer.blueprint import AXES, TIMELINE
 from hil.viewer.chunks import Columns, Streams
 from hil.viewer.judged_view import log_verdict
 from hil.viewer.modes import ViewerOptions
-from hil.viewer.trial_viewer import FILE_FLUSH_S, QUEUE_ITEMS, recording_stream
+from hil.viewer.log_jobs import LogJobs
+from hil.viewer.trial_viewer import FILE_FLUSH_S, recording_stream
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +91,6 @@ class FixtureView:
         self.blocking = blocking
         self.rrd_path: Path | None = None
         self.dropped = 0  # snapshots not logged because the logging thread was behind
-        self.error: BaseException | None = None  # the first error the logging thread met
         self._units: dict[str, _Unit] = {}
         self._t_latest: dict[str, float] = {}
         self._lock = threading.Lock()
@@ -99,9 +98,13 @@ class FixtureView:
         self._file: rr.RecordingStream | None = None
         self._view: rr.RecordingStream | None = None
         self._columns: list[Columns] = []
-        self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
-        self._worker: threading.Thread | None = None
+        self._jobs: LogJobs | None = None  # the logging thread, once open
         self._closed = self._ended = False
+
+    @property
+    def error(self) -> BaseException | None:
+        """The first error the logging thread met."""
+        return self._jobs.error if self._jobs is not None else None
 
     def listener(self, unit: str, serial: str | None, truth: BiasTruth | None) -> Listener:
         """Unit ``unit`` (its ``serial``, an emulated unit's ``truth``) and its pipeline's listener: its snapshots
@@ -112,7 +115,7 @@ class FixtureView:
     def open(self, units: list[str], connect: str | None) -> None:
         """Start the recording with the columns of ``units`` (the units that run); ``connect``: the gRPC URL of the
         viewer the first unit's view started (None: the .rrd alone)."""
-        if self.options.mode == "none" or self._worker is not None:
+        if self.options.mode == "none" or self._jobs is not None:
             return
         self._units = {name: self._units[name] for name in units}
         recording_id = uuid.uuid4()
@@ -135,8 +138,7 @@ class FixtureView:
         _text(rec, "fixture", 0.0, fixture_markdown(self.name, rows))
         self.rrd_path, self._file, self._columns = self.out / FIXTURE_RRD, file, columns
         self._view = recs[1] if len(recs) > 1 else None
-        self._worker = threading.Thread(target=self._work, name="rerun-fixture", daemon=True)
-        self._worker.start()
+        self._jobs = LogJobs("rerun-fixture", "the fixture's overview", self._due, self._flush)
         self._rec = rec  # logging from here on
 
     def log_snapshots(self, unit: str, snaps: list[Snapshot]) -> None:
@@ -144,9 +146,7 @@ class FixtureView:
         if self._rec is None or self._closed or unit not in self._units or not snaps:
             return
         snaps = list(snaps)
-        try:
-            self._queue.put(lambda: self._write(unit, snaps), block=self.blocking)
-        except queue.Full:
+        if not self._jobs.submit(lambda: self._write(unit, snaps), self.blocking):
             with self._lock:
                 self.dropped += 1
 
@@ -156,7 +156,7 @@ class FixtureView:
         if self._rec is None or self._ended or unit not in self._units:
             return
         self.close()
-        self._run(lambda: log_verdict(self._rec, self._t_latest.get(unit, 0.0), markdown,
+        self._jobs.run(lambda: log_verdict(self._rec, self._t_latest.get(unit, 0.0), markdown,
                                       f"{unit_entity(unit)}/verdict"))
 
     def end(self, index: Mapping) -> None:
@@ -167,7 +167,7 @@ class FixtureView:
         self.close()
         t = max(self._t_latest.values(), default=0.0)
         markdown = fixture_markdown(self.name, list(index["units"]), index["ended"], index["verdict"])
-        self._run(lambda: _text(self._rec, "fixture", t, markdown))
+        self._jobs.run(lambda: _text(self._rec, "fixture", t, markdown))
         self._ended = True
         self._file.flush()
         self._file.disconnect()  # the .rrd is complete
@@ -179,8 +179,7 @@ class FixtureView:
         if self._rec is None or self._closed:
             return
         self._closed = True
-        self._queue.put(None)
-        self._worker.join()
+        self._jobs.stop()
         if self.error is not None:
             log.warning("Rerun logging of the fixture's overview failed: %s", self.error)
         for rec in self._rec.recs:
@@ -192,22 +191,16 @@ class FixtureView:
         if progress.snapshots:
             self.log_snapshots(unit, progress.snapshots)
 
-    def _work(self) -> None:
-        while (job := self._queue.get()) is not None:
-            self._run(job)
-            t = max(self._t_latest.values(), default=0.0)
-            for columns in self._columns:
-                self._run(lambda c=columns: c.due(t))
+    def _due(self) -> None:
+        """After each job: the rows due to each sink, at the latest unit's trial time."""
+        t = max(self._t_latest.values(), default=0.0)
         for columns in self._columns:
-            self._run(columns.flush)
+            self._jobs.run(lambda c=columns: c.due(t))
 
-    def _run(self, job: Callable[[], object]) -> None:
-        try:
-            job()
-        except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
-            if self.error is None:
-                self.error = exc
-                log.warning("Rerun logging error in the fixture's overview (further errors not reported): %s", exc)
+    def _flush(self) -> None:
+        """Once the queue is closed: every row held."""
+        for columns in self._columns:
+            self._jobs.run(columns.flush)
 
     def _write(self, unit: str, snaps: list[Snapshot]) -> None:
         truth = self._units[unit].truth

@@ -22,9 +22,7 @@ Viewer modes (:mod:`hil.viewer.modes`): ``spawn`` starts the native viewer, ``se
 from __future__ import annotations
 
 import logging
-import queue
 import subprocess
-import threading
 import uuid
 from collections.abc import Callable, Mapping
 from datetime import timedelta
@@ -51,6 +49,7 @@ from hil.viewer.bias_view import BiasTruth, bias_rows, log_bias_styles
 from hil.viewer.calibration_view import CalibrationLog, calibration_views
 from hil.viewer.chunks import Columns, Streams
 from hil.viewer.judged_view import JudgedView, log_plan, log_verdict
+from hil.viewer.log_jobs import LogJobs
 from hil.viewer.modes import VIEWER_MODES, ViewerOptions
 from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
@@ -63,7 +62,6 @@ RRD_NAME = "recording.rrd"
 TABLE_RATE_HZ = 10.0  # gimbal poses in the 3D view: a step of 1 deg at 10 deg/s, a few pixels on screen
 CONE_PERIOD_S = 10.0  # the reconstructed cone is redrawn at most this often (trial time)
 FILE_FLUSH_S = 120.0  # the .rrd gets each time series as one chunk this often (trial time), the rest (wall time)
-QUEUE_ITEMS = 1024
 
 
 class TrialViewer:
@@ -91,7 +89,7 @@ class TrialViewer:
         self.grpc_url: str | None = None  # the running viewer's, where another trial's view can connect too
         self.viewer_process: subprocess.Popen | None = None
         self.dropped = 0  # calls not logged because the logging thread was behind
-        self.error: BaseException | None = None  # the first error the logging thread met
+        self._jobs: LogJobs | None = None  # the logging thread
         self._closed = False
         self._next_table_tick = -np.inf
         self._next_cone_t = 0.0
@@ -132,9 +130,12 @@ class TrialViewer:
         log_bias_styles(self._rec, self.truth_bias is not None)
         log_plan(self._rec, plan)
         log_turntable(self._rec, geometry)
-        self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(QUEUE_ITEMS)
-        self._worker = threading.Thread(target=self._work, name="rerun-logging", daemon=True)
-        self._worker.start()
+        self._jobs = LogJobs("rerun-logging", "the trial's view", self._due, self._finish)
+
+    @property
+    def error(self) -> BaseException | None:
+        """The first error the logging thread met."""
+        return self._jobs.error if self._jobs is not None else None
 
     # -- public API (called from the processing thread) --
 
@@ -215,8 +216,7 @@ class TrialViewer:
         if self._rec is None or self._closed:
             return
         self._closed = True
-        self._queue.put(None)
-        self._worker.join()
+        self._jobs.stop()
         if self.error is not None:
             log.warning("Rerun logging failed: %s", self.error)
         if not self.verdict_at_end:
@@ -231,7 +231,7 @@ class TrialViewer:
         if self._rec is None or self._ended:
             return
         self.close()
-        self._run(lambda: log_verdict(self._rec, self._t_latest, verdict_markdown))
+        self._jobs.run(lambda: log_verdict(self._rec, self._t_latest, verdict_markdown))
         self._end_file()
         if self._view is not None:
             self._view.flush()
@@ -264,25 +264,13 @@ class TrialViewer:
     def _submit(self, job: Callable[[], None], block: bool | None = None) -> None:
         if self._rec is None or self._closed:
             return
-        try:
-            self._queue.put(job, block=self.blocking if block is None else block)
-        except queue.Full:
+        if not self._jobs.submit(job, self.blocking if block is None else block):
             self.dropped += 1
 
-    def _work(self) -> None:
-        while (job := self._queue.get()) is not None:
-            self._run(job)
-            for columns in self._columns:
-                self._run(lambda c=columns: c.due(self._t_latest))
-        self._run(self._finish)
-
-    def _run(self, job: Callable[[], object]) -> None:
-        try:
-            job()
-        except Exception as exc:  # noqa: BLE001 - logging must never stop a trial
-            if self.error is None:
-                self.error = exc
-                log.warning("Rerun logging error (further errors not reported): %s", exc)
+    def _due(self) -> None:
+        """After each job: the rows due to each sink."""
+        for columns in self._columns:
+            self._jobs.run(lambda c=columns: c.due(self._t_latest))
 
     def _finish(self) -> None:
         """The last cone, the verdict so far, every row held, and the followed ranges in the .rrd's blueprint."""
