@@ -2,19 +2,22 @@
 
     apt-get install chromium                    (Debian's package: /usr/bin/chromium)
     .venv/bin/pip install -e '.[webcheck]'      (Python Playwright; its own browsers are not needed)
-    .venv/bin/python benchmarks/web_viewer_check.py [--layout trial] [--out web_viewer.png] [--timeout 600]
+    .venv/bin/python benchmarks/web_viewer_check.py [--layout trial|calibration|noise|plan|units] [--out web_viewer.png]
+        [--timeout 600]
 
 Logs a 60 s emulated swing (``--layout calibration``: and a calibration's first steps and windows)
 through a serving ``TrialViewer`` with the default trial's ``output.limits`` (the verdict so far)
 (``--layout noise``: the Allan deviation of a simulated static hour at 50 Hz as it forms, ``AllanView``;
-``--layout plan``: a plan's view at its second step and that step's own view in the same viewer),
+``--layout plan``: a plan's view at its second step and that step's own view in the same viewer;
+``--layout units``: the fixture's overview, ``FixtureView``, of configs/emulated_units.yaml's three units,
+each unit's simulated 60 s swing, its verdict and the fixture's table, in a web viewer started for it),
 checks that the web and gRPC servers listen on 127.0.0.1 only, opens the printed URL in headless
 Chromium with software WebGL (``--use-gl=angle --use-angle=swiftshader --enable-unsafe-swiftshader``,
 tests/pages.py's ``SOFTWARE_GL``) and saves a screenshot at 1600x1000 (docs/viewer.md's,
 ``docs/images/viewer_<layout>.png``). The page takes in the data in a small window, where a frame costs
 little, until the viewer's recording holds every row of the .rrd on screen (the trial's, the noise view's, a
-plan's step's); it is then drawn full size, and the screenshot taken once two in a row are the same. No fixed
-wait: ``--timeout`` bounds each of the three.
+plan's step's, the fixture's overview's); it is then drawn full size, and the screenshot taken once two in a
+row are the same. No fixed wait: ``--timeout`` bounds each of the three.
 
 Requests the page makes to hosts other than 127.0.0.1 are blocked (the check needs no network)
 and listed: the Rerun web viewer itself asks for a web font, its release and example lists and
@@ -25,8 +28,10 @@ Exit status 0 when the page loaded and the screenshot was written.
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
@@ -38,15 +43,22 @@ sys.path.insert(0, str(ROOT))
 from emulators.simulation import Simulation  # noqa: E402
 from hil.config import load_config  # noqa: E402
 from hil.estimation.calibration_schedule import default_schedule  # noqa: E402
-from hil.estimation.online import OnlineEstimator  # noqa: E402
+from hil.config import Config  # noqa: E402
+from hil.estimation.online import OnlineEstimator, Snapshot  # noqa: E402
+from hil.outputs.judgement import judge  # noqa: E402
 from hil.outputs.noise import ADEV_UNITS  # noqa: E402
+from hil.outputs.units_index import SEVERITY  # noqa: E402
 from hil.trial.noise_runner import analyse_record, show_forming, simulated  # noqa: E402
+from hil.trial.viewer_feed import bias_truth  # noqa: E402
 from hil.units import UG  # noqa: E402
 from hil.viewer.allan_view import AllanView  # noqa: E402
+from hil.viewer.fixture_view import FixtureView  # noqa: E402
 from hil.viewer.plan_view import PlanView, plan_markdown  # noqa: E402
 from hil.viewer.bias_view import BiasTruth  # noqa: E402
 from hil.viewer.modes import ViewerOptions  # noqa: E402
+from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_requested  # noqa: E402
 from hil.viewer.trial_viewer import TrialViewer  # noqa: E402
+from hil.viewer.verdict import VerdictSoFar, final_markdown  # noqa: E402
 from tests.pages import SOFTWARE_GL, open_viewer, settled_screenshot, wait_for_recording  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
@@ -119,6 +131,72 @@ def log_noise(out: Path) -> AllanView:
     return view
 
 
+@dataclass
+class ServedOverview:
+    """The fixture's overview in a web viewer started for it alone (in a units trial the first unit's view starts
+    the viewer): ``url``, ``rrd_path`` and ``stop`` as the other layouts' views have them."""
+
+    view: FixtureView
+    process: subprocess.Popen
+    url: str
+
+    @property
+    def rrd_path(self) -> Path:
+        return self.view.rrd_path
+
+    def stop(self) -> None:
+        self.view.close()
+        stop_served(self.process, "serve")
+
+
+def log_units(out: Path) -> ServedOverview:
+    """The fixture's overview of configs/emulated_units.yaml's three units, each its own simulated 60 s swing: their
+    snapshots, each unit's verdict and the fixture's table, as a units trial logs them."""
+    cfg = load_config("configs/emulated_units.yaml", units=True)
+    cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": 60.0, "rate_hz": 200.0})})
+    units = cfg.unit_configs()
+    process, grpc_url, url = start_viewer("serve", "127.0.0.1", telemetry_requested())
+    view = FixtureView(ViewerOptions("serve"), out, cfg.trial.name, blocking=True)
+    for name, unit in units.items():
+        view.listener(name, unit.record.dut_serial, bias_truth(unit))
+    view.open(list(units), grpc_url)
+    snapshots = {name: unit_snapshots(unit) for name, unit in units.items()}
+    for name, snaps in snapshots.items():
+        view.log_snapshots(name, snaps)
+    end_units(view, units, snapshots)
+    return ServedOverview(view, process, url)
+
+
+def end_units(view: FixtureView, units: dict[str, Config], snapshots: dict[str, list[Snapshot]]) -> None:
+    """Each completed unit's verdict, then the fixture's table from an index like the units' result.json, as a
+    units trial ends (hil/commands/trial_outputs.py's ``finish_units``)."""
+    rows = []
+    for name, unit in units.items():
+        judged = judge(unit_result(unit, snapshots[name]), unit.limits)
+        view.unit_verdict(name, final_markdown(judged))
+        rows.append({"name": name, "dut_serial": unit.record.dut_serial, "ended": "completed",
+                     "verdict": judged.verdict})  # fmt: skip
+    view.end({"ended": "completed", "verdict": max((row["verdict"] for row in rows), key=SEVERITY.index),
+              "units": rows})  # fmt: skip
+
+
+def unit_snapshots(cfg: Config) -> list[Snapshot]:
+    """The 1 Hz snapshots of a unit's simulated trial (its one-unit config)."""
+    sim = Simulation.from_config(cfg)
+    est = OnlineEstimator(sim.truth.earth, sim.truth.geometry, solve_period=1.0)
+    for batch in sim.batches(chunk=2000):
+        est.update_many(batch)
+    return est.snapshots
+
+
+def unit_result(cfg: Config, snaps: list[Snapshot]) -> dict:
+    """A completed unit's result.json figures of its snapshots and its truth, the document its verdict judges."""
+    truth = bias_truth(cfg)
+    so_far = VerdictSoFar(cfg.limits, None if truth is None else truth.bias / UG)
+    so_far.add(snaps)
+    return so_far.result() | {"ended": "completed"}
+
+
 def log_calibration(viewer: TrialViewer) -> None:
     """A calibration's first three dwells and one plateau, with made-up residuals."""
     schedule = default_schedule()
@@ -135,7 +213,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--timeout", type=float, default=600.0,
                         help="seconds to wait for the page to load, take in the data and draw, each (default 600)")
-    parser.add_argument("--layout", choices=("trial", "calibration", "noise", "plan"), default="trial",
+    parser.add_argument("--layout", choices=("trial", "calibration", "noise", "plan", "units"), default="trial",
                         help="blueprint layout")
     parser.add_argument("--out", type=Path, default=Path("web_viewer.png"), help="screenshot file")
     parser.add_argument("--chromium", default=CHROMIUM, help=f"browser executable (default {CHROMIUM})")
@@ -150,7 +228,7 @@ def main() -> int:
         return 2
 
     with tempfile.TemporaryDirectory() as tmp:
-        own = {"noise": log_noise, "plan": log_plan}.get(args.layout)
+        own = {"noise": log_noise, "plan": log_plan, "units": log_units}.get(args.layout)
         viewer = own(Path(tmp)) if own is not None else log_trial(Path(tmp), args.layout)
         shown = Path(tmp) / "02-swing" / "recording.rrd" if args.layout == "plan" else viewer.rrd_path  # on screen
         try:

@@ -65,15 +65,16 @@ def fixture_markdown(name: str, rows: list[Mapping], ended: str | None = None, v
 
 
 def fixture_blueprint(units: list[str]) -> rrb.Blueprint:
-    """A column per unit (its three bias axes over its verdict), the fixture's table under them."""
+    """A column per unit (its three bias axes over its verdict), the fixture's table under them; at 1600x1000 the
+    verdicts' tables (a row per judged measurement, about ten) and the fixture's (three or four units) are whole."""
     columns = [rrb.Vertical(
         *(rrb.TimeSeriesView(origin=f"/{unit_entity(name)}/bias/{a}", name=f"{name}: bias {a} (µg)",
                              plot_legend=rrb.PlotLegend(visible=a == "x")) for a in AXES),
         rrb.TextDocumentView(origin=f"/{unit_entity(name)}/verdict", name=f"{name}: verdict"),
-        row_shares=[3, 3, 3, 2], name=name) for name in units]  # fmt: skip
+        row_shares=[4, 4, 4, 12], name=name) for name in units]  # fmt: skip
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns), rrb.TextDocumentView(origin="/fixture", name="fixture: units, verdicts"),
-                     row_shares=[5, 1]),
+                     row_shares=[11, 3]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
