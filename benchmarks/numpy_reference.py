@@ -202,7 +202,7 @@ def main() -> None:
         subprocess.run([sys.executable, __file__, "--reference", kind], check=True)
     hil = Path(sys.executable).with_name("hil")
     with __import__("tempfile").TemporaryDirectory() as tmp:
-        simulate = best_wall([str(hil), "simulate", str(CONFIG), "--out", tmp], args.repeat)
+        simulate = best_wall([str(hil), "simulate", str(CONFIG), "--out", tmp, "--overwrite"], args.repeat)
     plain, lean = (best_wall([sys.executable, __file__, "--reference", kind], args.repeat) for kind in ("plain", "lean"))
     print(f"hil simulate configs/liu2019_sim.yaml  {simulate:7.3f} s   whole process, best of {args.repeat}")
     print(f"plain numpy reference                  {plain:7.3f} s   ratio {simulate / plain:.3f} (target <= 0.25)")
