@@ -126,14 +126,16 @@ class TimeOffsetEstimator:
         m = len(gyro) - 2 * MAX_LAG
         g = gyro[MAX_LAG : MAX_LAG + m]
         centred = table - table.mean(axis=0)
-        score = [np.sum((g - g.mean(axis=0)) * centred[MAX_LAG + k : MAX_LAG + k + m]) for k in lags]
+        g_centred = g - g.mean(axis=0)
+        score = [np.sum(g_centred * centred[MAX_LAG + k : MAX_LAG + k + m]) for k in lags]
         shift = float(lags[int(np.argmax(score))])
         spline = CubicSpline(np.arange(len(table)), table)
         at = np.arange(MAX_LAG, MAX_LAG + m, dtype=float)
-        offsets = np.tile(np.eye(3), (m, 1))  # a constant per axis: the gyros' rate error
+        design = np.empty((3 * m, 4))  # [d r / d shift, a constant per axis: the gyros' rate error]
+        design[:, 1:] = np.tile(np.eye(3), (m, 1))
         for _ in range(NEWTON_STEPS):  # Gauss-Newton on the sub-sample shift and the constant offsets
             r, r_dot = spline(at + shift), spline(at + shift, 1)
-            design = np.column_stack((r_dot.ravel(), offsets))
+            design[:, 0] = r_dot.ravel()
             step, *_ = np.linalg.lstsq(design, (g - r).ravel(), rcond=None)
             shift += step[0]
         return np.concatenate(([shift / self.rate_hz], step[1:]))
