@@ -73,27 +73,29 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
         raise ConfigError("trial.duration_s: required key is missing (or give --duration)")
     stop = stop_event or threading.Event()
     bench: Bench | None = None
+    owner = _Owner(os.getppid())
     with _SignalsStop(stop):
         try:
             bench = Bench(cfg, duration, speed, stop, wait_readers, link_dir)
             print(json.dumps(bench.names()), flush=True)
             if ports_file is not None:
                 _write_json(ports_file, bench.names())
-            stats = _pulse_train(bench, speed, stop, wait_readers, hold, stats_file)
-            if stats_file is not None:
-                _write_json(stats_file, stats.as_dict())
+            stats = _pulse_train(bench, speed, stop, wait_readers, hold,
+                                 lambda ended: owner.write(stats_file, ended.as_dict()))
+            owner.write(stats_file, stats.as_dict())
             return stats
         finally:
             if bench is not None:
                 bench.close()
-            if ports_file is not None:
+            if owner.file(ports_file) is not None:
                 ports_file.unlink(missing_ok=True)
 
 
 def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, wait_readers: bool, hold: bool,
-                 stats_file: Path | None) -> EmulatorStats:
+                 train_ended: Callable[[EmulatorStats], None]) -> EmulatorStats:
     """The pulse train of :func:`run_emulator` until done or stopped, the bytes written left to the readers,
-    and with ``hold`` the devices kept up until stopped; the statistics."""
+    and with ``hold`` the devices kept up until stopped (``train_ended`` told of the train's statistics first);
+    the statistics."""
     if wait_readers and not wait_for_readers(bench.ptys(), stop):
         return bench.stats(0, 0.0, True)
     clock = SyncClock(speed)
@@ -105,10 +107,28 @@ def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, wait_
         port.drain(stop, math.inf if hold else DRAIN_S)
     elapsed, stopped = time.monotonic() - clock.start, stop.is_set()
     if hold:
-        if stats_file is not None:  # tells that the pulse train has ended
-            _write_json(stats_file, bench.stats(pulses, elapsed, stopped, clock.due(0.0)).as_dict())
+        train_ended(bench.stats(pulses, elapsed, stopped, clock.due(0.0)))  # the stats file: the train has ended
         stop.wait()
     return bench.stats(pulses, elapsed, stopped, clock.due(0.0))  # held: with the commands received meanwhile
+
+
+class _Owner:
+    """The process that started the emulator (``parent``, its pid). Once it is gone (a harness killed outright:
+    its death signal stops the emulator), the emulator writes and removes nothing more of its files: they are in
+    the harness's directory, where the next harness (a plan resumed at once) may already have started its own."""
+
+    def __init__(self, parent: int) -> None:
+        self.parent = parent
+
+    def file(self, path: Path | None) -> Path | None:
+        """``path`` while the parent lives; None once it is gone."""
+        return path if path is not None and os.getppid() == self.parent else None
+
+    def write(self, path: Path | None, doc: dict) -> None:
+        """``doc`` to ``path`` (JSON) while the parent lives."""
+        path = self.file(path)
+        if path is not None:
+            _write_json(path, doc)
 
 
 class _SignalsStop:

@@ -111,3 +111,32 @@ def test_a_signal_closes_the_ptys_and_releases_the_command_port(emulator, sig):
         socket.create_connection((host, int(port)), timeout=2).close()
     with socket.create_server((host, int(port))):  # the port is free again
         pass
+
+
+def _gone(pid: int) -> bool:
+    """The process has exited (reaped, or a zombie no one has reaped yet)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+def test_an_emulator_whose_harness_is_killed_writes_nothing_more_in_the_harness_directory(tmp_path):
+    """A harness killed outright (a plan killed mid-step): its emulator stops on its death signal without writing
+    its statistics or removing its ports file there, where a harness resumed at once may have started its own."""
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump(CONFIG))
+    stats, ports = tmp_path / "emulator.json", tmp_path / "ports.json"
+    script = ("import time\nfrom pathlib import Path\nfrom emulators.process import spawn_emulator\n"
+              f"proc, _ = spawn_emulator(Path({str(config)!r}), Path({str(ports)!r}), '1', "
+              f"stats_file=Path({str(stats)!r}), hold=True)\nprint(proc.pid, flush=True)\ntime.sleep(600)\n")
+    harness = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                               cwd=Path(__file__).resolve().parents[1])
+    emulator = int(harness.stdout.readline())
+    harness.kill()
+    harness.wait()
+    deadline = time.monotonic() + 30
+    while not _gone(emulator) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _gone(emulator), "the emulator outlived its harness"
+    assert not stats.exists() and ports.exists()
