@@ -275,16 +275,14 @@ class Config(Model):
     @model_validator(mode="after")
     def _units_apart_and_imu_rates_divide_into_table_latches(self) -> Config:
         check_units(self.units, "imu" in self.model_fields_set)
-        for key, imu in self.imus.items():
-            rate = imu.rate_hz or self.trial.rate_hz
+        rates = {key: imu.rate_hz or self.trial.rate_hz for key, imu in self.imus.items()}
+        first = next(iter(rates))
+        for key, rate in rates.items():
             ratio = rate / self.trial.rate_hz
             if round(ratio) < 1 or abs(ratio - round(ratio)) > RATE_RATIO_TOLERANCE * ratio:
                 raise ValueError(f"{key}.rate_hz: {rate:g} Hz is not an integer multiple of trial.rate_hz "
                                  f"({self.trial.rate_hz:g} Hz); both count one pulse train at the IMU rate and the "
                                  "table latches every n-th pulse")
-        rates = {key: imu.rate_hz or self.trial.rate_hz for key, imu in self.imus.items()}
-        first = next(iter(rates))
-        for key, rate in rates.items():
             if rate != rates[first] and not self.turntable.timing.free_running:
                 raise ValueError(f"{key}.rate_hz: {rate:g} Hz differs from {first}.rate_hz ({rates[first]:g} Hz): the "
                                  "table counts one sync pulse train, at one rate; units at different rates need a "

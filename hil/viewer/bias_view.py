@@ -49,10 +49,9 @@ def log_bias_styles(rec, with_truth: bool, prefix: str = "", series: tuple[str, 
                         rr.SeriesLines(names=name, colors=series_color(a, kind), widths=width), static=True)
 
 
-def bias_rows(snaps: list[Snapshot], truth_bias: np.ndarray | None, truth_drift: np.ndarray | None
-              ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def bias_rows(snaps: list[Snapshot], truth: BiasTruth | None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The rows (t, values µg) of each bias entity for these snapshots; rows without a value left out. The truth
-    at t is ``truth_bias + truth_drift t`` (the bias at t, as the estimate is)."""
+    at t is ``truth.bias + truth.drift t`` (the bias at t, as the estimate is)."""
     t = np.fromiter((s.t for s in snaps), float, len(snaps))
     nan3 = np.full(3, np.nan)
     bias = np.array([s.full.bias if s.full.bias is not None else nan3 for s in snaps]).reshape(-1, 3) / UG
@@ -60,9 +59,10 @@ def bias_rows(snaps: list[Snapshot], truth_bias: np.ndarray | None, truth_drift:
     table = np.array([s.table_bias if s.table_bias is not None else nan3 for s in snaps]).reshape(-1, 3) / UG
     columns = {"estimate": bias, "sigma3_upper": bias + 3.0 * sigma, "sigma3_lower": bias - 3.0 * sigma,
                "table_reference": table}  # fmt: skip
-    if truth_bias is not None:
-        drift = np.zeros(3) if truth_drift is None else truth_drift
-        columns["truth"] = np.where(np.isnan(bias), np.nan, (truth_bias + np.outer(t, drift)) / UG)
+    if truth is not None:
+        start = np.asarray(truth.bias, dtype=float)
+        drift = np.zeros(3) if truth.drift is None else np.asarray(truth.drift, dtype=float)
+        columns["truth"] = np.where(np.isnan(bias), np.nan, (start + np.outer(t, drift)) / UG)
     rows = {}
     for k, a in enumerate(AXES):
         for series, values in columns.items():

@@ -15,14 +15,12 @@ thread: the snapshots are handed to one background thread, and dropped and count
 
 from __future__ import annotations
 
-import logging
 import threading
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -35,8 +33,6 @@ from hil.viewer.judged_view import log_verdict
 from hil.viewer.modes import ViewerOptions
 from hil.viewer.log_jobs import LogJobs
 from hil.viewer.trial_viewer import FILE_FLUSH_S, recording_stream
-
-log = logging.getLogger(__name__)
 
 FIXTURE_RRD = "fixture.rrd"
 FIXTURE_SERIES = ("estimate", "sigma3_upper", "sigma3_lower", "truth")  # of bias_view.SERIES; truth: emulated
@@ -136,7 +132,7 @@ class FixtureView:
         for unit, info in self._units.items():
             log_bias_styles(rec, info.truth is not None, prefix=f"{unit_entity(unit)}/", series=FIXTURE_SERIES)
         rows = [{"name": unit, "dut_serial": info.serial} for unit, info in self._units.items()]
-        _text(rec, "fixture", 0.0, fixture_markdown(self.name, rows))
+        log_verdict(rec, 0.0, fixture_markdown(self.name, rows), "fixture")
         self.rrd_path, self._file, self._columns = self.out / FIXTURE_RRD, file, columns
         self._view = recs[1] if len(recs) > 1 else None
         self._jobs = LogJobs("rerun-fixture", "the fixture's overview", self._due, self._flush)
@@ -168,7 +164,7 @@ class FixtureView:
         self.close()
         t = max(self._t_latest.values(), default=0.0)
         markdown = fixture_markdown(self.name, list(index["units"]), index["ended"], index["verdict"])
-        self._jobs.run(lambda: _text(self._rec, "fixture", t, markdown))
+        self._jobs.run(lambda: log_verdict(self._rec, t, markdown, "fixture"))
         self._ended = True
         self._file.flush()
         self._file.disconnect()  # the .rrd is complete
@@ -181,8 +177,6 @@ class FixtureView:
             return
         self._closed = True
         self._jobs.stop()
-        if self.error is not None:
-            log.warning("Rerun logging of the fixture's overview failed: %s", self.error)
         for rec in self._rec.recs:
             rec.flush()
 
@@ -204,17 +198,9 @@ class FixtureView:
             self._jobs.run(columns.flush)
 
     def _write(self, unit: str, snaps: list[Snapshot]) -> None:
-        truth = self._units[unit].truth
-        rows = bias_rows(snaps, None if truth is None else np.asarray(truth.bias, dtype=float),
-                         None if truth is None or truth.drift is None else np.asarray(truth.drift, dtype=float))
-        for path, (t, values) in rows.items():
+        for path, (t, values) in bias_rows(snaps, self._units[unit].truth).items():
             if path.rsplit("/", 1)[1] in FIXTURE_SERIES:
                 for columns in self._columns:
                     columns.scalars(f"{unit_entity(unit)}/{path}", t, values)
         self._t_latest[unit] = max(self._t_latest.get(unit, 0.0), max(s.t for s in snaps))
 
-
-def _text(rec, path: str, t: float, markdown: str) -> None:
-    """A markdown document at ``path`` at trial time t."""
-    rec.set_time(TIMELINE, duration=t)
-    rec.log(path, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))

@@ -45,9 +45,11 @@ class LogJobs:
                 log.warning("Rerun logging error in %s (further errors not reported): %s", self._what, exc)
 
     def stop(self) -> None:
-        """Run what is queued and ``at_end``, and wait for the thread."""
+        """Run what is queued and ``at_end``, wait for the thread, and warn once more if a job failed."""
         self.queue.put(None)
         self._thread.join()
+        if self.error is not None:
+            log.warning("Rerun logging of %s failed: %s", self._what, self.error)
 
     def _work(self) -> None:
         while (job := self.queue.get()) is not None:

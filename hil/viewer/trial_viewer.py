@@ -21,7 +21,6 @@ Viewer modes (:mod:`hil.viewer.modes`): ``spawn`` starts the native viewer, ``se
 
 from __future__ import annotations
 
-import logging
 import subprocess
 import uuid
 from collections.abc import Callable, Mapping
@@ -55,8 +54,6 @@ from hil.viewer.rerun_process import start_viewer, stop_served, telemetry_reques
 from hil.viewer.scene import GIMBALS, axis_quaternions, log_cone, log_turntable
 from hil.viewer.temperature_view import CHAMBER_READING, CHAMBER_SET_POINT, IMU, TemperatureLog
 
-log = logging.getLogger(__name__)
-
 APPLICATION_ID = "turntable-hil"
 RRD_NAME = "recording.rrd"
 TABLE_RATE_HZ = 10.0  # gimbal poses in the 3D view: a step of 1 deg at 10 deg/s, a few pixels on screen
@@ -81,6 +78,7 @@ class TrialViewer:
         self.mode = mode
         self.out_dir = Path(out_dir)
         self.geometry = geometry
+        self._truth = truth
         self.truth_bias = None if truth is None else np.asarray(truth.bias, dtype=float)
         self.truth_drift = None if truth is None or truth.drift is None else np.asarray(truth.drift, dtype=float)
         self.blocking = blocking
@@ -217,8 +215,6 @@ class TrialViewer:
             return
         self._closed = True
         self._jobs.stop()
-        if self.error is not None:
-            log.warning("Rerun logging failed: %s", self.error)
         if not self.verdict_at_end:
             self._end_file()
         else:
@@ -294,7 +290,7 @@ class TrialViewer:
         n = len(snaps)
         t = np.fromiter((s.t for s in snaps), float, n)
         nan3 = np.full(3, np.nan)
-        for path, (t_rows, values) in bias_rows(snaps, self.truth_bias, self.truth_drift).items():
+        for path, (t_rows, values) in bias_rows(snaps, self._truth).items():
             self._scalars(path, t_rows, values)
         sigma = np.array([s.full.bias_sigma if s.full.bias_sigma is not None else nan3 for s in snaps]) / UG
         self._scalars("sigma", t, sigma)
