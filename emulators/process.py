@@ -87,7 +87,7 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
         finally:
             if bench is not None:
                 bench.close()
-            if owner.file(ports_file) is not None:
+            if ports_file is not None:
                 ports_file.unlink(missing_ok=True)
 
 
@@ -114,8 +114,10 @@ def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, wait_
 
 class _Owner:
     """The process that started the emulator (``parent``, its pid). Once it is gone (a harness killed outright:
-    its death signal stops the emulator), the emulator writes and removes nothing more of its files: they are in
-    the harness's directory, where the next harness (a plan resumed at once) may already have started its own."""
+    its death signal stops the emulator), the emulator writes no more statistics: they are in the harness's
+    directory, where the next harness (a plan resumed at once) may already have started its own, and would tell it
+    that its devices' run has ended. The ports file is still removed on the way out (spawn_emulator removes a
+    stale one before it starts the next)."""
 
     def __init__(self, parent: int) -> None:
         self.parent = parent

@@ -123,7 +123,7 @@ def _gone(pid: int) -> bool:
 
 def test_an_emulator_whose_harness_is_killed_writes_nothing_more_in_the_harness_directory(tmp_path):
     """A harness killed outright (a plan killed mid-step): its emulator stops on its death signal without writing
-    its statistics or removing its ports file there, where a harness resumed at once may have started its own."""
+    its statistics there, where a harness resumed at once may have started its own; it removes its ports file."""
     config = tmp_path / "config.yaml"
     config.write_text(yaml.safe_dump(CONFIG))
     stats, ports = tmp_path / "emulator.json", tmp_path / "ports.json"
@@ -139,4 +139,4 @@ def test_an_emulator_whose_harness_is_killed_writes_nothing_more_in_the_harness_
     while not _gone(emulator) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert _gone(emulator), "the emulator outlived its harness"
-    assert not stats.exists() and ports.exists()
+    assert not stats.exists() and not ports.exists()
