@@ -7,8 +7,10 @@ anything is checked (docs/architecture.md, "Where each trial kind plugs in")."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
+import threading
 
 from hil import interrupted_at_start
 
@@ -45,13 +47,33 @@ def main(argv: list[str] | None = None) -> int:
     arguments on, is one line and exit 130."""
     try:
         if signal.getsignal(signal.SIGINT) is interrupted_at_start:
-            signal.signal(signal.SIGINT, signal.default_int_handler)  # caught below from here on
+            signal.signal(signal.SIGINT, _interrupt)  # caught below from here on
         return _command(argv)
     except BaseException as exc:
         if not _interrupted(exc):
             raise
+        _INTERRUPT_CAUGHT.set()
         print("hil: interrupted", file=sys.stderr)
         return 130
+
+
+_INTERRUPT_CAUGHT = threading.Event()
+RESEND_S = 0.5  # s between the sendings of a Ctrl-C that has not ended the command yet
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """Ctrl-C: KeyboardInterrupt, caught in :func:`main`. Some places lose one (the import system's module-lock
+    callbacks print "Exception ignored" and go on), so the signal is sent again every :data:`RESEND_S` until one
+    reaches :func:`main`, or a trial's own handler takes it (and ends the trial as interrupted)."""
+    timer = threading.Timer(RESEND_S, _resend, (signum,))
+    timer.daemon = True
+    timer.start()
+    raise KeyboardInterrupt
+
+
+def _resend(signum: int) -> None:
+    if not _INTERRUPT_CAUGHT.is_set():
+        os.kill(os.getpid(), signum)
 
 
 def _interrupted(exc: BaseException | None) -> bool:

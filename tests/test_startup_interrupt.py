@@ -60,3 +60,28 @@ def test_ctrl_c_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, com
         else:  # the trial was running: it ended as interrupted
             assert command == "run" and code == 1 and err[0] == TRIAL_LINES[0] and err[-1] == TRIAL_LINES[1], \
                 (delay, code, err)
+
+
+LOSES_ONE = """
+import signal, sys, time
+import hil
+signal.signal(signal.SIGINT, hil.interrupted_at_start)  # as the console script starts
+from hil import cli
+
+def loses_the_first(args):
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        print("lost", file=sys.stderr, flush=True)  # as the import system's module-lock callbacks lose one
+    for _ in range(1000):
+        time.sleep(0.01)
+    return 0
+
+cli.COMMANDS["simulate"] = loses_the_first
+sys.exit(cli.main(["simulate", "any.yaml"]))
+"""
+
+
+def test_a_ctrl_c_lost_on_the_way_is_sent_again_until_the_command_ends_with_130():
+    proc = subprocess.run([sys.executable, "-c", LOSES_ONE], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert (proc.returncode, proc.stderr.splitlines()) == (130, ["lost", "hil: interrupted"])
