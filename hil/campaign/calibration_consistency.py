@@ -22,14 +22,14 @@ from hil.campaign.campaign_report import (
 )
 from hil.outputs.html_page import figures_html
 from hil.campaign.runs import ERROR, TERM
-from hil.campaign.task import point_label
+from hil.campaign.entries import entry_label, entry_rows
 
 BLOCKS = (("accel", "accelerometer terms"), ("gyro", "gyro terms"), ("turntable", "zero offsets"))
 
 
-def _errors_in_sigmas(rows: list[dict[str, Any]], point: int, terms: list[str]) -> np.ndarray:
-    """Error over sigma of ``terms`` in every done run of a point, pooled (the runs that judge them)."""
-    return np.array([row[k] for row in rows if row["point"] == point and row.get(ERROR) is None for term in terms
+def _errors_in_sigmas(rows: list[dict[str, Any]], p: dict, terms: list[str]) -> np.ndarray:
+    """Error over sigma of ``terms`` in every done run of a summary entry, pooled (the runs that judge them)."""
+    return np.array([row[k] for row in entry_rows(rows, p) if row.get(ERROR) is None for term in terms
                      if row.get(k := f"{TERM}.{term}.error_sigma") is not None], dtype=float)
 
 
@@ -38,7 +38,7 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], terms: list[str], plt
     for block, name in BLOCKS:
         members = [t for t in terms if t.startswith(f"{block}.")]
         if members:
-            panels.append((f"{name}: error / sigma", [_errors_in_sigmas(rows, p["point"], members)
+            panels.append((f"{name}: error / sigma", [_errors_in_sigmas(rows, p, members)
                                                       for p in summary["points"]]))
     if not panels:
         return None
@@ -61,7 +61,7 @@ def _point_rows(p: dict) -> list[tuple[bool, str]]:
     terms = p.get("terms", {})
     rows = []
     for term, s in terms.items():
-        cells = point_cell(p["values"], len(terms)) if not rows else ""
+        cells = point_cell(p, len(terms)) if not rows else ""
         cells += cell(breakable(term), num=False) + cell(s["runs"]) + cell(s["unobservable"])
         cells += "".join(cell(_num(s.get(k))) for k in ("error_mean", "error_std", "sigma_mean"))
         cells += (cell(_num(s.get("ratio"), ".3f"), bold=not s.get("ratio_inside", True))
@@ -80,7 +80,7 @@ def _table(summary: dict) -> str:
 def _families(summary: dict) -> str:
     head = ("<tr><th>sweep point</th><th>family</th><th>terms</th><th>std/σ min–max</th><th>within 3σ</th>"
             "<th>rms error/σ</th></tr>")
-    body = [f"<tr><td>{html.escape(point_label(p['values']))}</td><td>{html.escape(family)}</td>"
+    body = [f"<tr><td>{html.escape(entry_label(p))}</td><td>{html.escape(family)}</td>"
             f"<td class='num'>{f['terms']}</td><td class='num'>{f['ratio_min']:.3f}–{f['ratio_max']:.3f}</td>"
             f"<td class='num'>{f['within_3sigma']:.2f}</td><td class='num'>{f['z_rms']:.2f}</td></tr>"
             for p in summary["points"] for family, f in p.get("families", {}).items()]
@@ -94,7 +94,7 @@ def _headlines(summary: dict) -> str:
             continue
         worst = p["worst"]
         verdict = "consistent" if p["consistent"] else "NOT consistent"
-        items.append(f"<li>{html.escape(point_label(p['values']))}: {verdict}, {p['ratio_above']} above and "
+        items.append(f"<li>{html.escape(entry_label(p))}: {verdict}, {p['ratio_above']} above and "
                      f"{p['ratio_below']} below their band of {p['ratio_tested']} terms (by chance "
                      f"~{p['ratio_expected_outside']:.1f}, at most {p['ratio_outside_allowed']}); worst {html.escape(worst['term'])} "
                      f"{worst['ratio']:.3f}</li>")

@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from hil.campaign.entries import entry_label
 from hil.campaign.runs import ERROR, TERM
 from hil.campaign.swing_summary import LEVEL, ratio_band
-from hil.campaign.task import point_label
 
 WITHIN = 3.0  # sigmas
 
@@ -101,7 +101,7 @@ def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]
 def point_lines(p: dict[str, Any]) -> list[str]:
     """The console lines of a point: the headline, each family's ratios, the terms outside their band and the
     unobservable ones."""
-    label = point_label(p["values"])
+    label = entry_label(p)
     if "terms" not in p:
         return [f"  {label}: no run done"]
     if not p["ratio_tested"]:

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from hil.campaign.entries import entry_label, entry_rows, entry_values
 from hil.campaign.swing_summary import SIGMA, bias_error
-from hil.campaign.task import point_label
 from hil.outputs.page_header import page_header
 from hil.outputs.figures import pyplot
 from hil.outputs.html_page import figures_html, html_page
@@ -26,9 +26,11 @@ AXES = "xyz"
 
 
 def point_labels(points: list[dict]) -> list[str]:
-    """Short point labels for the figures: the keys that vary across the points, by their last part."""
-    varying = [k for k in points[0]["values"] if len({repr(p["values"][k]) for p in points}) > 1] if points else []
-    return [", ".join(f"{k.rsplit('.', 1)[-1]}={p['values'][k]}" for k in varying) or "all runs" for p in points]
+    """Short labels of the summary's entries for the figures: the keys that vary across them (a units campaign's
+    unit among them), by their last part."""
+    values = [entry_values(p) for p in points]
+    varying = [k for k in values[0] if len({repr(v[k]) for v in values}) > 1] if values else []
+    return [", ".join(f"{k.rsplit('.', 1)[-1]}={v[k]}" for k in varying) or "all runs" for v in values]
 
 
 def png(fig) -> bytes:
@@ -40,10 +42,10 @@ def png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def _normalised(rows: list[dict[str, Any]], point: int) -> np.ndarray:
-    """(M, 3) errors over reported sigma of a point's runs with an estimate."""
-    found = [(e, [row[f"{SIGMA}.{i}"] for i in range(3)]) for row in rows
-             if row["point"] == point and (e := bias_error(row)) is not None]
+def _normalised(rows: list[dict[str, Any]], p: dict) -> np.ndarray:
+    """(M, 3) errors over reported sigma of the runs with an estimate of a summary entry ``p``."""
+    found = [(e, [row[f"{SIGMA}.{i}"] for i in range(3)]) for row in entry_rows(rows, p)
+             if (e := bias_error(row)) is not None]
     if not found:
         return np.empty((0, 3))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -71,7 +73,7 @@ def normal_histograms(panels: list[tuple[str, list[np.ndarray]]], labels: list[s
 
 
 def _histograms(summary: dict, rows: list[dict[str, Any]], plt) -> bytes:
-    normalised = [_normalised(rows, p["point"]) for p in summary["points"]]
+    normalised = [_normalised(rows, p) for p in summary["points"]]
     return normal_histograms([(f"error {AXES[k]} / reported sigma", [z[:, k] for z in normalised]) for k in range(3)],
                              point_labels(summary["points"]), plt, "Bias error against the reported sigma")
 
@@ -122,7 +124,7 @@ def _convergence(summary: dict, plt) -> bytes | None:
     if key is None:
         return None
     groups: dict[str, list[dict]] = {}
-    others = point_labels([{"values": {k: v for k, v in p["values"].items() if k != key}} for p in points])
+    others = point_labels([{"values": {k: v for k, v in entry_values(p).items() if k != key}} for p in points])
     for p, label in zip(points, others):
         groups.setdefault(label, []).append(p)
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -162,9 +164,9 @@ def breakable(key: str) -> str:
     return re.sub(r"\.(?=[A-Za-z_])|_", lambda m: m.group() + "<wbr>", html.escape(key))
 
 
-def point_cell(values: dict[str, Any], span: int = 1) -> str:
-    """The sweep point's cell."""
-    return cell(breakable(point_label(values)), num=False, span=span)
+def point_cell(p: dict, span: int = 1) -> str:
+    """The cell of the summary's entry ``p``: its sweep point (and unit)."""
+    return cell(breakable(entry_label(p)), num=False, span=span)
 
 
 def band_text(band: list[float] | None, form: str = ".3f") -> str:
@@ -189,7 +191,7 @@ def _point_rows(p: dict) -> list[tuple[bool, str]]:
     for k, axis in enumerate(AXES):
         cells = ""
         if k == 0:
-            cells += point_cell(p["values"], 3) + cell(p["runs"], span=3) + cell(p["failed"], span=3)
+            cells += point_cell(p, 3) + cell(p["runs"], span=3) + cell(p["failed"], span=3)
         cells += cell(axis, num=False)
         cells += "".join(cell(_num(p[key][k]) if key in p else "–") for key in ("error_mean_ug", "error_std_ug",
                                                                                    "sigma_mean_ug"))

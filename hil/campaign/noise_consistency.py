@@ -19,6 +19,7 @@ from hil.campaign.campaign_report import (
     point_labels,
     table_html,
 )
+from hil.campaign.entries import entry_rows
 from hil.outputs.html_page import figures_html
 from hil.campaign.runs import ERROR, TRUTH
 
@@ -32,10 +33,10 @@ def _terms(summary: dict) -> list[str]:
     return [term for term in TERM_KEYS if term in found]
 
 
-def _ratios(rows: list[dict[str, Any]], point: int, term: str) -> np.ndarray:
-    """Fitted over true value of a term, every axis and done run of a point where both are there."""
-    return np.array([row[f"{term}.{k}"] / row[f"{TRUTH}.{term}.{k}"] for row in rows for k in range(AXES)
-                     if row["point"] == point and row.get(ERROR) is None and row.get(f"{term}.{k}") is not None
+def _ratios(rows: list[dict[str, Any]], p: dict, term: str) -> np.ndarray:
+    """Fitted over true value of a term, every axis and done run of a summary entry where both are there."""
+    return np.array([row[f"{term}.{k}"] / row[f"{TRUTH}.{term}.{k}"] for row in entry_rows(rows, p)
+                     for k in range(AXES) if row.get(ERROR) is None and row.get(f"{term}.{k}") is not None
                      and (row.get(f"{TRUTH}.{term}.{k}") or 0.0) > 0.0], dtype=float)
 
 
@@ -47,7 +48,7 @@ def _histograms(summary: dict, rows: list[dict[str, Any]], terms: list[str], plt
         ax.set_visible(False)
     for ax, term in zip(axes.flat, terms):
         for p, label in zip(summary["points"], point_labels(summary["points"])):
-            ratios = _ratios(rows, p["point"], term)
+            ratios = _ratios(rows, p, term)
             if ratios.size:
                 ax.hist(ratios, bins=20, density=True, histtype="step", label=label)
         ax.axvline(1.0, color="k", linestyle="--", linewidth=0.8)
@@ -86,7 +87,7 @@ def _point_rows(p: dict, terms: list[str]) -> list[tuple[bool, str]]:
         for k, a in enumerate(per_axis):
             cells = ""
             if not rows:
-                cells += point_cell(p["values"], span) + cell(p["runs"], span=span) + cell(p["failed"], span=span)
+                cells += point_cell(p, span) + cell(p["runs"], span=span) + cell(p["failed"], span=span)
             if k == 0:
                 cells += cell(breakable(term), num=False, span=len(per_axis))
             cells += cell(AXIS_NAMES[k], num=False) + "".join(

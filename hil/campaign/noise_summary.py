@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from hil.campaign.entries import entry_label
 from hil.campaign.runs import ERROR, TRUTH
 from hil.campaign.swing_summary import LEVEL
-from hil.campaign.task import point_label
 from hil.outputs.noise import SENSORS
 
 AXES = 3
@@ -81,7 +81,7 @@ def _joined(texts: list[str]) -> str:
 def point_lines(p: dict[str, Any]) -> list[str]:
     """The console lines of a point: whether its coverages are consistent with the intervals' level, then per
     term with a truth the relative error and the coverage per axis."""
-    label = point_label(p["values"])
+    label = entry_label(p)
     if "terms" not in p:
         return [f"  {label}: no run done"]
     head = f"  {label}: {p['done']} runs, coverage of the {p['ci_level']:.1%} intervals"

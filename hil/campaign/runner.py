@@ -20,6 +20,7 @@ import yaml
 
 from hil.campaign.campaign_report import write_campaign_report
 from hil.campaign.cluster import open_client
+from hil.campaign.entries import summary_entries
 from hil.campaign.kinds import KINDS, Kind, Row
 from hil.campaign.runs import ERROR, SWEEP_PREFIX, failed_row, task_columns
 from hil.campaign.spec import DEFAULT_KIND, Campaign, SpecError, load_campaign
@@ -146,7 +147,8 @@ def run_campaign(spec: str | Path, out: Path, scheduler: str | None = None, work
             interrupted = str(exc)
         finally:
             write_runs(out, rows)
-    summary = {"spec": campaign.spec.as_dict(), **summarise(campaign.points, rows, info.as_dict(), kind.point_summary),
+    summary = {"spec": campaign.spec.as_dict(), **summarise(campaign.points, rows, info.as_dict(), kind.point_summary,
+                                                            summary_entries(campaign.tasks)),
                "record": {**run_record({}, campaign.path.read_text(), started, datetime.now(timezone.utc)),
                           "spec_path": str(campaign.path)}}
     write_summary(out, summary)

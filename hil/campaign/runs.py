@@ -20,6 +20,7 @@ from hil.campaign.task import RunTask
 
 SWEEP_PREFIX = "sweep."  # a swept value's column: sweep.<dotted key> (result.json has trial.* keys of its own)
 ERROR = "error"
+UNIT = "unit"  # the unit's name: a column of a units config's campaign only
 
 
 def flatten(value: Any, prefix: str = "") -> dict[str, Any]:
@@ -37,13 +38,15 @@ def flatten(value: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def task_columns(task: RunTask) -> dict[str, Any]:
-    """The columns every row of the task has, done or failed: its id, indices, seed, swept values and its part of
-    the record (the unit of its config's ``record`` block, the SHA-256 of the config text the run was given)."""
-    unit = task.config.get("record") or {}
+    """The columns every row of the task has, done or failed: its id, indices (and unit, of a units config), seed,
+    swept values and its part of the record (the device of its config's ``record`` block, the SHA-256 of the config
+    text the run was given)."""
+    record = task.config.get("record") or {}
     digest = hashlib.sha256(yaml.safe_dump(task.config).encode()).hexdigest()
-    return {"id": task.id, "point": task.point, "run": task.run, "seed": task.seed,
-            **flatten(task.values, SWEEP_PREFIX), "record.dut_part": unit.get("dut_part"),
-            "record.dut_serial": unit.get("dut_serial"), "record.config_sha256": digest}
+    unit = {} if task.unit is None else {UNIT: task.unit}
+    return {"id": task.id, "point": task.point, "run": task.run, **unit, "seed": task.seed,
+            **flatten(task.values, SWEEP_PREFIX), "record.dut_part": record.get("dut_part"),
+            "record.dut_serial": record.get("dut_serial"), "record.config_sha256": digest}
 
 
 def failed_row(task: RunTask, error: BaseException | str) -> dict[str, Any]:

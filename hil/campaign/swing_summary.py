@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from hil.campaign.entries import Entry, entry_label, row_entry, with_unit
 from hil.campaign.runs import ERROR
-from hil.campaign.task import point_label
 from hil.outputs.result import strict_json
 
 SUMMARY_NAME = "summary.json"
@@ -96,15 +96,16 @@ def point_summary(point: int, values: dict[str, Any], rows: list[dict[str, Any]]
 
 
 def summarise(points: list[dict[str, Any]], rows: list[dict[str, Any]], cluster: dict[str, Any],
-              point: Callable[[int, dict[str, Any], list[dict[str, Any]]], dict[str, Any]] = point_summary
-              ) -> dict[str, Any]:
-    """summary.json: every sweep point's statistics (``point``: of the campaign's kind), the campaign's counts
-    and the cluster it ran on."""
-    by_point: dict[int, list[dict[str, Any]]] = {p: [] for p in range(len(points))}
+              point: Callable[[int, dict[str, Any], list[dict[str, Any]]], dict[str, Any]] = point_summary,
+              entries: list[Entry] | None = None) -> dict[str, Any]:
+    """summary.json: the statistics (``point``: of the campaign's kind) of every entry (:mod:`hil.campaign.entries`;
+    by default each sweep point, as a one-unit campaign's), the campaign's counts and the cluster it ran on."""
+    by_entry: dict[Entry, list[dict[str, Any]]] = {e: [] for e in entries or [(p, None) for p in range(len(points))]}
     for row in rows:
-        by_point[row["point"]].append(row)
+        by_entry[row_entry(row)].append(row)
     return {"runs": len(rows), "failed": sum(row.get(ERROR) is not None for row in rows), "level": LEVEL,
-            "points": [point(p, points[p], by_point[p]) for p in range(len(points))], "cluster": cluster}
+            "points": [with_unit(point(p, points[p], found), unit) for (p, unit), found in by_entry.items()],
+            "cluster": cluster}
 
 
 def write_summary(out: Path, summary: dict[str, Any]) -> Path:
@@ -115,7 +116,7 @@ def write_summary(out: Path, summary: dict[str, Any]) -> Path:
 
 def point_lines(p: dict[str, Any]) -> list[str]:
     """The console line of a point: the consistency ratio per axis and the mean NEES."""
-    values = point_label(p["values"])
+    values = entry_label(p)
     if "ratio" not in p:
         return [f"  {values}: {p['with_estimate']} runs with an estimate: too few for statistics"]
     ratio = " ".join(f"{r:.3f}" for r in p["ratio"])

@@ -1,4 +1,4 @@
-"""``OUT/runs.parquet``: one row a run, ordered by (point, run), whatever order the runs completed in."""
+"""``OUT/runs.parquet``: one row a run, ordered by (point, run, unit), whatever order the runs completed in."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from hil.campaign.runs import UNIT
 from hil.config import InputError
 
 RUNS_NAME = "runs.parquet"
@@ -19,8 +20,9 @@ class TableError(InputError, ValueError):
 
 
 def to_table(rows: list[dict[str, Any]]) -> pa.Table:
-    """The rows sorted by (point, run); the columns in their first appearance, a missing value null."""
-    rows = sorted(rows, key=lambda r: (r["point"], r["run"]))
+    """The rows sorted by (point, run, unit: a units config's); the columns in their first appearance, a missing
+    value null."""
+    rows = sorted(rows, key=lambda r: (r["point"], r["run"], r.get(UNIT) or ""))
     columns: dict[str, None] = {}
     for row in rows:
         columns.update(dict.fromkeys(row))
