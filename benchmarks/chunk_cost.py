@@ -27,6 +27,7 @@ from drivers.tts1 import FRAME_SIZE as TTS1_FRAME
 from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
+from hil.pipeline.settings import PipelineSettings
 from hil.recording.replay import open_recording
 
 
@@ -58,7 +59,7 @@ def main() -> None:
         chunks = reads(list(recording), cfg.imu_rate_hz, cfg.trial.rate_hz, args.gather)
 
     def run(pause: float = 0.0) -> Finished:
-        processor = TrialProcessor(cfg, None, 1.0)
+        processor = TrialProcessor(PipelineSettings.of(cfg), None, 1.0)
         for chunk in chunks:
             processor.feed(chunk)
             if pause:

@@ -38,6 +38,7 @@ from hil.config import Config, parse_config
 from hil.outputs.result import COMPLETED
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
+from hil.pipeline.settings import PipelineSettings
 from hil.recording.recorder import Recorder, RecordingReader
 from hil.recording.replay import open_recording
 from hil.trial.offline import how_it_ended, replay_recording
@@ -85,7 +86,7 @@ def trial_config(path: str, hours: float, rate: float) -> tuple[Config, str]:
 
 def simulate(cfg: Config, config_text: str, every: float) -> None:
     rows = Rows(every)
-    processor = TrialProcessor(cfg)
+    processor = TrialProcessor(PipelineSettings.of(cfg))
     with SimulationProcess() as simulation:
         for batch in simulation.batches(cfg):  # as hil simulate: computed by a child process, ahead
             processor.feed_batch(batch)

@@ -24,6 +24,7 @@ from drivers.registry import imu_codec  # noqa: E402
 from emulators.simulation import Simulation  # noqa: E402
 from hil.config import load_config  # noqa: E402
 from hil.pipeline.processor import TrialProcessor  # noqa: E402
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import ImuSample, TableSample  # noqa: E402
 
 OURS = ("hil", "drivers", "emulators")
@@ -40,7 +41,7 @@ def main() -> None:
     batch = next(Simulation.from_config(cfg).batches(chunk=10**6))
     imu_c, table_c = imu_codec(cfg.imu, cfg.imu_rate_hz), data_codec(cfg.turntable, cfg.table_counts_per_frame)
     block = cfg.block_samples
-    processor = TrialProcessor(cfg, None, 1.0)
+    processor = TrialProcessor(PipelineSettings.of(cfg), None, 1.0)
 
     def reads(start: int) -> tuple[RawChunk, RawChunk]:
         at = (start + block) / cfg.imu_rate_hz

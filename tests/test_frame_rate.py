@@ -10,18 +10,19 @@ from tests.helpers import make_config
 from drivers.codec import RawChunk
 from drivers.kvh1750 import Kvh1750Codec
 from emulators.simulation import Simulation
-from hil.pipeline.decoding import IMU, TABLE, FrameRate, stream_codecs
+from hil.pipeline.decoding import IMU, TABLE, FrameRate
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import ImuSample, TableSample
 
 CFG = make_config(duration=20.0, rate=200.0)
-CODECS = stream_codecs(CFG)
+CODECS = PipelineSettings.of(CFG).codecs()
 
 
 def _fed(device_hz: float, keep=lambda k: True) -> tuple[float, str | None]:
     """A 200 Hz trial's processor fed KVH frames sent at ``device_hz`` (those ``keep`` says arrive) and the
     table's at 200 Hz, in reads of 0.1 s of host time; the host time it stalled at and why (None: it did not)."""
-    processor = TrialProcessor(CFG, 20.0, 1.0)
+    processor = TrialProcessor(PipelineSettings.of(CFG), 20.0, 1.0)
     imu, table = Kvh1750Codec(device_hz), CODECS[TABLE]  # the IMU's own encoder, at its own rate
     batch = next(Simulation.from_config(make_config(duration=10.0, rate=device_hz)).batches(chunk=10**6))
     step, n = round(device_hz / 10), round(device_hz / 200)

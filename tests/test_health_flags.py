@@ -21,8 +21,9 @@ from drivers.xsens import XsensCodec
 from emulators.simulation import Simulation
 from hil.config import ReportLimits
 from hil.outputs.measurements import FAIL, PASS, measurements
-from hil.pipeline.decoding import IMU, TABLE, stream_codecs
+from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import ImuSample, TableSample
 
 # TRECVT/ros_kvh1750 test/utest.cpp, case "early": a KVH 1750 frame at power-up, status 0x70 (accelerometers
@@ -83,7 +84,7 @@ def test_hil_decode_counts_the_flagged_frames_and_marks_them_in_the_csv(tmp_path
 
 RATE = 100.0
 CFG = make_config(duration=20.0, rate=RATE)
-CODECS = stream_codecs(CFG)
+CODECS = PipelineSettings.of(CFG).codecs()
 BATCH = next(Simulation.from_config(CFG).batches(chunk=10**6))
 POWER_UP = 0x70  # the gyros flagged invalid
 
@@ -92,7 +93,7 @@ def _processed(status_of, garbage: float = 0.0, duration: float = 20.0, cfg=CFG)
     """A processor fed a 20 s swing's KVH and table frames in reads of 0.5 s, the IMU's status per sample
     ``status_of(k)``; a flagged sample's gyro reads ``garbage`` rad more than the truth."""
     imu, table = CODECS[IMU], CODECS[TABLE]
-    processor = TrialProcessor(cfg, duration, None)
+    processor = TrialProcessor(PipelineSettings.of(cfg), duration, None)
     n = len(BATCH)
     progress = None
     for start in range(0, n, 50):

@@ -12,6 +12,7 @@ from hil.outputs import measurements as measurements_module
 from hil.outputs.judgement import as_written, judge
 from hil.outputs.measurements import DECLARED
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.trial.outcome import TrialOutcome
 from hil.viewer.verdict import final_markdown
 from tests.helpers import make_config
@@ -23,7 +24,7 @@ def _outcome(tmp_path) -> TrialOutcome:
     """A 30 s simulated swing judged against ``LIMITS``."""
     cfg = make_config(duration=30.0)
     cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"limits": LIMITS})})
-    processor = TrialProcessor(cfg)
+    processor = TrialProcessor(PipelineSettings.of(cfg))
     for batch in Simulation.from_config(cfg).batches():
         processor.feed_batch(batch)
     return TrialOutcome.of(processor.finished(), cfg, "", tmp_path / "out")

@@ -7,9 +7,10 @@ from tests.helpers import make_config
 
 from drivers.codec import RawChunk, StreamEvent
 from emulators.simulation import Simulation
-from hil.pipeline.decoding import IMU, TABLE, stream_codecs
+from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Progress
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import ImuSample, TableSample
 
 RATE = 100.0
@@ -19,8 +20,8 @@ def _processor(duration: float = 60.0) -> tuple[TrialProcessor, bytes, bytes]:
     """A processor, and 10 s of IMU and table frames of a swing."""
     cfg = make_config(duration=duration, rate=RATE)
     batch = next(Simulation.from_config(cfg).batches(chunk=1000))
-    processor = TrialProcessor(cfg, duration)
-    imu, table = (stream_codecs(cfg)[s] for s in (IMU, TABLE))
+    processor = TrialProcessor(PipelineSettings.of(cfg), duration)
+    imu, table = (PipelineSettings.of(cfg).codecs()[s] for s in (IMU, TABLE))
     imu_bytes = b"".join(imu.encode(imu.from_sample(ImuSample(k + 1, tuple(batch.dtheta[k]), tuple(batch.dv[k]))))
                          for k in range(len(batch)))
     table_bytes = b"".join(table.encode(table.from_sample(TableSample(k + 1, tuple(batch.angles[k]))))

@@ -11,12 +11,14 @@ from tests.helpers import make_config
 
 from emulators.simulation import Simulation
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import AlignedBatch
 
 
 def _fed(batches: list[AlignedBatch]):
     heard = []
-    processor = TrialProcessor(make_config(duration=20.0, rate=100.0), listeners=[heard.append, heard.append])
+    settings = PipelineSettings.of(make_config(duration=20.0, rate=100.0))
+    processor = TrialProcessor(settings, listeners=[heard.append, heard.append])
     returned = [processor.feed_batch(batch) for batch in batches]
     return returned, heard, processor.finished()
 

@@ -10,8 +10,9 @@ from tests.helpers import make_config
 
 from drivers.codec import RawChunk
 from emulators.simulation import Simulation
-from hil.pipeline.decoding import IMU, TABLE, stream_codecs
+from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TABLE_WAIT_S, TrialProcessor, table_wait
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import ImuSample, TableSample
 
 RATE = 100.0
@@ -20,7 +21,7 @@ LAG_FROM_S = 5.0  # ... from this time on
 
 
 CFG = make_config(duration=60.0, rate=RATE, errors={"accel_noise_ug": [50, 50, 50], "gyro_noise_dph": [0.01] * 3})
-CODECS = stream_codecs(CFG)
+CODECS = PipelineSettings.of(CFG).codecs()
 BLOCK = CFG.block_samples  # 5 at 100 Hz: a read aligning 2 or more is taken
 
 
@@ -34,7 +35,7 @@ def _trial(duration: float | None, time_scale: float | None) -> tuple[TrialProce
     batch = next(Simulation.from_config(CFG).batches(chunk=10**6))
     imu = [ImuSample(k + 1, tuple(batch.dtheta[k]), tuple(batch.dv[k])) for k in range(len(batch))]
     table = [TableSample(k + 1, tuple(batch.angles[k])) for k in range(len(batch))]
-    return TrialProcessor(CFG, duration, time_scale), imu, table
+    return TrialProcessor(PipelineSettings.of(CFG), duration, time_scale), imu, table
 
 
 def _lagging_trial(time_scale: float | None) -> dict:

@@ -40,8 +40,11 @@ def config_imports(source: str) -> list[int]:
     return lines
 
 
-def test_no_module_of_drivers_imports_the_trial_config():
-    found = [f"{path.relative_to(ROOT)}:{line}" for path in sorted((ROOT / "drivers").rglob("*.py"))
+@pytest.mark.parametrize("package", ["drivers", "hil/pipeline"])
+def test_no_module_of_drivers_or_of_the_pipeline_imports_the_trial_config(package):
+    """The device library knows nothing of a trial; the pipeline's stages take their settings
+    (:class:`hil.pipeline.settings.PipelineSettings`), not the config."""
+    found = [f"{path.relative_to(ROOT)}:{line}" for path in sorted((ROOT / package).rglob("*.py"))
              for line in config_imports(path.read_text())]
     assert not found, found
 

@@ -12,6 +12,7 @@ from drivers.decoder import StreamDecoder
 from drivers.detect import DETECT_BYTES
 from drivers.registry import imu_codec, make_codec
 from hil.config import ConfigError, OutputConfig, parse_config
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.stream_watch import StreamWatch
 from test_detect import garbage, stream
 
@@ -20,11 +21,15 @@ READ_S = 0.05  # host time between chunks
 T0 = 1000.0
 
 
+def watch_of(cfg, ports: dict[str, str] = PORTS) -> StreamWatch:
+    return StreamWatch.of(PipelineSettings.of(cfg), ports)
+
+
 def run(cfg, name: str, data: bytes, per_read: int = 240, watch: StreamWatch | None = None):
     """Feed ``data`` as stream ``name`` in reads of ``per_read`` bytes through the stream's decoder; (verdict,
     host time since the first chunk when it came, bytes fed until then)."""
     codec = imu_codec(cfg.imu, cfg.imu_rate_hz) if name == "imu" else make_codec("tts1")
-    decoder, watch = StreamDecoder(codec), watch or StreamWatch.of(cfg, PORTS)
+    decoder, watch = StreamDecoder(codec), watch or watch_of(cfg)
     for k, at in enumerate(range(0, len(data), per_read)):
         chunk = RawChunk(name, T0 + k * READ_S, data[at:at + per_read])
         decoder.feed(chunk)
@@ -76,18 +81,18 @@ def test_a_stream_that_decodes_is_never_judged_and_a_frame_restarts_the_clock():
     frames = stream("kvh1750", 50)
     data = b"".join(garbage(4 * 240 * 20, k) + frames for k in range(10))  # 4 s of garbage between frames
     assert run(cfg, "imu", data)[0] is None
-    watch = StreamWatch.of(cfg, PORTS)
+    watch = watch_of(cfg)
     assert run(cfg, "imu", frames + garbage(6 * 240 * 20), watch=watch)[0].startswith("no frame in")
 
 
 def test_undecoded_bytes_kept_are_bounded():
-    watch = StreamWatch(1e9, StreamWatch.of(make_config(), PORTS).expected, PORTS)
+    watch = StreamWatch(1e9, watch_of(make_config()).expected, PORTS)
     run(make_config(), "imu", garbage(1_000_000), per_read=4096, watch=watch)
     assert len(watch._streams["imu"].tail) == DETECT_BYTES
 
 
 def test_an_outage_restarts_the_clock():
-    watch = StreamWatch.of(make_config(), PORTS)
+    watch = watch_of(make_config())
     chunk = RawChunk("imu", T0, garbage(100))
     assert watch.fed(chunk, 0) is None
     watch.event(StreamEvent("imu", T0 + 4.0, "outage"))
@@ -98,7 +103,7 @@ def test_an_outage_restarts_the_clock():
 def test_can_messages_that_never_make_a_frame_name_the_dbc_keys():
     cfg = make_config()
     cfg = cfg.model_copy(update={"imu": cfg.imu.model_copy(update={"protocol": "can-dbc"})})
-    watch = StreamWatch.of(cfg, {"imu": "can://udp_multicast/239.74.163.2", "table": PORTS["table"]})
+    watch = watch_of(cfg, {"imu": "can://udp_multicast/239.74.163.2", "table": PORTS["table"]})
     verdicts = [watch.fed(RawChunk("imu", T0 + k * 0.01, bytes(8), arbitration_id=0x123), 0) for k in range(501)]
     assert not any(verdicts[:-1])
     assert verdicts[-1] == ("no frame in 501 CAN messages on can://udp_multicast/239.74.163.2: "
@@ -112,7 +117,7 @@ def test_the_verdict_depends_on_the_chunks_alone():
     pieces = np.split(np.frombuffer(data, np.uint8), cuts)
     verdicts = []
     for _ in range(2):
-        watch = StreamWatch.of(make_config(), PORTS)
+        watch = watch_of(make_config())
         verdicts.append(next((k, v) for k, piece in enumerate(pieces)
                              if (v := watch.fed(RawChunk("imu", T0 + 0.02 * k, piece.tobytes()), 0))))
     assert verdicts[0] == verdicts[1] and "xsens-mtdata2" in verdicts[0][1]

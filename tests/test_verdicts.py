@@ -20,6 +20,7 @@ from hil.cli import main
 from hil.config import ReportLimits
 from hil.outputs.result import ENDED_EARLY, INTERRUPTED, trial_verdict
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import AlignedBatch
 from hil.trial.outcome import TrialOutcome
 from tests.helpers import make_config
@@ -70,7 +71,7 @@ def _simulated_outcome(tmp_path: Path, scale: float = 1.0) -> TrialOutcome:
     from emulators.simulation import Simulation
 
     cfg = make_config(duration=30.0)
-    processor = TrialProcessor(cfg)
+    processor = TrialProcessor(PipelineSettings.of(cfg))
     for batch in Simulation.from_config(cfg).batches():
         dv = np.where((batch.t > 10.0)[:, None], batch.dv * scale, batch.dv)
         processor.feed_batch(AlignedBatch(batch.t, batch.dtheta, dv, batch.angles, batch.t0))

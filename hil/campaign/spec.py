@@ -28,6 +28,7 @@ from hil.config import Config, ConfigError, InputError, parse_config
 from hil.config_types import describe_validation
 from hil.inputs import resolve_path
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.trial.calibration_outcome import checked_schedule
 from hil.trial.outcome import TrialSetupError
 
@@ -138,7 +139,7 @@ def _check_point(config: dict, label: str, source: str, kind: str) -> None:
             ServoSimulation.from_config(cfg)
         else:
             Simulation.from_config(cfg)
-        TrialProcessor(cfg)
+        TrialProcessor(PipelineSettings.of(cfg))
     except (ConfigError, TrialSetupError) as exc:
         raise SpecError(f"{source}: sweep point {label}: {str(exc).removeprefix(source + ': ')}") from None
 

@@ -4,7 +4,7 @@ At the devices' speed it takes every sample waiting once a read completes at lea
 holds (``take_at``), whichever stream's read aligns them; the few left waiting for a table frame still on the
 wire join the next read's. The reads, recorded one message each (a CAN stream's grouped by their receive
 times), decide the updates: a replay updates as the live run did. Otherwise (``--speed max``, or a silent
-table) it takes whole blocks of ``Config.block_samples``, bounded by the samples alone, so a run at ``--speed
+table) it takes whole blocks of ``PipelineSettings.block_samples``, bounded by the samples alone, so a run at ``--speed
 max`` gives one result however its bytes were read. A gap or the end closes a block early.
 """
 
@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from hil.config import Config
+from hil.pipeline.settings import PipelineSettings
 from hil.samples import AlignedBatch, ImuGap
 
 Released = AlignedBatch | ImuGap
@@ -30,10 +30,10 @@ class Blocks:
         self._held: list[AlignedBatch] = []
 
     @classmethod
-    def of(cls, cfg: Config, time_scale: float | None) -> Blocks:
+    def of(cls, settings: PipelineSettings, time_scale: float | None) -> Blocks:
         """The trial's policy: half of what a live read holds (at ``--speed max`` never: blocks)."""
-        return cls(cfg.block_samples, math.inf if time_scale is None
-                   else max(1, cfg.block_samples // (2 * cfg.reads_per_block)))
+        size = settings.block_samples
+        return cls(size, math.inf if time_scale is None else max(1, size // (2 * settings.reads_per_block)))
 
     def add(self, ready: list[Released], final: bool = False) -> list[Released]:
         """What one read released (``final``: the last), as blocks and gaps for the estimator."""

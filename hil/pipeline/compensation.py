@@ -6,7 +6,7 @@ not compensated. Its ``turntable.zero_offset_arcsec`` (true gimbal angle minus e
 inner; optional) is added to the table's reported angles: the IMU's terms were fitted against the corrected
 angles, and the table-referenced estimates need them too (the inner offset, unobservable, is folded into the
 IMU's misalignment and ``null``). A file that cannot be applied raises :class:`CalibrationFileError` (a
-:class:`hil.config.ConfigError`) naming the key, the file and the reason, in one line.
+:class:`hil.inputs.ConfigError`) naming the key, the file and the reason, in one line.
 :attr:`Compensation.applied` says which file (path, SHA-256 of the bytes read) and which terms were applied:
 result.json's ``calibration_applied``.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import ConfigError
+from hil.inputs import ConfigError
 from hil.estimation.calibration_model import BIAS, MIS, NONLIN, SCALE, TERMS, compensate, inverse
 from hil.estimation.thermal_calibration import ThermalTerms, compensate_each
 from hil.samples import AlignedBatch, ImuSamples, TableSamples

@@ -5,11 +5,9 @@
 from __future__ import annotations
 
 from drivers.codec import Codec, Counters, RawChunk, StreamEvent
-from drivers.controllers import data_codec
 from drivers.decoder import StreamDecoder
-from drivers.registry import imu_codec
-from hil.config import Config
 from hil.pipeline.plausibility import UnitKeys
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.temperature import TemperatureTrack
 from hil.samples import ImuSamples, TableSamples
 from hil.vocabulary import Stream
@@ -21,11 +19,6 @@ RATE_HOST_S = 1.0  # ... and at least this long on the host's clock (a fast emul
 RATE_TOLERANCE = 0.05  # the measured rate may differ from imu.rate_hz by this fraction
 RATE_CLEAR = 0.2  # a rate this far off is another setting of the device, judged on the first window; one nearer
 RATE_CONFIRM_HOST_S = 6.0  # is measured over this much of the host's clock at least, where a stall weighs less
-
-
-def stream_codecs(cfg: Config) -> dict[str, Codec]:
-    """The codecs of the IMU's and the table's data streams, as the config sets them."""
-    return {IMU: imu_codec(cfg.imu, cfg.imu_rate_hz), TABLE: data_codec(cfg.turntable, cfg.table_counts_per_frame)}
 
 
 class FrameRate:
@@ -72,10 +65,10 @@ class FrameRate:
 class Decoding:
     """The two streams' decoders. ``time_scale`` is the devices' speed (see :class:`~drivers.decoder.StreamDecoder`)."""
 
-    def __init__(self, cfg: Config, time_scale: float | None) -> None:
-        self.decoders = {stream: StreamDecoder(codec, time_scale, cfg.read_s)
-                         for stream, codec in stream_codecs(cfg).items()}
-        self.imu_rate = FrameRate(cfg.imu_rate_hz, time_scale)
+    def __init__(self, settings: PipelineSettings, time_scale: float | None) -> None:
+        self.decoders = {stream: StreamDecoder(codec, time_scale, settings.read_s)
+                         for stream, codec in settings.codecs().items()}
+        self.imu_rate = FrameRate(settings.imu_rate_hz, time_scale)
         self.temperature = TemperatureTrack()
 
     def codec(self, stream: str) -> Codec:

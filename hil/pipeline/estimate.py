@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hil.config import Config
 from hil.estimation.online import OnlineEstimator
-from hil.frames import Earth, TableGeometry
 from hil.pipeline.progress import Taken
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.time_offset import TimeOffsetEstimator
 from hil.samples import AlignedBatch, ImuGap
 
@@ -18,12 +17,12 @@ class Estimation:
     """The estimator of a trial (None until its first sample) and its time-offset check; ``updates`` counts
     the blocks taken, ``bridged_without_table`` the aligner's gaps bridged without the table's angles."""
 
-    def __init__(self, cfg: Config, earth: Earth, geometry: TableGeometry) -> None:
-        self.settings = cfg.estimator
-        self.earth = earth
-        self.geometry = geometry
+    def __init__(self, settings: PipelineSettings) -> None:
+        self.settings = settings.estimator
+        self.earth = settings.earth
+        self.geometry = settings.geometry
         self.estimator: OnlineEstimator | None = None
-        self.time_offset = TimeOffsetEstimator(earth, geometry, cfg.imu_rate_hz)
+        self.time_offset = TimeOffsetEstimator(settings.earth, settings.geometry, settings.imu_rate_hz)
         self.updates = 0
         self.bridged_without_table = 0
 

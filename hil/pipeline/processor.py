@@ -15,7 +15,6 @@ from types import MappingProxyType
 import numpy as np
 
 from drivers.codec import BITS_PER_BYTE, RawChunk, StreamEvent
-from hil.config import Config
 from hil.frames import Earth, TableGeometry
 from hil.pipeline.aligner import Aligner
 from hil.pipeline.blocks import Blocks, Released, until
@@ -25,6 +24,7 @@ from hil.pipeline.estimate import Estimation
 from hil.pipeline.judge import Judge
 from hil.pipeline.motion_match import TableRotations
 from hil.pipeline.progress import Finished, Health, Listener, Progress, Taken, read_only
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.sync_pairing import SyncPairing
 from hil.pipeline.temperature import TemperatureTrack
 from hil.samples import AlignedBatch, ImuGap, ImuSamples, StreamCounts, TableSamples
@@ -52,22 +52,20 @@ class TrialProcessor:
     is measured every that many seconds of trial time (:attr:`Progress.time_offset_s`).
     """
 
-    def __init__(self, cfg: Config, duration: float | None = None, time_scale: float | None = 1.0,
+    def __init__(self, settings: PipelineSettings, duration: float | None = None, time_scale: float | None = 1.0,
                  listeners: Sequence[Listener] = (), offset_every_s: float | None = None) -> None:
-        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-        geometry = TableGeometry.from_config(cfg.turntable)
-        self._rate_hz = cfg.imu_rate_hz
-        self._decoding = Decoding(cfg, time_scale)
-        self._compensation = Compensation(cfg.imu.calibration, 1.0 / cfg.imu_rate_hz) if cfg.imu.calibration else None
-        self._judge = Judge(earth, geometry, cfg.imu_rate_hz, max(cfg.turntable.limits.rate_dps),
-                            self._decoding.codec(IMU).health_flags, cfg.estimator.gyro_table_gate,
-                            cfg.estimator.flags_end_trial)
-        free_running = cfg.imu.timing.free_running or cfg.turntable.timing.free_running
-        self._pairing = None if free_running else sync_pairing(cfg, time_scale, self._decoding, earth, geometry)
-        self._aligner = Aligner(cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.imu.latch_delay_us * 1e-6,
-                               table_wait_s=table_wait(time_scale), free_running=free_running)
-        self._blocks = Blocks.of(cfg, time_scale)
-        self._estimation = Estimation(cfg, earth, geometry)
+        s = settings
+        self._rate_hz = s.imu_rate_hz
+        self._decoding = Decoding(s, time_scale)
+        self._compensation = Compensation(s.imu.calibration, 1.0 / s.imu_rate_hz) if s.imu.calibration else None
+        self._judge = Judge(s.earth, s.geometry, s.imu_rate_hz, s.rate_limit_dps,
+                            self._decoding.codec(IMU).health_flags, s.estimator.gyro_table_gate,
+                            s.estimator.flags_end_trial)
+        self._pairing = None if s.free_running else sync_pairing(s, time_scale, self._decoding)
+        self._aligner = Aligner(s.imu_rate_hz, s.table_counter_rate_hz, s.imu.latch_delay_us * 1e-6,
+                               table_wait_s=table_wait(time_scale), free_running=s.free_running)
+        self._blocks = Blocks.of(s, time_scale)
+        self._estimation = Estimation(s)
         self._listeners = tuple(listeners)
         self._duration = duration
         self._offset_every = offset_every_s
@@ -241,19 +239,17 @@ class TrialProcessor:
                             imu.corrupt + table.corrupt + self._judge.plausibility.rejected, MappingProxyType(extra))
 
 
-def sync_pairing(cfg: Config, time_scale: float | None, decoding: Decoding, earth: Earth,
-                 geometry: TableGeometry) -> SyncPairing:
+def sync_pairing(settings: PipelineSettings, time_scale: float | None, decoding: Decoding) -> SyncPairing:
     """The pair stage: the sync pairing of the two streams' counters (docs/harness.md, "Sync pairing")."""
-    codec = decoding.codec(IMU)
-    rate = cfg.imu_rate_hz
-    wire = (codec.frame_bytes() * BITS_PER_BYTE / cfg.imu.baudrate,  # a CAN frame's bus time: negligible
-            decoding.codec(TABLE).frame_bytes() * BITS_PER_BYTE / cfg.turntable.baudrate)
+    s, codec = settings, decoding.codec(IMU)
+    wire = (codec.frame_bytes() * BITS_PER_BYTE / s.imu.baudrate,  # a CAN frame's bus time: negligible
+            decoding.codec(TABLE).frame_bytes() * BITS_PER_BYTE / s.turntable.baudrate)
 
     def rotations(counts: np.ndarray, angles: np.ndarray) -> TableRotations:
-        return TableRotations(geometry, earth, rate, cfg.table_counts_per_frame, counts, angles)
+        return TableRotations(s.geometry, s.earth, s.imu_rate_hz, s.table_counts_per_frame, counts, angles)
 
-    return SyncPairing(rate, cfg.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations,
-                       cfg.estimator.pair_by_motion)
+    return SyncPairing(s.imu_rate_hz, s.table_counts_per_frame, codec.counter_modulus, time_scale, wire, rotations,
+                       s.estimator.pair_by_motion)
 
 
 def _health(decoding: Decoding, counts: StreamCounts, batched: bool) -> Health:

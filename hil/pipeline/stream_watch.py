@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 from drivers.codec import RawChunk, StreamEvent
 from drivers.detect import DETECT_BYTES, detect
-from hil.config import Config
 from drivers.registry import IMU_CODECS
 from hil.pipeline.processor import IMU, TABLE
+from hil.pipeline.settings import PipelineSettings
 
 SWAPPED = "are the IMU and table ports swapped?"
 
@@ -30,13 +30,13 @@ class Expected:
     check: str  # the keys to check when nothing decodes
 
     @classmethod
-    def of(cls, cfg: Config) -> dict[str, Expected]:
-        """The IMU's and the table's, from a trial config."""
-        imu = cfg.imu
+    def of(cls, settings: PipelineSettings) -> dict[str, Expected]:
+        """The IMU's and the table's."""
+        imu = settings.imu
         check = ("imu.can.dbc and imu.can.signals" if IMU_CODECS.get(imu.protocol).link == "can"
                  else "imu.baudrate and imu.protocol")
         return {IMU: cls("imu port", "imu", imu.protocol, "imu.protocol", check),
-                TABLE: cls("turntable data port", "table", cfg.turntable.data_protocol, "turntable.data_protocol",
+                TABLE: cls("turntable data port", "table", settings.turntable.data_protocol, "turntable.data_protocol",
                            "turntable.baudrate and turntable.data_port")}
 
 
@@ -64,9 +64,9 @@ class StreamWatch:
         self._streams = {name: _Undecoded() for name in expected}
 
     @classmethod
-    def of(cls, cfg: Config, ports: dict[str, str]) -> StreamWatch:
-        """The watch of a trial config, its streams on ``ports`` (by stream name, as messages name them)."""
-        return cls(cfg.output.stream_timeout_s, Expected.of(cfg), ports)
+    def of(cls, settings: PipelineSettings, ports: dict[str, str]) -> StreamWatch:
+        """The watch of a pipeline's streams on ``ports`` (by stream name, as messages name them)."""
+        return cls(settings.stream_timeout_s, Expected.of(settings), ports)
 
     def fed(self, chunk: RawChunk, frames: int) -> str | None:
         """Note a chunk the stream's decoder has taken, ``frames`` its frame count since the start; the verdict

@@ -30,6 +30,7 @@ from hil.config import Config
 from hil.estimation.calibration_schedule import Schedule
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.calibration_sequence import CalibrationSequence
@@ -50,7 +51,8 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable)
     sequence = simulated_sequence(cfg, schedule, sim, client, sequence_views(viewer, schedule, cfg), viewer)
-    processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
+    processor = TrialProcessor(PipelineSettings.of(cfg),
+                               listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
     try:
         client.apply_limits()
         sequence.start()

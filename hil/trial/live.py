@@ -31,9 +31,10 @@ from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.record import start_record
 from hil.outputs.result import COMPLETED, TrialEnd
-from hil.pipeline.decoding import IMU, TABLE, stream_codecs
+from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished, Health, Listener, Progress
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.stream_watch import StreamWatch
 from hil.trial.imu_config import check_imu_config
 from hil.trial.latency_stats import LatencyStats
@@ -176,15 +177,16 @@ class LiveTrial:
         listeners = [ViewerFeed(viewer, self._live_health).on_progress, *hooks.listeners]
         if hooks.motion_check is not None:
             listeners.append(self._check_motion)
-        self.processor = TrialProcessor(cfg, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
+        settings = PipelineSettings.of(cfg)
+        self.processor = TrialProcessor(settings, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         shared = hooks.table_reader
         opened = transports(cfg, ports, None if shared is None else shared.transport)
-        codecs = stream_codecs(cfg)
+        codecs = settings.codecs()
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
             check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
-        self.stream_watch = StreamWatch.of(cfg, {stream: t.address for stream, t in opened.items()})
+        self.stream_watch = StreamWatch.of(settings, {s: t.address for s, t in opened.items()})
         imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
                                  record=start_record(cfg, config_text, ports, imu_config))  # once the trial can start

@@ -27,6 +27,7 @@ from hil.inputs import resolve_path
 from hil.outputs.noise import SENSORS, noise_document, write_noise
 from hil.outputs.trial_report import write_noise_report
 from hil.pipeline.processor import TrialProcessor
+from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.table_motion import motion_residuals
 from hil.recording.csv_input import DataError, read_increments_csv, write_increments_csv
 from hil.recording.replay import open_recording, recorded_pace
@@ -106,7 +107,8 @@ def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
     recording, cfg = open_recording(path)
     runs: list[AlignedBatch] = []
     time_scale = recorded_pace(recording)[1]
-    processor = TrialProcessor(cfg, None, time_scale, [lambda progress: runs.extend(progress.samples())])
+    processor = TrialProcessor(PipelineSettings.of(cfg), None, time_scale,
+                               [lambda progress: runs.extend(progress.samples())])
     with recording:
         for item in recording:
             processor.feed(item)

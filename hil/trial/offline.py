@@ -9,12 +9,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from emulators.simulation import Simulation
 from hil.config import Config
 from hil.outputs.record import recorded_block
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
+from hil.pipeline.settings import PipelineSettings
 from hil.recording.csv_input import read_increments_csv
 from hil.recording.recorder import Recording, RecordingReader
 from hil.recording.replay import open_recording, recorded_pace, recording_path
@@ -65,7 +65,7 @@ def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer
                      ) -> Finished:
     """The pipeline's end of a recording's items fed in their order (and logged to ``viewer``); a
     :class:`~hil.recording.recorder.RecordingReader` is read item by item as they are fed."""
-    processor = TrialProcessor(cfg, *recorded_pace(recording), [ViewerFeed(viewer).on_progress])
+    processor = TrialProcessor(PipelineSettings.of(cfg), *recorded_pace(recording), [ViewerFeed(viewer).on_progress])
     for item in recording:
         processor.feed(item)
     finished = processor.finish()
@@ -80,11 +80,13 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
     The batches are computed by ``process`` ahead of the estimator, on another core (``hil simulate``), or
     without one in line (a campaign's run: its worker has no core to spare)."""
     if process is None:
+        from emulators.simulation import Simulation  # hil simulate's process imports it in its child only
+
         batches = Simulation.from_config(cfg).batches()
     else:
         batches = process.batches(cfg)
     viewer = open_viewer(options, cfg, out, blocking=True)
-    processor = TrialProcessor(cfg, listeners=[ViewerFeed(viewer, snapshots=False).on_progress])
+    processor = TrialProcessor(PipelineSettings.of(cfg), listeners=[ViewerFeed(viewer, snapshots=False).on_progress])
     for batch in batches:
         processor.feed_batch(batch)
     finished = processor.finished()
@@ -95,6 +97,6 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
 
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
     """Increments (and table angles, if present) from a CSV into the processor; no truth."""
-    processor = TrialProcessor(cfg)
+    processor = TrialProcessor(PipelineSettings.of(cfg))
     processor.feed_batch(read_increments_csv(data, cfg))
     return TrialOutcome.of(processor.finished(), cfg, config_text, out)
