@@ -70,5 +70,5 @@ def one_unit_only(cfg: Any, source: str) -> Any:
     """``cfg``, a one-unit config; ConfigError for a ``units`` config given where one IMU (``imu``) is taken."""
     if cfg.units:
         raise ConfigError(f"{source}: units: this command takes a one-unit config (imu); hil run, replay, "
-                          "simulate, calibrate, noise and emulate take several units (docs/units.md)")
+                          "simulate, calibrate, noise, emulate and campaign take several units (docs/units.md)")
     return cfg

@@ -83,27 +83,69 @@ def _submodel(annotation: Any) -> type[BaseModel] | None:
     return None
 
 
+def _listed_model(annotation: Any) -> type[BaseModel] | None:
+    """The model of each item of a field that lists models (``list[UnitConfig] | None``), else None."""
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        models = [m for m in map(_listed_model, typing.get_args(annotation)) if m is not None]
+        return models[0] if len(models) == 1 else None
+    if typing.get_origin(annotation) is list:
+        return _submodel(typing.get_args(annotation)[0])
+    return None
+
+
 def check_key(key: str) -> None:
-    """Raise :class:`SpecError` unless ``key`` names a key of the trial config (``imu.errors.accel_noise_ug``)."""
+    """Raise :class:`SpecError` unless ``key`` names a key of the trial config (``imu.errors.accel_noise_ug``); a
+    list of models is stepped into by an item's index (``units.1.imu.errors.accel_bias_ug``)."""
     model: type[BaseModel] | None = Config
+    listed: type[BaseModel] | None = None  # the item model when the part before was a list of models
     parts = key.split(".")
     for k, part in enumerate(parts):
+        if listed is not None:
+            if not part.isdigit():
+                raise SpecError(f"sweep.{key}: {'.'.join(parts[:k + 1])}: expected an index of the list "
+                                f"{'.'.join(parts[:k])} (0, 1, ...)")
+            model, listed = listed, None
+            continue
         if model is None:
             raise SpecError(f"sweep.{key}: {'.'.join(parts[:k])} is a value, not a block of keys")
         if part not in model.model_fields:
             raise SpecError(f"sweep.{key}: unknown key {'.'.join(parts[:k + 1])!r} of the trial config")
-        model = _submodel(model.model_fields[part].annotation)
+        annotation = model.model_fields[part].annotation
+        model, listed = _submodel(annotation), _listed_model(annotation)
 
 
 def set_key(config: dict, key: str, value: Any) -> None:
-    """Set the dotted ``key`` of a config mapping, making the blocks on the way."""
-    *blocks, last = key.split(".")
-    node = config
-    for part in blocks:
-        if not isinstance(node.get(part), dict):
-            node[part] = {}
-        node = node[part]
-    node[last] = copy.deepcopy(value)
+    """Set the dotted ``key`` of a config mapping, making the blocks on the way; an index (``units.1``) steps
+    into a list the mapping has, a :class:`SpecError` naming the key when it has no such list or item."""
+    parts = key.split(".")
+    node: Any = config
+    for k, part in enumerate(parts):
+        index: Any = _index(node, key, ".".join(parts[:k]), part) if isinstance(node, list) else part
+        if k == len(parts) - 1:
+            node[index] = copy.deepcopy(value)
+        elif parts[k + 1].isdigit():
+            if not isinstance(_child(node, index), list):
+                raise SpecError(f"sweep.{key}: {'.'.join(parts[:k + 2])}: the base config has no "
+                                f"{'.'.join(parts[:k + 1])} to index")
+            node = node[index]
+        else:
+            if not isinstance(_child(node, index), dict):
+                node[index] = {}
+            node = node[index]
+
+
+def _child(node: dict | list, index: Any) -> Any:
+    return node[index] if isinstance(node, list) else node.get(index)
+
+
+def _index(items: list, key: str, name: str, part: str) -> int:
+    """``part`` (digits) as an index of ``items``, the list ``name`` of the config; a SpecError naming ``key``
+    when the list has no such item."""
+    if int(part) >= len(items):
+        indices = f"0 to {len(items) - 1}" if items else "none"
+        raise SpecError(f"sweep.{key}: {name}.{part}: index out of range: the base config has {len(items)} {name} "
+                        f"({indices})")
+    return int(part)
 
 
 def run_seeds(seed: int, runs: int) -> list[int]:
@@ -127,21 +169,51 @@ def _base_path(spec_path: Path, base: str) -> Path:
     return beside if beside.exists() else resolve_path(base)
 
 
-def _check_point(config: dict, label: str, source: str, kind: str) -> None:
+def _check_point(config: dict, label: str, source: str, kind: str) -> Config:
     """The trial config of a point, checked as its kind's trial sets it up (the emulator and the processor,
     with ``imu.calibration`` read; a calibration's schedule within the table's limits and the in-process
-    servo); a ConfigError or TrialSetupError names the point."""
+    servo), each unit's one-unit config of a units config; a ConfigError or TrialSetupError names the point."""
     try:
-        cfg = parse_config(config, source)
+        cfg = parse_config(config, source, units=True)
         cfg.emulated_only(source, "hil campaign")
-        if kind == "calibration":
-            checked_schedule(cfg)
-            ServoSimulation.from_config(cfg)
-        else:
-            Simulation.from_config(cfg)
-        TrialProcessor(PipelineSettings.of(cfg))
+        for trial in cfg.unit_configs().values() or [cfg]:
+            if kind == "calibration":
+                checked_schedule(trial)
+                ServoSimulation.from_config(trial)
+            else:
+                Simulation.from_config(trial)
+            TrialProcessor(PipelineSettings.of(trial))
     except (ConfigError, TrialSetupError) as exc:
         raise SpecError(f"{source}: sweep point {label}: {str(exc).removeprefix(source + ': ')}") from None
+    return cfg
+
+
+def _point_config(base: dict, values: dict[str, Any], source: str) -> dict:
+    """The base config with a point's swept values set."""
+    config = copy.deepcopy(base)
+    for key, value in values.items():
+        try:
+            set_key(config, key, value)
+        except SpecError as exc:
+            raise SpecError(f"{source}: {exc}") from None
+    return config
+
+
+def _run_tasks(p: int, values: dict[str, Any], config: dict, seeds: list[int], cfg: Config) -> list[RunTask]:
+    """A point's tasks (``cfg``: its config checked): its config with each run's ``trial.seed``. A units config's
+    run is a task per unit, the unit's one-unit config as ``hil simulate`` of the run's units config runs it
+    (:meth:`Config.unit_configs`: each unit's seed drawn from the run's)."""
+    tasks = []
+    for r, seed in enumerate(seeds):
+        run_config = copy.deepcopy(config)
+        set_key(run_config, "trial.seed", seed)
+        if not cfg.units:
+            tasks.append(RunTask(f"p{p:03d}-r{r:04d}", p, r, seed, values, run_config))
+            continue
+        units = Config.model_validate(run_config).unit_configs()
+        tasks += [RunTask(f"p{p:03d}-r{r:04d}-{name}", p, r, seed, values,
+                          unit.model_dump(mode="json", exclude_defaults=True), name) for name, unit in units.items()]
+    return tasks
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -168,12 +240,7 @@ def load_campaign(path: str | Path) -> Campaign:
     seeds = run_seeds(spec.seed, spec.runs)
     tasks = []
     for p, values in enumerate(points):
-        config = copy.deepcopy(base)
-        for key, value in values.items():
-            set_key(config, key, value)
-        _check_point(config, point_label(values), str(path), spec.kind)
-        for r, seed in enumerate(seeds):
-            run_config = copy.deepcopy(config)
-            set_key(run_config, "trial.seed", seed)
-            tasks.append(RunTask(f"p{p:03d}-r{r:04d}", p, r, seed, values, run_config))
+        config = _point_config(base, values, str(path))
+        cfg = _check_point(config, point_label(values), str(path), spec.kind)
+        tasks += _run_tasks(p, values, config, seeds, cfg)
     return Campaign(spec, path, points, tasks)

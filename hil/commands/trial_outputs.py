@@ -77,8 +77,8 @@ def finish_units(args: argparse.Namespace, fixture) -> int:
     if overview is not None:
         overview.end(fixture.index)
     views = list(fixture.viewers.values())
-    for view in views[1:]:  # connected to the first one's viewer
-        view.close()
+    for view in views[1:]:  # connected to the first one's viewer: all sent, then disconnected from it
+        view.stop()
     if views:
         finish_viewer(views[0])
     return code

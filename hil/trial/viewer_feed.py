@@ -111,7 +111,8 @@ def show_verdict(viewer: Viewer | None, judged: Judgement) -> None:
 
 
 def finish_viewer(viewer: Viewer | None) -> None:
-    """Finish the .rrd; a served web viewer stays up until Ctrl-C."""
+    """Finish the .rrd; a served web viewer stays up until Ctrl-C. The view is then disconnected, all sent: a
+    viewer that stops later finds nothing left to send."""
     if viewer is None:
         return
     viewer.close()
@@ -122,7 +123,7 @@ def finish_viewer(viewer: Viewer | None) -> None:
                 time.sleep(0.5)
         except KeyboardInterrupt:
             pass
-        viewer.stop()
+    viewer.stop()
 
 
 def flag_health(counts: StreamCounts) -> dict[str, dict[str, float]]:

@@ -170,6 +170,7 @@ class FixtureView:
         self._file.disconnect()  # the .rrd is complete
         if self._view is not None:
             self._view.flush()
+            self._view.disconnect()  # all is sent: a viewer that stops later finds nothing left to send
 
     def close(self) -> None:
         """Log what is queued and flush; the .rrd is finished by :meth:`end` (or the end of the process)."""
