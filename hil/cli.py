@@ -19,6 +19,7 @@ if __name__ == "__main__":  # python -m hil.cli (the console script's start is h
 
 import argparse  # noqa: E402 (after the handler: a Ctrl-C during these imports is one line too)
 from datetime import datetime, timezone  # noqa: E402
+from types import FrameType  # noqa: E402
 
 from hil.arguments import build_parser  # noqa: E402
 from hil.commands.noise import cmd_noise  # noqa: E402
@@ -59,16 +60,21 @@ def main(argv: list[str] | None = None) -> int:
 
 _INTERRUPT_CAUGHT = threading.Event()
 RESEND_S = 0.5  # s between the sendings of a Ctrl-C that has not ended the command yet
+DEFER_S = 0.02  # s before a Ctrl-C that came inside the import system is sent again
+IMPORT_SYSTEM = "<frozen importlib"  # the file names of its frames
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    """Ctrl-C: KeyboardInterrupt, caught in :func:`main`. Some places lose one (the import system's module-lock
-    callbacks print "Exception ignored" and go on), so the signal is sent again every :data:`RESEND_S` until one
-    reaches :func:`main`, or a trial's own handler takes it (and ends the trial as interrupted)."""
-    timer = threading.Timer(RESEND_S, _resend, (signum,))
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    """Ctrl-C: KeyboardInterrupt, caught in :func:`main`. Some places lose one: the import system's module-lock
+    callbacks print "Exception ignored" with a traceback and go on. Inside the import system the signal is sent
+    again :data:`DEFER_S` later instead; anywhere else it is raised and sent again every :data:`RESEND_S` until
+    one reaches :func:`main`, or a trial's own handler takes it (and ends the trial as interrupted)."""
+    deferred = frame is not None and frame.f_code.co_filename.startswith(IMPORT_SYSTEM)
+    timer = threading.Timer(DEFER_S if deferred else RESEND_S, _resend, (signum,))
     timer.daemon = True
     timer.start()
-    raise KeyboardInterrupt
+    if not deferred:
+        raise KeyboardInterrupt
 
 
 def _resend(signum: int) -> None:
