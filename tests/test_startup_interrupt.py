@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 HIL = Path(sys.executable).parent / "hil"
@@ -22,7 +23,7 @@ TRIAL_LINES = ("hil: SIGINT: ending the trial (turntable off, outputs kept)", "h
 COMMANDS = {
     "run": ["run", "configs/emulated_swing.yaml", "--duration", "600", "--speed", "max", "--viewer", "none",
             "--quiet", "--no-figures", "--no-history"],
-    "simulate": ["simulate", "configs/emulated_swing.yaml", "--no-figures", "--no-history"],
+    "simulate": ["simulate", "{long_swing}", "--no-figures", "--no-history"],  # 2 h: seconds to simulate
     "noise": ["noise", "configs/noise_static.yaml", "--no-figures", "--no-history"],  # 8 h: never done by then
 }
 
@@ -50,10 +51,20 @@ def _interrupted(args: list[str], delay: float, out: Path) -> tuple[int, list[st
     return proc.returncode, err
 
 
+def _long_swing(directory: Path) -> Path:
+    """The default trial's swing made 2 h long: still simulating a second after its start, however fast."""
+    cfg = yaml.safe_load((ROOT / "configs" / "emulated_swing.yaml").read_text())
+    cfg["trial"]["duration_s"] = 7200
+    path = directory / "long_swing.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_ctrl_c_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, command):
+    args = [arg.format(long_swing=_long_swing(tmp_path)) for arg in COMMANDS[command]]
     for delay in DELAYS:
-        code, err = _interrupted(COMMANDS[command], delay, tmp_path / f"out-{delay}")
+        code, err = _interrupted(args, delay, tmp_path / f"out-{delay}")
         assert not any("Traceback" in line for line in err), (delay, "\n".join(err))
         if code == 130:
             assert err == ["hil: interrupted"], (delay, err)
