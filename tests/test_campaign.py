@@ -211,6 +211,14 @@ def test_summary_per_point_counts_failures_and_gives_convergence_quantiles(tmp_p
     json.dumps(summary, allow_nan=False)
 
 
+def test_the_summary_is_the_same_bit_for_bit_whatever_order_the_runs_completed_in():
+    rows = _rows(np.random.default_rng(3).normal(0, 1e-3, (40, 3)) * np.pi, 0.7)  # sums whose last bits move
+    cluster = {"scheduler": "tcp://127.0.0.1:1", "workers": 2}
+    first = json.dumps(summarise([{}], rows, cluster))
+    shuffled = [rows[k] for k in np.random.default_rng(4).permutation(len(rows))]
+    assert json.dumps(summarise([{}], shuffled, cluster)) == first
+
+
 def test_the_shipped_example_sweeps_amplitude_and_duration_of_the_papers_swing():
     campaign = load_campaign(ROOT / "configs" / "campaign_swing.yaml")
     assert len(campaign.points) == 4 and len(campaign.tasks) == 4 * campaign.spec.runs

@@ -49,6 +49,12 @@ def task_columns(task: RunTask) -> dict[str, Any]:
             "record.dut_serial": record.get("dut_serial"), "record.config_sha256": digest}
 
 
+def row_order(row: dict[str, Any]) -> tuple[int, int, str]:
+    """A row's place among a campaign's: by point, run and unit (a units config's), whatever order the runs
+    completed in."""
+    return row["point"], row["run"], row.get(UNIT) or ""
+
+
 def failed_row(task: RunTask, error: BaseException | str) -> dict[str, Any]:
     text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
     return {**task_columns(task), ERROR: " ".join(text.split()) or "failed"}

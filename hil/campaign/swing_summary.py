@@ -21,7 +21,7 @@ import numpy as np
 from scipy import stats
 
 from hil.campaign.entries import Entry, entry_label, row_entry, with_unit
-from hil.campaign.runs import ERROR
+from hil.campaign.runs import ERROR, row_order
 from hil.outputs.result import strict_json
 
 SUMMARY_NAME = "summary.json"
@@ -101,7 +101,7 @@ def summarise(points: list[dict[str, Any]], rows: list[dict[str, Any]], cluster:
     """summary.json: the statistics (``point``: of the campaign's kind) of every entry (:mod:`hil.campaign.entries`;
     by default each sweep point, as a one-unit campaign's), the campaign's counts and the cluster it ran on."""
     by_entry: dict[Entry, list[dict[str, Any]]] = {e: [] for e in entries or [(p, None) for p in range(len(points))]}
-    for row in rows:
+    for row in sorted(rows, key=row_order):  # the same sums, bit for bit, whatever order the runs completed in
         by_entry[row_entry(row)].append(row)
     return {"runs": len(rows), "failed": sum(row.get(ERROR) is not None for row in rows), "level": LEVEL,
             "points": [with_unit(point(p, points[p], found), unit) for (p, unit), found in by_entry.items()],

@@ -9,7 +9,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from hil.campaign.runs import UNIT
+from hil.campaign.runs import row_order
 from hil.config import InputError
 
 RUNS_NAME = "runs.parquet"
@@ -22,7 +22,7 @@ class TableError(InputError, ValueError):
 def to_table(rows: list[dict[str, Any]]) -> pa.Table:
     """The rows sorted by (point, run, unit: a units config's); the columns in their first appearance, a missing
     value null."""
-    rows = sorted(rows, key=lambda r: (r["point"], r["run"], r.get(UNIT) or ""))
+    rows = sorted(rows, key=row_order)
     columns: dict[str, None] = {}
     for row in rows:
         columns.update(dict.fromkeys(row))
