@@ -122,14 +122,9 @@ class _Owner:
     def __init__(self, parent: int) -> None:
         self.parent = parent
 
-    def file(self, path: Path | None) -> Path | None:
-        """``path`` while the parent lives; None once it is gone."""
-        return path if path is not None and os.getppid() == self.parent else None
-
     def write(self, path: Path | None, doc: dict) -> None:
-        """``doc`` to ``path`` (JSON) while the parent lives."""
-        path = self.file(path)
-        if path is not None:
+        """``doc`` to ``path`` (JSON; None: nowhere) while the parent lives."""
+        if path is not None and os.getppid() == self.parent:
             _write_json(path, doc)
 
 

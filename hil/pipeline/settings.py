@@ -17,7 +17,8 @@ from hil.vocabulary import Stream
 @dataclass(frozen=True)
 class PipelineSettings:
     """The site, the table's geometry and limits, the IMU's block, the estimator's block, the timing the config
-    derives from them and the stream watch's timeout (docs/harness.md, "Sync pairing", "What a read costs, and the block length")."""
+    derives from them and the stream watch's timeout (docs/harness.md, "Sync pairing", "What a read costs, and
+    the block length")."""
 
     earth: Earth
     geometry: TableGeometry
