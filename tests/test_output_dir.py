@@ -115,3 +115,23 @@ def test_a_trial_run_again_from_its_own_config_copy_replaces_all_but_that(tmp_pa
     assert main(again) == 2
     assert main([*again, "--overwrite"]) == 0
     assert (out / "config.yaml").read_text() == short.read_text()
+
+
+def test_a_history_is_opened_to_forget_replaced_outputs_only_where_it_may_name_them(tmp_path):
+    """:func:`hil.history.location.may_name`: a SQLite file not there, or one at the last revision naming no trial in
+    the directory, needs no SQLAlchemy; anything else is opened and updated as before."""
+    from hil.history.location import may_name
+    from hil.history.store import History
+    from tests.history_legacy import legacy_history
+
+    out, other, history = str(tmp_path / "out"), str(tmp_path / "other"), tmp_path / "history.sqlite"
+    assert not may_name(str(history), out)
+    History(str(history)).append({"kind": "swing", "out_dir": other, "figures": {}})
+    assert not may_name(str(history), out) and may_name(str(history), other)
+    assert may_name(f"sqlite:///{history}", out)  # a URL: opened to tell
+    legacy = legacy_history(tmp_path / "legacy.sqlite", 3)
+    legacy.commit()
+    legacy.close()
+    assert may_name(str(tmp_path / "legacy.sqlite"), out)  # an older schema: migrated as before
+    (tmp_path / "garbage.sqlite").write_text("not a database")
+    assert may_name(str(tmp_path / "garbage.sqlite"), out)  # its error is the history's to report

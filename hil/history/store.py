@@ -6,7 +6,6 @@ Alembic revisions in ``hil/history/migrations``. Every message names the databas
 from __future__ import annotations
 
 import json
-import os
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -17,13 +16,11 @@ import sqlalchemy as sa  # a dependency: SQLite needs nothing more, a server its
 from sqlalchemy.engine import URL, Connection, Engine
 from sqlalchemy.exc import ArgumentError
 
+from hil.history.location import ENV, HEAD, LOCK_TIMEOUT_S, data_dir, default_location, resolve  # noqa: F401
 from hil.history.tables import COLUMNS, trials
 
-ENV = "HIL_HISTORY"
-LOCK_TIMEOUT_S = 2.0  # how long a SQLite write waits for another writer's lock before it gives up
 CONNECT_TIMEOUT_S = 10  # how long a PostgreSQL connection waits for a server that does not answer
 MIGRATIONS = Path(__file__).with_name("migrations")
-HEAD = "0004"  # the last revision in MIGRATIONS/versions: a database there needs no migration (and no Alembic)
 LEGACY_REVISIONS = {1: "0001", 2: "0002", 3: "0003"}  # schema_version of the files versions 1-3 wrote by hand
 MIGRATION_LOCK = 7_305_050  # the PostgreSQL advisory lock that keeps two stations from migrating at once
 _PASSWORD_IN_URL = re.compile(r"(://[^:/@\s]*:)[^@\s]*@")
@@ -42,21 +39,6 @@ class HistoryError(Exception):
     def __init__(self, message: str, lasting: bool = False) -> None:
         super().__init__(message)
         self.lasting = lasting
-
-
-def data_dir() -> Path:
-    """The user's data directory for the project ($XDG_DATA_HOME, else ~/.local/share, then turntable-hil)."""
-    return Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "turntable-hil"
-
-
-def default_location() -> Path:
-    """history.sqlite under the user's data directory."""
-    return data_dir() / "history.sqlite"
-
-
-def resolve(option: str | None) -> str:
-    """The database named by ``--history`` (``option``), else by $HIL_HISTORY, else the default file."""
-    return option or os.environ.get(ENV) or str(default_location())
 
 
 def shown(location: str) -> str:
