@@ -36,6 +36,16 @@ def child_env(**extra: str) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": path, **extra}
 
 
+def package_version() -> str:
+    """This package's installed version, "unknown" when it is not installed (run from a checkout)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("turntable-hil")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def end_child(child: subprocess.Popen, files: Iterable[IO]) -> None:
     """Kill ``child`` if it still runs, reap it, and close ``files`` (its pipes)."""
     child.kill()

@@ -18,7 +18,7 @@ from hil.outputs.html_page import figures_html, html_page
 from hil.outputs.measurements import format_value
 from hil.outputs.page_header import page_header
 from hil.outputs.record import source_commit
-from hil.recording.recorder import package_version
+from hil import package_version
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

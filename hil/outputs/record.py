@@ -13,10 +13,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from hil import package_version
 from hil.config import Config, RecordConfig
 from hil.inputs import resolve_path
 from hil.vocabulary import Port
-from hil.recording.recorder import package_version, read_start_record
 
 PROPERTIES = ("dut_part", "dut_serial", "station", "operator", "software_version", "commit", "config_sha256",
               "started_utc", "ended_utc", "host", "controller")  # what junit.xml and the report's header show
@@ -56,7 +56,7 @@ def trial_record(cfg: Config, config_text: str, started: datetime, ended: dateti
     """The record of a trial of ``cfg`` (its YAML ``config_text``) that ran from ``started`` to ``ended`` (aware
     datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it started), else
     the config's."""
-    recorded = read_start_record(out / "recording.mcap") or {}
+    recorded = _start_record(out / "recording.mcap") or {}
     ports, imu_config = (json.loads(recorded[key]) if recorded.get(key) else None for key in ("ports", "imu_config"))
     return {**run_record(cfg.record.model_dump(), config_text, started, ended), **_devices(cfg, ports),
             "imu_config": imu_config}
@@ -73,10 +73,20 @@ def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None,
     return {**record, **_devices(cfg, ports), "imu_config": imu_config}
 
 
+def _start_record(recording: Path) -> dict[str, str] | None:
+    """:func:`~hil.recording.recorder.read_start_record` of ``recording``; None when there is none (a simulation's
+    outputs), without loading the recorder and mcap."""
+    if not recording.is_file():
+        return None
+    from hil.recording.recorder import read_start_record  # mcap: only for a trial that recorded
+
+    return read_start_record(recording)
+
+
 def recorded_block(recording: Path, block: RecordConfig) -> RecordConfig:
     """``block`` with the fields of the record the trial in ``recording`` started with (its unit, part, operator,
     station and notes, as the command line gave them over its config); ``block`` for a file without one."""
-    recorded = read_start_record(recording) or {}
+    recorded = _start_record(recording) or {}
     return block.model_copy(update={key: recorded[key] or None for key in RecordConfig.model_fields if key in recorded})
 
 

@@ -33,7 +33,6 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +42,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from drivers.codec import RawChunk, StreamEvent
+from hil import package_version
 from hil.recording.csv_input import DataError
 from hil.vocabulary import StreamEventKind
 
@@ -51,13 +51,6 @@ BYTES = "application/octet-stream"
 CAN_FRAME = "turntable-hil/can-frame"
 EVENTS = "events"
 _CAN_HEADER = struct.Struct(">IB")
-
-
-def package_version() -> str:
-    try:
-        return version("turntable-hil")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def to_ns(host_time: float) -> int:

@@ -15,15 +15,13 @@ from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.progress import Finished
 from hil.pipeline.settings import PipelineSettings
-from hil.recording.csv_input import read_increments_csv
-from hil.recording.recorder import Recording, RecordingReader
-from hil.recording.replay import open_recording, recorded_pace, recording_path
 from hil.trial.outcome import TrialOutcome, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer
 from hil.vocabulary import TrialKind
 
 if TYPE_CHECKING:
     from emulators.simulation_process import SimulationProcess
+    from hil.recording.recorder import Recording, RecordingReader
 
 
 @dataclass
@@ -40,6 +38,8 @@ class ReplayOutcome(TrialOutcome):
 def run_replay(source: str | Path, out: str | Path | None, options: ViewerOptions
                ) -> tuple[ReplayOutcome, Viewer | None]:
     """A recording's chunks through the processing of the live run, in the same order, read as they are fed."""
+    from hil.recording.replay import open_recording, recording_path  # the recorder and mcap: a replay's only
+
     path = recording_path(source)
     out = Path(out) if out else path.parent / "replay"
     recording, cfg = open_recording(source)
@@ -65,6 +65,8 @@ def replay_recording(recording: RecordingReader | Recording, cfg: Config, viewer
                      ) -> Finished:
     """The pipeline's end of a recording's items fed in their order (and logged to ``viewer``); a
     :class:`~hil.recording.recorder.RecordingReader` is read item by item as they are fed."""
+    from hil.recording.replay import recorded_pace  # the recorder and mcap: a recording's only
+
     processor = TrialProcessor(PipelineSettings.of(cfg), *recorded_pace(recording), [ViewerFeed(viewer).on_progress])
     for item in recording:
         processor.feed(item)
@@ -97,6 +99,8 @@ def run_simulation(cfg: Config, config_text: str, out: Path, options: ViewerOpti
 
 def run_csv(cfg: Config, config_text: str, data: str | Path, out: Path) -> TrialOutcome:
     """Increments (and table angles, if present) from a CSV into the processor; no truth."""
+    from hil.recording.csv_input import read_increments_csv  # hil estimate's only
+
     processor = TrialProcessor(PipelineSettings.of(cfg))
     processor.feed_batch(read_increments_csv(data, cfg))
     return TrialOutcome.of(processor.finished(), cfg, config_text, out)
