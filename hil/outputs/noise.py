@@ -16,8 +16,9 @@ import numpy as np
 from hil.estimation.allan import ACCEL_UNITS, GYRO_UNITS, AllanAnalysis, TermUnits
 from hil.estimation.allan_fit import FLICKER_FLOOR, TERM_NAMES, Term
 from hil.outputs.figures import pyplot
+from hil.outputs.output_dir import NOISE_JSON
 
-NOISE_JSON, ALLAN_PNG = "noise.json", "allan.png"
+ALLAN_PNG = "allan.png"
 # (sensor, its units, the noise.json key of each term in the order of TERM_NAMES: quantisation, white, bias
 # instability, random walk, ramp)
 SENSORS = (

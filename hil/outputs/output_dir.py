@@ -17,11 +17,12 @@ from hil.inputs import InputError
 from hil.outputs.figures import FIGURES
 
 LOCK_NAME = ".hil.lock"
+NOISE_JSON = "noise.json"  # a noise characterisation's document (hil.outputs.noise)
 # what a trial writes (docs/contracts.md, "Output files"), and a noise characterisation
 TRIAL_OUTPUTS = ("result.json", "series.csv", "report.html", "junit.xml", "config.yaml", *FIGURES, "recording.mcap",
                  "recording.rrd", "fixture.rrd", "emulator.json", "emulator.log", "ports.json", "calibration.json",
                  "calibration.html", "calibration_residuals.png", "units")
-NOISE_OUTPUTS = ("noise.json", "allan.png", "report.html", "noise.rrd", "acquisition")
+NOISE_OUTPUTS = (NOISE_JSON, "allan.png", "report.html", "noise.rrd", "acquisition")
 RECORDS = ("result.json", "recording.mcap", "noise.json")  # what another command could take for a trial's
 
 

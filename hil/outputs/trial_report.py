@@ -23,13 +23,10 @@ from hil.outputs.junit import write_junit
 from hil.outputs.html_page import REPORT_NAME, ReportError, html_page, measurement_table
 from hil.outputs.judgement import Judgement, judge
 from hil.outputs.measurements import FAIL, NOT_JUDGED, Measurement, format_value
-from hil.outputs.noise import NOISE_JSON
-from hil.outputs.noise_section import noise_section
+from hil.outputs.output_dir import NOISE_JSON
 from hil.outputs.page_header import page_header
-from hil.outputs.ratetest import ratetest_document, rebuild_ratetest
 from hil.outputs.record import PROPERTIES
 from hil.outputs.result import COMPLETED, calibration_applied_text
-from hil.outputs.result_schema import result_problem
 from hil.outputs.series import SERIES_COLUMNS, SERIES_NAME, read_series
 
 _CAPTIONS = {
@@ -59,6 +56,8 @@ def rebuild_report(out_dir: Path) -> tuple[Path, str | None]:
     (:func:`write_noise_report`) when the directory holds noise.json without a trial's result.json, or of a rate
     test's (:func:`~hil.outputs.ratetest.rebuild_ratetest`) when it holds the test's document without one; the
     page and the verdict (None for a noise characterisation, which has none)."""
+    from hil.outputs.ratetest import ratetest_document, rebuild_ratetest  # hil report's only
+
     out_dir = Path(out_dir)
     document = ratetest_document(out_dir)
     if document is not None and not (out_dir / "result.json").exists():
@@ -84,6 +83,8 @@ def _write_report(out_dir: Path, limits: ReportLimits | None = None,
         raise ReportError(f"{result_path}: not valid JSON ({exc}); run the trial again to rewrite it") from None
     if not isinstance(result, dict):
         raise ReportError(f"{result_path}: not a trial result (a JSON object is expected)")
+    from hil.outputs.result_schema import result_problem  # its models: a result.json read back, not one written
+
     problem = result_problem(result)
     if problem is not None:  # judged as it stands, a value of another shape could pass a limit unread
         raise ReportError(f"{result_path}: not a trial result of this version ({problem}; "
@@ -120,6 +121,8 @@ def write_judged_report(out_dir: Path, result: dict, judged: Judgement, draw: Dr
 def write_noise_report(out_dir: Path) -> Path:
     """report.html of a noise characterisation: the trial's report with its noise section when the
     directory holds a trial's result.json, else a page of the noise section and allan.png alone."""
+    from hil.outputs.noise_section import noise_section  # the Allan analysis: a noise characterisation's only
+
     if (out_dir / "result.json").exists():
         return write_report(out_dir)
     figures = _figure_html(_figures(out_dir, None, {}))
@@ -135,7 +138,11 @@ def write_noise_report(out_dir: Path) -> Path:
 
 def _noise(out_dir: Path) -> str:
     path = out_dir / NOISE_JSON
-    return noise_section(json.loads(path.read_text(encoding="utf-8"))) if path.exists() else ""
+    if not path.exists():
+        return ""
+    from hil.outputs.noise_section import noise_section  # the Allan analysis: a noise characterisation's only
+
+    return noise_section(json.loads(path.read_text(encoding="utf-8")))
 
 
 # --- page ------------------------------------------------------------------------------------------
