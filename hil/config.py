@@ -8,7 +8,6 @@ converts at the edges through the ``*_si`` helpers below. Unknown keys and bad v
 
 from __future__ import annotations
 
-import logging
 import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -28,7 +27,6 @@ from hil.inputs import ConfigError, InputError  # noqa: F401 (InputError: for th
 BLOCK_S = 0.05  # s of samples handed to the estimator at once by default (estimator.batch_samples)
 MIN_READ_S = 0.02  # the shortest time between a live trial's reads (Config.read_s)
 MAX_READ_FRAMES = 50  # IMU frames a live read holds at most: 25 ms at 2 kHz (1.8 kB of KVH frames, under half a pty's buffer)
-_log = logging.getLogger(__name__)
 RATE_RATIO_TOLERANCE = 1e-9  # relative: how close imu.rate_hz / trial.rate_hz must be to an integer
 
 class TrialConfig(Model):
@@ -155,7 +153,10 @@ class ImuConfig(Model):
         if "kvh1750" in data:
             if "options" in data:
                 raise ValueError("kvh1750: give the KVH 1750's settings in imu.options only")
-            _log.warning("hil: imu.kvh1750 is deprecated and will be removed: write its keys under imu.options")
+            import logging  # for this deprecation only
+
+            logging.getLogger(__name__).warning("hil: imu.kvh1750 is deprecated and will be removed: write its keys "
+                                                "under imu.options")
             data["options"] = data.pop("kvh1750")
         try:
             on_can = IMU_CODECS.get(data.get("protocol", "kvh1750")).link == "can"

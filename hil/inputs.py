@@ -3,7 +3,6 @@ named config or DBC file is found. Free of pydantic, so that parsing the argumen
 
 from __future__ import annotations
 
-from importlib.resources import files
 from pathlib import Path
 
 SHIPPED = "hil.configs"  # the repository's configs/, installed with the package
@@ -23,5 +22,7 @@ def resolve_path(path: str | Path) -> Path:
     path = Path(path)
     if path.exists() or path.parent not in (Path("."), Path("configs")):
         return path
+    from importlib.resources import files  # with tempfile and zipfile: only for a name not found as given
+
     shipped = Path(files(SHIPPED) / path.name)  # an installed package is a directory
     return shipped if shipped.is_file() else path
