@@ -20,13 +20,13 @@ import tempfile
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, BinaryIO
 
-import numpy as np
-
 from hil import child_env, end_child
-from hil.samples import AlignedBatch
 
-if TYPE_CHECKING:  # imported by the child: this process starts it before it imports pydantic
+if TYPE_CHECKING:  # imported by the child: this process starts it before it imports numpy and pydantic
+    import numpy as np
+
     from hil.config import Config
+    from hil.samples import AlignedBatch
 
 HEADER = struct.Struct("<qd??")  # samples (0: no more batches), t0 (s), angles present, temperatures present
 AHEAD = 2  # batches the output pipe holds
@@ -36,8 +36,9 @@ INPUT_ERROR = 2  # the child's exit code for bad input (hil.config.InputError), 
 class SimulationProcess:
     """A child process that imports the emulator at once, then computes the batches of one config.
 
-    Use as a context manager; :meth:`batches` hands the child its config. A child not given one, or whose
-    batches are not all read, is ended on :meth:`close`.
+    Use as a context manager; :meth:`batches` hands the child its config (or :meth:`start` earlier, so that the
+    child computes its first batches while this process goes on). A child not given one, or whose batches are
+    not all read, is ended on :meth:`close`.
     """
 
     def __init__(self) -> None:
@@ -53,15 +54,23 @@ class SimulationProcess:
         self.close()
 
     def batches(self, cfg: Config) -> Iterator[AlignedBatch]:
-        """Hand ``cfg`` to the child now; its batches as they come, those of ``Simulation.from_config(cfg)``.
-        Raises the child's :class:`~hil.config.InputError` as one, any other error as a RuntimeError."""
+        """Hand ``cfg`` to the child now (unless :meth:`start` has); its batches as they come, those of
+        ``Simulation.from_config(cfg)``. Raises the child's :class:`~hil.config.InputError` as one, any other
+        error as a RuntimeError."""
+        self.start(cfg)
+        return self._read(self._child)
+
+    def start(self, cfg: Config) -> None:
+        """Hand ``cfg`` to the child now, once: it computes its first batches (as many as the pipe holds) before
+        :meth:`batches` reads them."""
         child = self._child
+        if child.stdin.closed:
+            return
         try:
             child.stdin.write(cfg.model_dump_json().encode())
             child.stdin.close()
         except BrokenPipeError:  # the child is gone: reading its output says why
             pass
-        return self._read(child)
 
     def close(self) -> None:
         """End the child at once (if it has not exited) and close its pipes."""
@@ -93,6 +102,10 @@ class SimulationProcess:
 
 def _read_batch(stream: BinaryIO) -> AlignedBatch | None:
     """The next batch on ``stream``, None after the last; EOFError if the stream ends before."""
+    import numpy as np  # here, not with the module: the child is started first
+
+    from hil.samples import AlignedBatch
+
     n, t0, angles, temperatures = HEADER.unpack(_filled(stream, bytearray(HEADER.size)))
     if n == 0:
         return None
@@ -110,6 +123,8 @@ def _filled(stream: BinaryIO, buffer: bytearray | np.ndarray) -> bytearray | np.
 
 
 def _write_batch(out: BinaryIO, batch: AlignedBatch) -> None:
+    import numpy as np
+
     out.write(HEADER.pack(len(batch), batch.t0, batch.angles is not None, batch.temperature_c is not None))
     for array in (batch.t, batch.dtheta, batch.dv, batch.angles, batch.temperature_c):
         if array is not None:

@@ -12,11 +12,10 @@ from hil.config import load_config
 from hil.history.entry import trial_row
 from hil.history.filing import file_trial
 from hil.outputs.measurements import format_value
-from hil.outputs.output_dir import claimed
+from hil.outputs.output_dir import claimed, output_dir
 from hil.outputs.ratetest import RATETEST_OUTPUTS, write_ratetest
 from hil.outputs.record import run_record
 from hil.outputs.result import verdict_exit_code
-from hil.trial.outcome import output_dir
 from hil.trial.ratetest_live import live_steps
 from hil.trial.ratetest_runner import run_frequency_response, run_scale_factor, simulate_steps
 

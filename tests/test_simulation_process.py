@@ -39,6 +39,14 @@ def test_the_childs_batches_are_the_batches_computed_in_line(cfg):
     _assert_same(got, list(Simulation.from_config(cfg).batches()))
 
 
+def test_a_config_handed_ahead_of_the_reading_gives_the_same_batches():
+    cfg = make_config(duration=60.0, rate=200.0, errors=ERRORS)
+    with SimulationProcess() as simulation:
+        simulation.start(cfg)  # as hil simulate does before it imports the estimator
+        got = list(simulation.batches(cfg))
+    _assert_same(got, list(Simulation.from_config(cfg).batches()))
+
+
 def test_a_batch_crosses_the_pipe_as_it_is_with_or_without_angles_and_temperatures():
     rng = np.random.default_rng(4)
     batches = [AlignedBatch(np.arange(1.0, 4.0), rng.normal(size=(3, 3)), rng.normal(size=(3, 3)), angles, t0,

@@ -108,7 +108,7 @@ def trial_config(args: argparse.Namespace, units: bool = False):
     ``--station`` over every unit's record."""
     from hil.config import load_config
     from hil.inputs import InputError
-    from hil.trial.outcome import output_dir
+    from hil.outputs.output_dir import output_dir
 
     cfg = load_config(args.config, units)
     if cfg.units and args.dut:

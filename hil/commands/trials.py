@@ -94,18 +94,27 @@ def _replay_units(args: argparse.Namespace, out: Path, name: str, recorded: dict
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from emulators.simulation_process import SimulationProcess  # first: its child imports the emulator meanwhile
-    from hil.outputs.figure_process import FigureProcess
 
-    with SimulationProcess() as simulation, FigureProcess() as figures:
-        from hil.trial.offline import run_simulation
-
+    with SimulationProcess() as simulation, _figure_process() as figures:
         cfg, out = trial_config(args, units=True)
         cfg.emulated_only(args.config, "hil simulate")
+        if not cfg.units:
+            simulation.start(cfg)  # its first batches computed while the estimator's modules load
+        from hil.trial.offline import run_simulation
+
         with claimed(args, out, args.config):
             if cfg.units:
                 return _simulate_units(args, cfg, out)
             outcome = run_simulation(cfg, Path(args.config).read_text(), out, viewer_options(args), simulation)
             return finish(args, *outcome, figures)
+
+
+def _figure_process():
+    """A :class:`~hil.outputs.figure_process.FigureProcess`, imported (with numpy) once the simulation's child is
+    started: that child's imports are on the way to the first batch, the figure process's are not."""
+    from hil.outputs.figure_process import FigureProcess
+
+    return FigureProcess()
 
 
 def _simulate_units(args: argparse.Namespace, cfg, out: Path) -> int:

@@ -11,10 +11,15 @@ import os
 import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
+import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.inputs import InputError
 from hil.outputs.figures import FIGURES
+
+if TYPE_CHECKING:
+    from hil.config import Config
 
 LOCK_NAME = ".hil.lock"
 NOISE_JSON = "noise.json"  # a noise characterisation's document (hil.outputs.noise)
@@ -24,6 +29,15 @@ TRIAL_OUTPUTS = ("result.json", "series.csv", "report.html", "junit.xml", "confi
                  "calibration.html", "calibration_residuals.png", "units")
 NOISE_OUTPUTS = (NOISE_JSON, "allan.png", "report.html", "noise.rrd", "acquisition")
 RECORDS = ("result.json", "recording.mcap", "noise.json")  # what another command could take for a trial's
+
+
+def output_dir(out: str | Path | None, cfg: Config) -> Path:
+    """``--out``, else ``output.dir``, else ``runs/NAME-TIME``."""
+    if out:
+        return Path(out)
+    if cfg.output.dir:
+        return Path(cfg.output.dir)
+    return Path("runs") / f"{cfg.trial.name}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 class OutputDirError(InputError):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,15 +38,6 @@ def emulated_truth(cfg: Config) -> dict | None:
     bias, drift = compensated_bias(accel, np.array(errors.accel_bias_ug) * UG,
                                    np.array(errors.accel_drift_ug_per_h) * UG)
     return {"accel_bias_ug": [float(b) for b in bias / UG], "accel_drift_ug_per_h": [float(d) for d in drift / UG]}
-
-
-def output_dir(out: str | Path | None, cfg: Config) -> Path:
-    """``--out``, else ``output.dir``, else ``runs/NAME-TIME``."""
-    if out:
-        return Path(out)
-    if cfg.output.dir:
-        return Path(cfg.output.dir)
-    return Path("runs") / f"{cfg.trial.name}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 @dataclass
