@@ -117,21 +117,23 @@ def test_a_trial_run_again_from_its_own_config_copy_replaces_all_but_that(tmp_pa
     assert (out / "config.yaml").read_text() == short.read_text()
 
 
-def test_a_history_is_opened_to_forget_replaced_outputs_only_where_it_may_name_them(tmp_path):
-    """:func:`hil.history.location.may_name`: a SQLite file not there, or one at the last revision naming no trial in
-    the directory, needs no SQLAlchemy; anything else is opened and updated as before."""
-    from hil.history.location import may_name
+def test_replaced_outputs_are_forgotten_without_sqlalchemy_in_a_sqlite_history_of_the_last_revision(tmp_path):
+    """:func:`hil.history.location.forgotten`: a SQLite file not there, or one at the last revision, needs no
+    SQLAlchemy; anything else is left to the store, which migrates, updates and words its failures as before."""
+    from hil.history.location import forgotten
     from hil.history.store import History
     from tests.history_legacy import legacy_history
 
     out, other, history = str(tmp_path / "out"), str(tmp_path / "other"), tmp_path / "history.sqlite"
-    assert not may_name(str(history), out)
-    History(str(history)).append({"kind": "swing", "out_dir": other, "figures": {}})
-    assert not may_name(str(history), out) and may_name(str(history), other)
-    assert may_name(f"sqlite:///{history}", out)  # a URL: opened to tell
+    assert forgotten(str(history), out) and not history.exists()  # not made for nothing
+    for out_dir in (out, other, out):
+        History(str(history)).append({"kind": "swing", "out_dir": out_dir, "figures": {}})
+    assert forgotten(str(history), out)
+    assert _rows(history) == [(1, None), (2, other), (3, None)]
+    assert not forgotten(f"sqlite:///{history}", out)  # a URL: the store's
     legacy = legacy_history(tmp_path / "legacy.sqlite", 3)
     legacy.commit()
     legacy.close()
-    assert may_name(str(tmp_path / "legacy.sqlite"), out)  # an older schema: migrated as before
+    assert not forgotten(str(tmp_path / "legacy.sqlite"), out)  # an older schema: migrated by the store first
     (tmp_path / "garbage.sqlite").write_text("not a database")
-    assert may_name(str(tmp_path / "garbage.sqlite"), out)  # its error is the history's to report
+    assert not forgotten(str(tmp_path / "garbage.sqlite"), out)  # its error is the store's to word

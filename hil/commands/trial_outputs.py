@@ -126,14 +126,14 @@ def claimed(args: argparse.Namespace, out: Path, *inputs: str | Path | None, noi
     """The command's output directory, claimed for the ``with`` block (:func:`hil.outputs.output_dir.claimed`;
     its ``inputs`` are never removed); a history's rows that pointed at outputs ``--overwrite`` replaced point
     nowhere."""
-    from hil.history.location import may_name, resolve
+    from hil.history.location import forgotten, resolve
     from hil.outputs.output_dir import NOISE_OUTPUTS, TRIAL_OUTPUTS
     from hil.outputs.output_dir import claimed as claim
 
     given = tuple(Path(path) for path in inputs if path is not None)
     with claim(out, NOISE_OUTPUTS if noise else TRIAL_OUTPUTS, args.overwrite, given) as replaced:
-        if replaced and may_name(resolve(args.history), str(out.resolve())):
-            from hil.history.filing import forget_outputs  # SQLAlchemy: only for a history that may name out
+        if replaced and not forgotten(resolve(args.history), str(out.resolve())):
+            from hil.history.filing import forget_outputs  # SQLAlchemy: a URL, a schema to migrate, an error
 
             forget_outputs(args.history, out)
         yield

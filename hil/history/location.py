@@ -1,6 +1,7 @@
 """Where the history is, without SQLAlchemy: the database ``--history`` or $HIL_HISTORY names, else the default
-file, and whether a SQLite history there can name a trial's output directory at all (:func:`may_name`), which a
-command that replaced outputs asks before it loads :mod:`hil.history.store` (SQLAlchemy, about 0.1 s)."""
+file; and, for a command that replaced another trial's outputs, their rows made to point nowhere in a SQLite file of
+the last revision with the standard library alone (:func:`forgotten`), before anything loads :mod:`hil.history.store`
+(SQLAlchemy, about 0.1 s)."""
 
 from __future__ import annotations
 
@@ -27,26 +28,33 @@ def resolve(option: str | None) -> str:
     return option or os.environ.get(ENV) or str(default_location())
 
 
-def may_name(location: str, out_dir: str) -> bool:
-    """False only when the history at ``location`` is a SQLite file (a path, not a URL) that is not there, or one
-    of the last revision (:data:`HEAD`) whose trials name no ``out_dir``: then forgetting ``out_dir`` there changes
-    nothing. True otherwise (a URL, an older schema, a file that cannot be read): the history is opened to tell."""
+def forgotten(location: str, out_dir: str) -> bool:
+    """Whether the trials of the history at ``location`` that name ``out_dir`` now point nowhere (``out_dir``
+    null), as :meth:`hil.history.store.History.forget_outputs` makes them, done here when the history is a SQLite
+    file (a path, not a URL) of the last revision (:data:`HEAD`), or none is there (a SQLite history not made yet
+    stays so). False for any other (a URL, an older schema to migrate first) and on any error: the store opens it
+    then, and words its failure."""
     if "://" in location:
-        return True
+        return False
     path = Path(location).expanduser()
     if not path.exists():
-        return False
-    import sqlite3  # the standard library's driver: a read needs no engine
+        return True
+    import sqlite3  # the standard library's driver: one update needs no engine
 
     try:
-        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=LOCK_TIMEOUT_S)
+        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, timeout=LOCK_TIMEOUT_S,
+                             isolation_level=None)
     except sqlite3.Error:
-        return True
+        return False
     try:
-        revision = db.execute("SELECT version_num FROM alembic_version").fetchall()
-        named = db.execute("SELECT 1 FROM trials WHERE out_dir = ? LIMIT 1", (out_dir,)).fetchall()
+        db.execute("BEGIN IMMEDIATE")  # the writer's lock first, as the store takes it
+        if db.execute("SELECT version_num FROM alembic_version").fetchall() != [(HEAD,)]:
+            db.execute("ROLLBACK")
+            return False
+        db.execute("UPDATE trials SET out_dir = NULL WHERE out_dir = ?", (out_dir,))
+        db.execute("COMMIT")
     except sqlite3.Error:
-        return True
+        return False  # rolled back as the connection closes
     finally:
         db.close()
-    return revision != [(HEAD,)] or bool(named)
+    return True
