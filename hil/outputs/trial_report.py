@@ -121,10 +121,10 @@ def write_judged_report(out_dir: Path, result: dict, judged: Judgement, draw: Dr
 def write_noise_report(out_dir: Path) -> Path:
     """report.html of a noise characterisation: the trial's report with its noise section when the
     directory holds a trial's result.json, else a page of the noise section and allan.png alone."""
-    from hil.outputs.noise_section import noise_section  # the Allan analysis: a noise characterisation's only
-
     if (out_dir / "result.json").exists():
         return write_report(out_dir)
+    from hil.outputs.noise_section import noise_section  # the Allan analysis: a noise characterisation's only
+
     figures = _figure_html(_figures(out_dir, None, {}))
     doc = json.loads((out_dir / NOISE_JSON).read_text())
     record = doc.get("record") or {}
