@@ -137,3 +137,8 @@ def test_replaced_outputs_are_forgotten_without_sqlalchemy_in_a_sqlite_history_o
     assert not forgotten(str(tmp_path / "legacy.sqlite"), out)  # an older schema: migrated by the store first
     (tmp_path / "garbage.sqlite").write_text("not a database")
     assert not forgotten(str(tmp_path / "garbage.sqlite"), out)  # its error is the store's to word
+    with sqlite3.connect(history, isolation_level=None) as writer:
+        writer.execute("BEGIN IMMEDIATE")  # another writer holds the lock: the store waits for it, as before
+        assert not forgotten(str(history), other)
+        writer.execute("ROLLBACK")
+    assert _rows(history)[1] == (2, other)

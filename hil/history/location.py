@@ -10,7 +10,6 @@ from pathlib import Path
 
 ENV = "HIL_HISTORY"
 HEAD = "0004"  # the last revision in migrations/versions: a database there needs no migration (and no Alembic)
-LOCK_TIMEOUT_S = 2.0  # how long a SQLite write waits for another writer's lock before it gives up
 
 
 def data_dir() -> Path:
@@ -42,12 +41,11 @@ def forgotten(location: str, out_dir: str) -> bool:
     import sqlite3  # the standard library's driver: one update needs no engine
 
     try:
-        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, timeout=LOCK_TIMEOUT_S,
-                             isolation_level=None)
+        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, timeout=0, isolation_level=None)
     except sqlite3.Error:
         return False
     try:
-        db.execute("BEGIN IMMEDIATE")  # the writer's lock first, as the store takes it
+        db.execute("BEGIN IMMEDIATE")  # the writer's lock first, at once: a held one is the store's to wait for
         if db.execute("SELECT version_num FROM alembic_version").fetchall() != [(HEAD,)]:
             db.execute("ROLLBACK")
             return False

@@ -16,9 +16,10 @@ import sqlalchemy as sa  # a dependency: SQLite needs nothing more, a server its
 from sqlalchemy.engine import URL, Connection, Engine
 from sqlalchemy.exc import ArgumentError
 
-from hil.history.location import ENV, HEAD, LOCK_TIMEOUT_S, data_dir, default_location, resolve  # noqa: F401
+from hil.history.location import ENV, HEAD, data_dir, default_location, resolve  # noqa: F401
 from hil.history.tables import COLUMNS, trials
 
+LOCK_TIMEOUT_S = 2.0  # how long a SQLite write waits for another writer's lock before it gives up
 CONNECT_TIMEOUT_S = 10  # how long a PostgreSQL connection waits for a server that does not answer
 MIGRATIONS = Path(__file__).with_name("migrations")
 LEGACY_REVISIONS = {1: "0001", 2: "0002", 3: "0003"}  # schema_version of the files versions 1-3 wrote by hand
