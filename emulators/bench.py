@@ -199,8 +199,8 @@ class Bench:
 
     def names(self) -> dict:
         """The ports JSON: ``imu``, or ``units: {<name>: {imu: ...}}``, and the table's and environment's."""
-        chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
-        power = {} if self.supply is None else {"power": self.supply.resource}
+        chamber = {} if self.chamber is None else {Port.CHAMBER: self.chamber.path}
+        power = {} if self.supply is None else {Port.POWER: self.supply.resource}
         imus = {name: self.ports[name].path for name in self.imus}
         if Port.IMU not in imus:
             imus = {Port.UNITS: {name.removeprefix(UNIT_PREFIX): {Port.IMU: path} for name, path in imus.items()}}

@@ -23,6 +23,8 @@ class Port(StrEnum):
     TABLE_DATA = "turntable_data"
     TABLE_CMD = "turntable_cmd"
     UNITS = "units"  # ports.json of a units config: {"units": {<name>: {"imu": ...}}}
+    CHAMBER = "chamber"  # the emulated chamber's pty, with environment.chamber
+    POWER = "power"  # the emulated supply's VISA resource, with environment.power
 
 
 UNIT_PREFIX = "imu."  # the emulator's device name of a unit's IMU: imu.<name>

@@ -10,7 +10,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from drivers.registry import CHAMBERS
 from hil.config import Config
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
@@ -41,7 +40,7 @@ class PlanChamber:
 
     def __exit__(self, *exc: object) -> None:
         """The chamber to its ``on_exit`` and closed."""
-        from hil.trial.chamber import release_chamber
+        from hil.trial.rig import release_chamber
 
         if self.controller is not None:
             release_chamber(self.controller, self.settings)
@@ -84,18 +83,11 @@ class PlanChamber:
 
     def _open(self) -> None:
         """The chamber's controller, open (the emulated chamber started first, at the last set point)."""
-        if self.controller is not None:
-            return
-        cfg = self.settings
-        if cfg.source == "emulator":
-            from emulators.chamber import emulated_chamber
+        from hil.trial.rig import open_plan_chamber
 
-            start = cfg.set_point_c if self.set_point_c is None else self.set_point_c
-            self.emulated = emulated_chamber(cfg.model_copy(update={"set_point_c": start}))
-            port, cls, options = self.emulated.path, CHAMBERS.get("watlow-f4"), {}
-        else:
-            port, cls, options = cfg.port, CHAMBERS.get(cfg.controller), cfg.options
-        self.controller = cls(port, cls.Options.model_validate(options)).open()
+        if self.controller is None:
+            start = self.settings.set_point_c if self.set_point_c is None else self.set_point_c
+            self.controller, self.emulated = open_plan_chamber(self.settings, start)
 
     def _wait(self, seconds: float, stop: StopSignals) -> bool:
         """``seconds`` of trial time: the emulated chamber's moved on (paced at the plan's speed), a real one's

@@ -21,15 +21,7 @@ class PlanTable:
 
     def __exit__(self, *exc: object) -> None:
         """Every axis Off and the modes read back; what the table said in :attr:`exit_state`."""
-        from drivers.table_controller import TableError
-        from hil.trial.table_control import TableControl
+        from hil.trial.rig import table_off
 
-        if self.url is None:
-            return
-        try:
-            control = TableControl(self.url, self.table).open()
-        except TableError as exc:
-            self.exit_state = f"not confirmed: {exc}"
-            return
-        control.stop()
-        self.exit_state = f"not confirmed: {control.stop_error}" if control.stop_error else "every axis Off (read back)"
+        if self.url is not None:
+            self.exit_state = table_off(self.url, self.table)

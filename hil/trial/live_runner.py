@@ -83,7 +83,7 @@ def _acquire(request: _Request, stop_requested, commanded: Commanded):
                     hooks = dataclasses.replace(commanded(rig.table, cfg, viewer, chamber), on_end=rig.table.stop)
                 hooks = dataclasses.replace(hooks, source_done=rig.source_done, on_progress=progress.update,
                                             on_warning=progress.warn, stop_requested=stop_requested)
-                trial = LiveTrial(cfg, request.config_text, out, duration, rig.ports, viewer, request.time_scale,
+                trial = LiveTrial(cfg, request.config_text, out, duration, rig.links(), viewer, request.time_scale,
                                   hooks)
                 return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
