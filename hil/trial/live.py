@@ -163,7 +163,7 @@ class LiveTrial:
         opened = links.transports
         codecs = settings.codecs()
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
-            check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
+            check_baudrate(IMU, codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(settings, {s: t.address for s, t in opened.items()})
         imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
