@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from hil.config import Config
+from hil.config_environment import ChamberConfig
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED
@@ -20,10 +20,10 @@ POLL_S = 5.0  # trial seconds between two readings of the chamber
 
 
 class PlanChamber:
-    """The chamber of ``config`` for one plan run (none without ``environment.chamber``), at ``speed``."""
+    """The chamber of ``environment.chamber`` (None: none) for one plan run, at ``speed``."""
 
-    def __init__(self, config: Config, speed: float | None) -> None:
-        self.settings, self.speed = config.environment.chamber, speed
+    def __init__(self, settings: ChamberConfig | None, speed: float | None) -> None:
+        self.settings, self.speed = settings, speed
         self.controller = self.emulated = None
         self.set_point_c: float | None = None  # the last soak's, which the trial steps after it run at
         self.t = 0.0  # the emulated chamber's trial time

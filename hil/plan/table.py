@@ -4,15 +4,15 @@ go to their ``on_exit``. An emulated trial's table (``command_port: emulator``) 
 
 from __future__ import annotations
 
-from hil.config import Config
+from hil.config import TurntableConfig
 
 
 class PlanTable:
-    """The table of ``config`` (none without a command port of its own), sent Off when the plan ends."""
+    """The ``turntable`` block's table (none without a command port of its own), sent Off when the plan ends."""
 
-    def __init__(self, config: Config) -> None:
-        port = config.turntable.command_port
-        self.table = config.turntable
+    def __init__(self, table: TurntableConfig) -> None:
+        port = table.command_port
+        self.table = table
         self.url = port if port and port != "emulator" else None
         self.exit_state: str | None = None
 
