@@ -78,3 +78,23 @@ def test_the_emulated_servo_speaks_the_controllers_modes():
     assert servo.mode(2) is TableMode.OFF and servo.mode(2) == "off"
     with pytest.raises(ValueError, match="'O' is not a valid TableMode"):
         servo.set_mode([0], "O")
+
+
+@pytest.mark.parametrize("doc", [
+    {"imu": "/dev/pts/3", "turntable_data": "/dev/pts/4", "turntable_cmd": "socket://127.0.0.1:5000"},
+    {"imu": {"interface": "udp_multicast", "channel": "239.0.0.1"}, "turntable_data": "/dev/pts/4",
+     "turntable_cmd": "socket://127.0.0.1:5000", "chamber": "/dev/pts/5", "power": "TCPIP::127.0.0.1::5001::SOCKET"},
+    {"units": {"kvh-a": {"imu": "/dev/pts/3"}, "kvh-b": {"imu": "/dev/pts/6"}}, "turntable_data": "/dev/pts/4",
+     "turntable_cmd": "socket://127.0.0.1:5000"},
+])
+def test_the_ports_record_reads_and_writes_ports_json_as_it_was(doc):
+    import json
+
+    from hil.vocabulary import DevicePorts
+
+    ports = DevicePorts.of(doc)
+    assert json.dumps(ports.as_dict()) == json.dumps(doc)  # the same keys, values and order
+    if "units" in doc:
+        assert ports.unit("kvh-b").as_dict() == {"imu": "/dev/pts/6", "turntable_data": "/dev/pts/4"}
+    else:
+        assert (ports.imu, ports.table_cmd) == (doc["imu"], "socket://127.0.0.1:5000") and ports.units == {}

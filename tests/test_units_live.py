@@ -204,11 +204,12 @@ def test_a_units_trial_ends_a_unit_whose_imu_or_the_table_is_silent_for_the_outa
     from drivers.reader import DeviceReader
     from hil.trial.live import LiveTrial, TrialAborted, TrialHooks
     from hil.trial.rig import data_links, table_transport
+    from hil.vocabulary import DevicePorts
 
     cfg = parse_config(units_config(), units=True).unit_configs()["kvh-a"]
     cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"outage_limit_s": 3.0}),
                                  "imu": cfg.imu.model_copy(update={"options": {"check_config": False}})})
-    ports = {"imu": "/dev/imu-a", "turntable_data": "/dev/table"}
+    ports = DevicePorts("/dev/imu-a", "/dev/table")
     table = DeviceReader(table_transport(cfg, ports))
     trial = LiveTrial(cfg, "", tmp_path, None, data_links(cfg, ports, table.transport),
                       hooks=TrialHooks(table_reader=table))

@@ -168,7 +168,7 @@ class LiveTrial:
         self.stream_watch = StreamWatch.of(settings, {s: t.address for s, t in opened.items()})
         imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
-                                 record=start_record(cfg, config_text, links.ports, imu_config))  # once it can start
+                                 record=start_record(cfg, config_text, links.recorded_ports(), imu_config))
         self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()

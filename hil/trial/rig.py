@@ -15,7 +15,6 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from drivers.registry import CHAMBERS, POWER_SUPPLIES
 from drivers.scpi_supply import ScpiSupply, SupplyError, SupplySettings
@@ -27,7 +26,7 @@ from hil.config_environment import ChamberConfig, PowerConfig
 from hil.inputs import InputError
 from hil.trial.outcome import TrialSetupError
 from hil.trial.table_control import TableControl
-from hil.vocabulary import Port, Stream
+from hil.vocabulary import DevicePorts, Stream
 
 
 def emulated(cfg: Config) -> bool:
@@ -39,13 +38,13 @@ def emulated(cfg: Config) -> bool:
     return sources == {"emulator"}
 
 
-def command_url(cfg: Config, ports: dict | None) -> str | None:
+def command_url(cfg: Config, ports: DevicePorts | None) -> str | None:
     """The table's command port: ``turntable.command_port``, where ``emulator`` means the emulated table's."""
     url = cfg.turntable.command_port
     if url == "emulator":
-        if ports is None or Port.TABLE_CMD not in ports:
+        if ports is None or ports.table_cmd is None:
             raise TrialSetupError("turntable.command_port: 'emulator' needs turntable.source: emulator")
-        return ports[Port.TABLE_CMD]
+        return ports.table_cmd
     return url
 
 
@@ -55,23 +54,28 @@ class DataLinks:
     the ports they were found on (the emulator's; None: the config's), which the trial's record names."""
 
     transports: dict[str, Transport]
-    ports: dict[str, Any] | None
+    ports: DevicePorts | None
+
+    def recorded_ports(self) -> dict | None:
+        """The ports as the trial's record names them (None: the config's)."""
+        return None if self.ports is None else self.ports.as_dict()
 
 
-def data_links(cfg: Config, ports: dict[str, Any] | None = None, table: Transport | None = None) -> DataLinks:
+def data_links(cfg: Config, ports: DevicePorts | None = None, table: Transport | None = None) -> DataLinks:
     """The IMU's and the table's transports of a one-unit config, from the emulator's ``ports`` (ports.json) or from
     the config; ``table``: the table's, already made (shared by several units)."""
-    found = ports or {}
-    imu_port = found.get(Port.IMU) or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
+    imu_port = ports and ports.imu
+    if not imu_port:
+        imu_port = cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
     if not imu_port:
         raise TrialSetupError("imu: no port (set imu.port, or imu.source: emulator)")
     imu = open_transport(imu_port, Stream.IMU, cfg.imu.baudrate)
-    return DataLinks({Stream.IMU: imu, Stream.TABLE: table or table_transport(cfg, found)}, ports)
+    return DataLinks({Stream.IMU: imu, Stream.TABLE: table or table_transport(cfg, ports)}, ports)
 
 
-def table_transport(cfg: Config, ports: dict[str, Any] | None) -> Transport:
+def table_transport(cfg: Config, ports: DevicePorts | None) -> Transport:
     """The table's data transport, from the emulator's ports (ports.json) or from the config."""
-    table_port = (ports or {}).get(Port.TABLE_DATA, cfg.turntable.data_port)
+    table_port = ports.table_data if ports is not None and ports.table_data else cfg.turntable.data_port
     if not table_port:
         raise TrialSetupError("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
     return open_transport(table_port, Stream.TABLE, cfg.turntable.baudrate)
@@ -87,16 +91,17 @@ def chamber_controller(cfg: ChamberConfig, emulated_port: str | None = None):
     return cls(port, cls.Options.model_validate(options))
 
 
-def open_chamber(cfg: ChamberConfig | None, ports: dict | None):
+def open_chamber(cfg: ChamberConfig | None, ports: DevicePorts | None):
     """A trial's chamber, open and at ``set_point_c`` (None without a chamber); a chamber that does not answer is a
     :class:`TrialSetupError` naming ``environment.chamber`` and the port."""
     from drivers.watlow_f4 import ChamberError
 
     if cfg is None:
         return None
-    if cfg.source == "emulator" and (not ports or Port.CHAMBER not in ports):
+    chamber_port = None if ports is None else ports.chamber
+    if cfg.source == "emulator" and chamber_port is None:
         raise TrialSetupError("environment.chamber: source: emulator, but the emulator opened no chamber port")
-    controller = chamber_controller(cfg, (ports or {}).get(Port.CHAMBER))
+    controller = chamber_controller(cfg, chamber_port)
     try:
         controller.open()
         if cfg.set_point_c is not None:
@@ -177,7 +182,7 @@ class Rig:
     def __init__(self, cfg: Config, config_path: Path, out: Path, speed: str, duration: float | None) -> None:
         self.cfg, self.config_path, self.out, self.speed, self.duration = cfg, config_path, out, speed, duration
         self.emulator = None
-        self.ports: dict | None = None
+        self.ports: DevicePorts | None = None
         self.chamber = None
         self.table: TableControl | None = None
 
@@ -187,8 +192,9 @@ class Rig:
                 try:
                     run = EmulatorRun(self.speed, self.duration, wait_readers=True, hold=True,
                                       stats_file=self.out / "emulator.json")
-                    self.emulator, self.ports = spawn_emulator(self.config_path, self.out / "ports.json", run,
-                                                               log_file=self.out / "emulator.log")
+                    self.emulator, ports = spawn_emulator(self.config_path, self.out / "ports.json", run,
+                                                          log_file=self.out / "emulator.log")
+                    self.ports = DevicePorts.of(ports)
                 except EmulatorError as exc:
                     raise TrialSetupError(f"{self.config_path}: {exc}") from None
             self.chamber = open_chamber(self.cfg.environment.chamber, self.ports)  # before the table moves
@@ -210,10 +216,7 @@ class Rig:
 
     def unit_links(self, name: str, unit: Config, table: Transport) -> DataLinks:
         """The data streams of the unit ``name`` (its one-unit config ``unit``), on the shared table's ``table``."""
-        ports = None
-        if self.ports is not None:
-            ports = {Port.IMU: self.ports[Port.UNITS][name][Port.IMU], Port.TABLE_DATA: self.ports[Port.TABLE_DATA]}
-        return data_links(unit, ports, table)
+        return data_links(unit, None if self.ports is None else self.ports.unit(name), table)
 
     def table_transport(self) -> Transport:
         """The table's data transport, for a reader the units share."""
