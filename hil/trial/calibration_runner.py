@@ -43,7 +43,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
     duration = emulated_length(settings, schedule) if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
-    def commanded(control, _cfg: Config, viewer, chamber) -> TrialHooks:
+    def commanded(control, viewer, chamber) -> TrialHooks:
         control.client.apply_limits()
 
         def schedule_sequence(steps) -> CalibrationSequence:
