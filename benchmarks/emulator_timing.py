@@ -25,7 +25,7 @@ import yaml
 
 from drivers.registry import imu_codec
 from drivers.tts1 import Tts1Codec
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from hil.config import load_config
 
 
@@ -43,7 +43,8 @@ def main() -> int:
         config.write_text(yaml.safe_dump(data))
         cfg = load_config(config)
         stats_file = Path(tmp) / "stats.json"
-        proc, ports = spawn_emulator(config, Path(tmp) / "ports.json", "1", stats_file=stats_file)
+        proc, ports = spawn_emulator(config, Path(tmp) / "ports.json",
+                                     EmulatorRun("1", wait_readers=True, stats_file=stats_file))
         emulator = psutil.Process(proc.pid)
         arrivals, cpu = read_frames(ports, cfg, proc, emulator)
         proc.wait(30)

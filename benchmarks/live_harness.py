@@ -29,10 +29,12 @@ import numpy as np
 import yaml
 
 from emulators.clocks import counter_starts
-from emulators.process import spawn_emulator, stop_emulator
+from emulators.process import EmulatorRun, spawn_emulator, stop_emulator
 from hil.config import load_config
 from hil.pipeline.progress import Progress
 from hil.trial.live import LiveTrial, TrialHooks
+from hil.trial.rig import data_links
+from hil.vocabulary import DevicePorts
 
 
 def rss_mib() -> float:
@@ -100,11 +102,11 @@ def main() -> None:
         if args.batch is not None:
             cfg = cfg.model_copy(update={"estimator": cfg.estimator.model_copy(update={"batch_samples": args.batch})})
         late = args.late if args.lab else 0.0
-        emulator, ports = spawn_emulator(config, out / "ports.json", "1", args.duration + late + 5.0,
-                                         stats_file=out / "emulator.json", wait_readers=not args.lab)
+        run = EmulatorRun("1", args.duration + late + 5.0, not args.lab, stats_file=out / "emulator.json")
+        emulator, ports = spawn_emulator(config, out / "ports.json", run)
         time.sleep(late)
         frames = FrameAges()
-        trial = LiveTrial(cfg, text, out, args.duration, ports, hooks=TrialHooks(
+        trial = LiveTrial(cfg, text, out, args.duration, data_links(cfg, DevicePorts.of(ports)), hooks=TrialHooks(
             source_done=lambda: emulator.poll() is not None, listeners=(frames.on_progress,)))
         memory: list[tuple[float, float]] = []
 

@@ -20,6 +20,7 @@ from drivers.codec import Codec, FrameBatch, Framer, HealthFlag, RawChunk
 from drivers.framing import SequenceUnwrapper, host_rate
 from hil.inputs import resolve_path
 from hil.samples import ImuSample, ImuSamples
+from hil.vocabulary import Stream
 from hil.units import G0
 
 DEG = math.pi / 180.0
@@ -66,7 +67,7 @@ class CanDbcCodec(Codec[CanImuFrame]):
     """Encode samples to CAN messages and decode them back through a DBC."""
 
     name: ClassVar[str] = "can-dbc"
-    kind: ClassVar[str] = "imu"
+    kind: ClassVar[str] = Stream.IMU
     link: ClassVar[str] = "can"
     # the status signal's bits as the shipped lab DBC defines them (configs/imu_lab_highres.dbc)
     health_flags: ClassVar[tuple[HealthFlag, ...]] = (HealthFlag("sensor_fault", 0x1), HealthFlag("saturation", 0x2),

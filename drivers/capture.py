@@ -27,6 +27,7 @@ from drivers.registry import CODECS
 from drivers.tap import message_to_chunk
 from hil.config_types import describe_validation
 from hil.inputs import InputError
+from hil.vocabulary import Stream
 
 CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc", ".mf4")
 DEFAULT_DBC = CanConfig().dbc  # the shipped DBC the config defaults to
@@ -63,7 +64,7 @@ def decode_capture(protocol: str, path: str | Path, out_csv: str | Path | None =
         codec = _byte_codec(cls, rate_hz, codec_options)
         chunks = _byte_chunks(path)
     decoder = StreamDecoder(codec)
-    imu = codec.kind == "imu"
+    imu = codec.kind == Stream.IMU
     invalid = 0
     try:
         with open(out_csv, "w", newline="", encoding="utf-8") if out_csv else contextlib.nullcontext() as out:
@@ -123,7 +124,7 @@ def _codec_class(protocol: str) -> Any:
     except ValueError as exc:
         raise CaptureError(f"protocol: {exc}") from None
     kind = getattr(cls, "kind", None)
-    if kind not in ("imu", "table"):
+    if kind not in tuple(Stream):
         raise CaptureError(f"protocol {protocol!r}: a {kind or 'non-data'} protocol, no data frames to decode")
     return cls
 

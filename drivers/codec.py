@@ -19,7 +19,7 @@ import numpy as np
 from hil.config_types import Model
 from hil.inputs import ConfigError
 from hil.samples import ImuSample, ImuSamples, TableSample, TableSamples
-from hil.vocabulary import StreamEventKind
+from hil.vocabulary import Stream, StreamEventKind
 
 if TYPE_CHECKING:
     from drivers.config_query import ConfigDialogue
@@ -136,7 +136,7 @@ class Codec(ABC, Generic[R]):
     """
 
     name: ClassVar[str]
-    kind: ClassVar[str]  # "imu" or "table"
+    kind: ClassVar[str]  # the stream it decodes: Stream.IMU or Stream.TABLE
     Options: ClassVar[type[Model]] = NoOptions
     link: ClassVar[str] = "serial"  # "serial": frames are bytes on a line (baud checked); "can": CAN messages
     healthy_status: ClassVar[int] = 0  # the status word of a device with nothing to report (the emulator sends it)
@@ -208,7 +208,7 @@ class Codec(ABC, Generic[R]):
         if self.link != "serial":
             return 0
         probe = (ImuSample(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), device_time=0.0, status=self.healthy_status)
-                 if self.kind == "imu"
+                 if self.kind == Stream.IMU
                  else TableSample(1, (0.0, 0.0, 0.0)))
         return len(self.encode(self.from_sample(probe)))
 

@@ -17,6 +17,7 @@ from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
+from hil.vocabulary import Stream
 from hil.units import G0
 
 HEADER = b"\xfe\x81\xff\x55"
@@ -121,7 +122,7 @@ class Kvh1750Codec(ByteCodec[KvhFrame]):
     """Encode and decode KVH 1750 frames; gyro and accel units follow the IMU's own configuration."""
 
     name: ClassVar[str] = "kvh1750"
-    kind: ClassVar[str] = "imu"
+    kind: ClassVar[str] = Stream.IMU
     sync: ClassVar[bytes] = HEADER
     header_size: ClassVar[int] = len(HEADER)
     sequence_modulus: ClassVar[int] = 128

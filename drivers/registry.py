@@ -28,6 +28,7 @@ from typing import Any
 from pydantic import AfterValidator, ValidationError, ValidationInfo
 
 from hil.config_types import describe_validation
+from hil.vocabulary import Stream
 
 CODEC_GROUPS = ("turntable_hil.imu_codecs", "turntable_hil.codecs")
 CODECS_BUILT_IN = {  # name -> "module:Class"
@@ -128,8 +129,8 @@ class Registry:
         return AfterValidator(check)
 
 
-IMU_CODECS = Registry("IMU protocols", CODEC_GROUPS, CODECS_BUILT_IN, kind="imu")
-TABLE_CODECS = Registry("table data protocols", CODEC_GROUPS, CODECS_BUILT_IN, kind="table")
+IMU_CODECS = Registry("IMU protocols", CODEC_GROUPS, CODECS_BUILT_IN, kind=Stream.IMU)
+TABLE_CODECS = Registry("table data protocols", CODEC_GROUPS, CODECS_BUILT_IN, kind=Stream.TABLE)
 CODECS = Registry("protocols", CODEC_GROUPS, CODECS_BUILT_IN)  # every codec, for hil decode
 TABLE_CONTROLLERS = Registry("table controllers", ("turntable_hil.table_controllers",), {
     "acutrol": "drivers.acutrol_controller:AcutrolController",

@@ -22,6 +22,7 @@ from drivers.crc import crc32_mpeg2, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
+from hil.vocabulary import Stream
 from hil.units import G0
 
 INTERNAL_HZ = 2000  # the counter counts internal samples at this rate
@@ -100,7 +101,7 @@ class Stim300Codec(ByteCodec[StimDatagram]):
     one of the device's sample rates (2000 / 2^k Hz): its counter steps by ``2000 / rate_hz`` a datagram."""
 
     name: ClassVar[str] = "stim300"
-    kind: ClassVar[str] = "imu"
+    kind: ClassVar[str] = Stream.IMU
     header_size: ClassVar[int] = 1
     Options: ClassVar[type[Model]] = Stim300Options
     health_flags: ClassVar[tuple[HealthFlag, ...]] = HEALTH_FLAGS

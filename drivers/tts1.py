@@ -16,6 +16,7 @@ from drivers.crc import crc16_xmodem, crc_rows
 from drivers.framing import ByteCodec, fixed_rows
 from hil.config_types import Model
 from hil.samples import TableSample, TableSamples
+from hil.vocabulary import Stream
 
 SYNC = b"\x54\x53\x01"  # sync word "TS" and version 1
 FRAME_SIZE = 24
@@ -75,7 +76,7 @@ class Tts1Codec(ByteCodec[Tts1Frame]):
     pulse of the train it counts (its counter steps by n from frame to frame)."""
 
     name: ClassVar[str] = "tts1"
-    kind: ClassVar[str] = "table"
+    kind: ClassVar[str] = Stream.TABLE
     sync: ClassVar[bytes] = SYNC
     header_size: ClassVar[int] = len(SYNC)
     sequence_modulus: ClassVar[int] = 1 << 32

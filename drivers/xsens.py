@@ -14,6 +14,7 @@ from drivers.xbus import EVERY_MESSAGE, MAX_PAYLOAD, OUTPUT_ITEMS, XsensConfigDi
 from drivers.framing import ByteCodec
 from hil.config_types import Model
 from hil.samples import ImuSample, ImuSamples
+from hil.vocabulary import Stream
 
 PREAMBLE = b"\xfa\xff\x36"  # preamble, bus id (master), message id MTData2
 SAMPLE_TIME_HZ = 10_000.0  # SampleTimeFine ticks per second
@@ -162,7 +163,7 @@ class XsensCodec(ByteCodec[MtData2Frame]):
     output configuration)."""
 
     name: ClassVar[str] = "xsens-mtdata2"
-    kind: ClassVar[str] = "imu"
+    kind: ClassVar[str] = Stream.IMU
     sync: ClassVar[bytes] = PREAMBLE
     header_size: ClassVar[int] = 6  # enough for the extended length
     sequence_modulus: ClassVar[int] = 1 << 16

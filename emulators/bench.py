@@ -32,7 +32,7 @@ from emulators.paced_writer import DeviceWriter
 from emulators.scpi_supply import EmulatedSupply, powering
 from hil.config import Config
 from hil.units import ARCSEC
-from hil.vocabulary import UNIT_PREFIX, Port
+from hil.vocabulary import UNIT_PREFIX, DevicePorts, Port
 
 CHUNK_S = 0.25  # frames computed ahead, trial seconds
 
@@ -199,13 +199,11 @@ class Bench:
 
     def names(self) -> dict:
         """The ports JSON: ``imu``, or ``units: {<name>: {imu: ...}}``, and the table's and environment's."""
-        chamber = {} if self.chamber is None else {"chamber": self.chamber.path}
-        power = {} if self.supply is None else {"power": self.supply.resource}
         imus = {name: self.ports[name].path for name in self.imus}
-        if Port.IMU not in imus:
-            imus = {Port.UNITS: {name.removeprefix(UNIT_PREFIX): {Port.IMU: path} for name, path in imus.items()}}
-        return {**imus, Port.TABLE_DATA: self.ports[Port.TABLE_DATA].path, Port.TABLE_CMD: self.server.url,
-                **chamber, **power}
+        units = {} if Port.IMU in imus else {name.removeprefix(UNIT_PREFIX): path for name, path in imus.items()}
+        return DevicePorts(imus.get(Port.IMU), self.ports[Port.TABLE_DATA].path, self.server.url,
+                           None if self.chamber is None else self.chamber.path,
+                           None if self.supply is None else self.supply.resource, units).as_dict()
 
     def close(self) -> None:
         if self.server is not None:

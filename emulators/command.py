@@ -52,10 +52,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def emulate(cfg: Config, args: argparse.Namespace, hold: bool = False) -> int:
     """Run the emulated devices of ``cfg`` as the options say, then print their statistics; exit code 0."""
-    from emulators.process import parse_speed, run_emulator
+    from emulators.process import EmulatorRun, run_emulator
 
-    stats = run_emulator(cfg, args.ports_file, parse_speed(args.speed), args.duration, wait_readers=args.wait_readers,
-                         stats_file=args.stats_file, hold=hold, link_dir=args.link_dir)
+    run = EmulatorRun(args.speed, args.duration, args.wait_readers, hold, args.stats_file, args.link_dir)
+    stats = run_emulator(cfg, run, args.ports_file)
     print(summary(stats), file=sys.stderr)
     return 0
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Self
 
 from emulators.bench import EmulatorStats
-from emulators.process import run_emulator, wait_for_ports
+from emulators.process import EmulatorRun, run_emulator, wait_for_ports
 from hil.config import Config
 
 
@@ -38,7 +38,8 @@ class EmulatorThread:
 
     def _run(self, cfg: Config, speed: float | None, duration: float | None, wait_readers: bool) -> None:
         try:
-            self.stats = run_emulator(cfg, self.ports_file, speed, duration, self.stop, wait_readers)
+            run = EmulatorRun("max" if speed is None else repr(speed), duration, wait_readers)
+            self.stats = run_emulator(cfg, run, self.ports_file, self.stop)
         except Exception as exc:  # noqa: BLE001 - raised again by join()
             self.error = exc
 

@@ -32,6 +32,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from emulators.bench import Bench, EmulatorStats, SyncClock
@@ -50,25 +51,45 @@ def _write_json(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
-def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | None = None,
-                 duration: float | None = None, stop_event: threading.Event | None = None,
-                 wait_readers: bool = False, stats_file: Path | None = None, hold: bool = False,
-                 link_dir: Path | None = None) -> EmulatorStats:
-    """Emulate the IMU and the turntable until the duration, a signal or ``stop_event``.
+@dataclass(frozen=True)
+class EmulatorRun:
+    """How the emulated devices run, the options of ``hil emulate``: ``speed`` a multiple of real time as text, or
+    ``max`` (as fast as the readers take the bytes); ``duration`` s of trial time (None: ``trial.duration_s``); with
+    ``wait_readers`` the pulse train waits for a reader on each pty; with ``hold`` the devices stay powered after the
+    train until stopped; the statistics to ``stats_file``; the serial ports published as links in ``link_dir``."""
 
-    ``speed`` is the multiple of real time (None: as fast as the readers take the bytes); ``duration``
-    (s) defaults to ``trial.duration_s``. With ``wait_readers`` the pulse train starts once a client has
-    opened each pty (as a table enables its sync output when the host is ready), and resumes after an
-    unplug once a client has reopened the port; otherwise at once, and a port nobody reads loses its
-    frames (counted). From the main thread, SIGTERM, SIGINT and SIGHUP set the stop event. The
-    statistics go to ``stats_file`` at the end, stopped or not; with ``hold`` the devices stay powered
-    after the pulse train (the table answers commands, the data ports are silent) until stopped, as a
-    table stays on its base after a trial: the file is written when the train has ended and rewritten
-    at exit with the commands received meanwhile. With
-    ``link_dir`` the serial ports are published as links there (:class:`emulators.bench.Bench`). Ports,
-    command socket and ports file are released on return.
+    speed: str = "max"
+    duration: float | None = None
+    wait_readers: bool = False
+    hold: bool = False
+    stats_file: Path | None = None
+    link_dir: Path | None = None
+
+    def arguments(self) -> list[str]:
+        """These options on the command line of ``python -m emulators``."""
+        args = ["--speed", self.speed]
+        for option, value in (("--duration", self.duration), ("--stats-file", self.stats_file),
+                              ("--link-dir", self.link_dir)):
+            if value is not None:
+                args += [option, str(value)]
+        return args + ["--wait-readers"] * self.wait_readers + ["--hold"] * self.hold
+
+
+def run_emulator(cfg: Config, run: EmulatorRun = EmulatorRun(), ports_file: Path | None = None,
+                 stop_event: threading.Event | None = None) -> EmulatorStats:
+    """Emulate the IMU and the turntable of ``cfg`` as ``run`` says until its duration, a signal or ``stop_event``;
+    the ports to ``ports_file`` (JSON) and stdout once open.
+
+    Without ``run.wait_readers`` the pulse train starts at once, and a port nobody reads loses its frames (counted);
+    with it, once a client has opened each pty (as a table enables its sync output when the host is ready), and it
+    resumes after an unplug once a client has reopened the port. From the main thread, SIGTERM, SIGINT and SIGHUP
+    set the stop event. The statistics go to ``run.stats_file`` at the end, stopped or not; with ``run.hold`` the
+    devices stay powered after the pulse train (the table answers commands, the data ports are silent) until
+    stopped, as a table stays on its base after a trial: the file is written when the train has ended and rewritten
+    at exit with the commands received meanwhile. With ``run.link_dir`` the serial ports are published as links
+    there (:class:`emulators.bench.Bench`). Ports, command socket and ports file are released on return.
     """
-    duration = cfg.trial.duration_s if duration is None else duration
+    duration = cfg.trial.duration_s if run.duration is None else run.duration
     if duration is None:
         raise ConfigError("trial.duration_s: required key is missing (or give --duration)")
     stop = stop_event or threading.Event()
@@ -76,13 +97,13 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
     owner = _Owner(os.getppid())
     with _SignalsStop(stop):
         try:
-            bench = Bench(cfg, duration, speed, stop, wait_readers, link_dir)
+            speed = parse_speed(run.speed)
+            bench = Bench(cfg, duration, speed, stop, run.wait_readers, run.link_dir)
             print(json.dumps(bench.names()), flush=True)
             if ports_file is not None:
                 _write_json(ports_file, bench.names())
-            stats = _pulse_train(bench, speed, stop, wait_readers, hold,
-                                 lambda ended: owner.write(stats_file, ended.as_dict()))
-            owner.write(stats_file, stats.as_dict())
+            stats = _pulse_train(bench, speed, stop, run, lambda ended: owner.write(run.stats_file, ended.as_dict()))
+            owner.write(run.stats_file, stats.as_dict())
             return stats
         finally:
             if bench is not None:
@@ -91,12 +112,13 @@ def run_emulator(cfg: Config, ports_file: Path | None = None, speed: float | Non
                 ports_file.unlink(missing_ok=True)
 
 
-def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, wait_readers: bool, hold: bool,
+def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, run: EmulatorRun,
                  train_ended: Callable[[EmulatorStats], None]) -> EmulatorStats:
     """The pulse train of :func:`run_emulator` until done or stopped, the bytes written left to the readers,
-    and with ``hold`` the devices kept up until stopped (``train_ended`` told of the train's statistics first);
+    and with ``run.hold`` the devices kept up until stopped (``train_ended`` told of the train's statistics first);
     the statistics."""
-    if wait_readers and not wait_for_readers(bench.ptys(), stop):
+    hold = run.hold
+    if run.wait_readers and not wait_for_readers(bench.ptys(), stop):
         return bench.stats(0, 0.0, True)
     clock = SyncClock(speed)
     pulses = bench.pulse_loop(clock, stop)
@@ -189,30 +211,21 @@ def _die_with_parent() -> None:
     libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
-def spawn_emulator(config: Path, ports_file: Path, speed: str = "max", duration: float | None = None,
-                   timeout_s: float = 20.0, stats_file: Path | None = None, log_file: Path | None = None,
-                   wait_readers: bool = True, hold: bool = False) -> tuple[subprocess.Popen, dict]:
-    """Start ``python -m emulators`` in its own process; returns it and its ports once open.
+def spawn_emulator(config: Path, ports_file: Path, run: EmulatorRun = EmulatorRun(wait_readers=True),
+                   log_file: Path | None = None, timeout_s: float = 20.0) -> tuple[subprocess.Popen, dict]:
+    """Start ``python -m emulators`` on ``config`` in its own process, run as ``run`` says; returns it and its ports
+    once open (within ``timeout_s``).
 
     The child runs in its own session, so a Ctrl-C or a hang-up of the terminal reaches only the
     harness, which turns the table off before it stops the devices; it ends with the harness. With
-    ``hold`` it keeps its devices up after the pulse train until stopped (see :func:`run_emulator`). Its
+    ``run.hold`` it keeps its devices up after the pulse train until stopped (see :func:`run_emulator`). Its
     stderr (the stats at the end, any error) goes to ``log_file`` when given. Raises
     :class:`EmulatorError` with the emulator's last line when it exits before opening its ports.
     """
     ports_file.unlink(missing_ok=True)
-    if stats_file is not None:
-        stats_file.unlink(missing_ok=True)  # its appearance tells that the pulse train has ended
-    cmd = [sys.executable, "-m", "emulators", str(config), "--ports-file", str(ports_file),
-           "--speed", speed]
-    if duration is not None:
-        cmd += ["--duration", str(duration)]
-    if stats_file is not None:
-        cmd += ["--stats-file", str(stats_file)]
-    if wait_readers:
-        cmd.append("--wait-readers")
-    if hold:
-        cmd.append("--hold")
+    if run.stats_file is not None:
+        run.stats_file.unlink(missing_ok=True)  # its appearance tells that the pulse train has ended
+    cmd = [sys.executable, "-m", "emulators", str(config), "--ports-file", str(ports_file), *run.arguments()]
     with open(log_file, "w+b") if log_file is not None else tempfile.TemporaryFile() as log:
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
                                 preexec_fn=_die_with_parent if sys.platform == "linux" else None)

@@ -10,12 +10,6 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("hil", "drivers", "emulators")
 MAX_LINES = 400
 MAX_PARAMETERS = 8  # self and cls not counted; more are grouped in the small settings each stage uses
-# functions that still take more, each with why; a function brought within the bound leaves this list
-EMULATOR_OPTIONS = "the emulator process's options, until the rig's emulated devices take them"
-PARAMETER_EXCEPTIONS = {
-    "emulators/process.py::run_emulator": EMULATOR_OPTIONS,
-    "emulators/process.py::spawn_emulator": EMULATOR_OPTIONS,
-}
 # docs/design.md, "Layers": an import may only point to its own layer or one above it in this list
 LAYERS = (
     ("hil.config_types", "hil.inputs", "hil.units", "hil.samples", "hil.vocabulary"),
@@ -136,15 +130,11 @@ def _over_parameters(tree: ast.AST) -> dict[str, int]:
 
 
 def test_no_function_takes_more_than_8_parameters():
-    """hil/, drivers/ and emulators/: no function, method or constructor over 8 parameters, bar the listed
-    exceptions; an exception no longer needed is taken off the list."""
+    """hil/, drivers/ and emulators/: no function, method or constructor over 8 parameters."""
     paths = [path for package in PACKAGES for path in sorted((ROOT / package).rglob("*.py"))]
     over = {f"{path.relative_to(ROOT)}::{name}": n for path in paths
             for name, n in _over_parameters(ast.parse(path.read_text())).items()}
-    wrong = {name: n for name, n in over.items() if name not in PARAMETER_EXCEPTIONS}
-    assert not wrong, f"over {MAX_PARAMETERS} parameters: {wrong}"
-    stale = sorted(set(PARAMETER_EXCEPTIONS) - set(over))
-    assert not stale, f"within {MAX_PARAMETERS} parameters now, take them off PARAMETER_EXCEPTIONS: {stale}"
+    assert not over, f"over {MAX_PARAMETERS} parameters: {over}"
 
 
 def test_the_parameter_count_leaves_out_self_and_counts_the_rest():

@@ -25,6 +25,7 @@ from hil.outputs.calibration import write_calibration
 from hil.outputs.calibration_report import comparison
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule
 from hil.trial.calibration_sequence import CalibrationSequence, StepWindow
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.calibration_simulation import run_calibration_simulation
 from hil.trial.outcome import TrialOutcome
 from hil.units import ARCSEC, DEG
@@ -142,13 +143,14 @@ def test_the_reported_angles_are_what_the_table_frames_decode_to():
 
 def test_a_window_whose_samples_were_all_lost_ends_the_trial_early_with_the_window_named(tmp_path):
     cfg = load_config(calibration_config(tmp_path, positions=[[0, 0, 0]], plateau_s=0))
-    sequence = CalibrationSequence(checked_schedule(cfg), None, 1.0 / RATE_HZ)
+    settings = CalibrationSettings.of(cfg, simulated=True)
+    sequence = CalibrationSequence(checked_schedule(settings), None, 1.0 / RATE_HZ)
     sequence.windows_found.append(StepWindow(sequence.steps[0], 2.0, 6.0))
     sequence._index = len(sequence.steps)  # the schedule went through
     t = np.arange(1, 301) / RATE_HZ  # the samples stop at 1.5 s
     sequence.keep(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
     outcome = TrialOutcome(cfg, "", tmp_path / "out", {"ended": "completed"}, [])
-    calibrated = CalibrationOutcome.of_sequence(outcome, sequence, True)
+    calibrated = CalibrationOutcome.of_sequence(outcome, sequence, settings)
     assert calibrated.ended == ("early: calibration position 1: 800 of the 800 samples of its window 2.00..6.00 s "
                                 "were rejected or lost (more than 0.00%): no fit on it")
     assert calibrated.calibration is None and "calibration" not in calibrated.result
@@ -160,7 +162,8 @@ def test_a_window_that_lacks_samples_ends_the_trial_as_soon_as_it_closes(tmp_pat
     gap, whose interval is not whole): failed at once, by the samples that close it, beyond ``lacking_max`` of them
     (and one sample, a boundary's rounding)."""
     cfg = load_config(calibration_config(tmp_path, positions=[[0, 0, 0]], plateau_s=0))
-    sequence = CalibrationSequence(checked_schedule(cfg), None, 1.0 / RATE_HZ, lacking_max=lacking_max)
+    schedule = checked_schedule(CalibrationSettings.of(cfg))
+    sequence = CalibrationSequence(schedule, None, 1.0 / RATE_HZ, lacking_max=lacking_max)
     sequence.windows_found.append(StepWindow(sequence.steps[0], 2.0, 6.0))
     t = np.arange(1, 1401) / RATE_HZ
     kept = np.ones(len(t), bool)

@@ -191,12 +191,13 @@ def test_an_emulated_trial_in_the_emulated_chamber_reports_the_imu_warming_towar
 @pytest.mark.parametrize("on_exit, after", [("hold", 400), (30.0, 300)])
 def test_the_chamber_goes_to_its_on_exit_set_point_when_released(on_exit, after):
     from hil.config_environment import ChamberConfig
-    from hil.trial.chamber import open_chamber, release_chamber
+    from hil.trial.rig import open_chamber, release_chamber
+    from hil.vocabulary import DevicePorts
 
     cfg = ChamberConfig(source="emulator", set_point_c=40.0, on_exit=on_exit)
     chamber, _ = _emulated(start_c=25.0)
     try:
-        controller = open_chamber(cfg, {"chamber": chamber.path})
+        controller = open_chamber(cfg, DevicePorts(chamber=chamber.path))
         assert chamber.registers.read(300) == 400
         release_chamber(controller, cfg)
         assert chamber.registers.read(300) == after

@@ -16,7 +16,7 @@ from tests.helpers import from_zero
 
 from drivers.kvh1750 import Kvh1750Codec
 from drivers.tts1 import Tts1Codec
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from emulators.simulation import Simulation
 from hil.config import load_config
 
@@ -73,7 +73,7 @@ def run(tmp_path: Path, errors: dict | None = None, speed: str = "max") -> tuple
     cfg = dict(CONFIG, imu=from_zero({"errors": errors or {}}))
     config = tmp_path / "emulated.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed)
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", EmulatorRun(speed, wait_readers=True))
     out = {k: bytearray() for k in ("imu", "turntable_data")}  # read raw: no serial-library flush on open
     threads = [threading.Thread(target=read_raw, args=(ports[k], buf)) for k, buf in out.items()]
     for t in threads:

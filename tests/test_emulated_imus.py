@@ -23,7 +23,7 @@ from drivers.capture import decode_capture
 from drivers.transport import open_can_bus
 from emulators.in_process import EmulatorThread
 from emulators.ports import CanPort
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from emulators.simulation import Simulation
 from hil.config import ConfigError, parse_config
 
@@ -140,7 +140,7 @@ def test_can_imu_across_processes_on_udp_multicast_is_captured_by_the_can_logger
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=interruptible)
     try:
         time.sleep(3.0)  # the logger imports python-can and joins the group (a SIGINT before that is lost)
-        proc, ports = spawn_emulator(config, tmp_path / "ports.json", speed="2")
+        proc, ports = spawn_emulator(config, tmp_path / "ports.json", EmulatorRun("2", wait_readers=True))
         assert ports["imu"] == {"interface": "udp_multicast", "channel": group}
         read_raw(ports["turntable_data"], bytearray())
         assert proc.wait(20) == 0

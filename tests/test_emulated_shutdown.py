@@ -18,7 +18,7 @@ import serial
 import yaml
 from crccheck.crc import Crc16Xmodem
 
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 
 CONFIG = {"trial": {"name": "shutdown", "duration_s": 600.0, "rate_hz": 200.0, "seed": 1},
           "site": {"latitude_deg": 32.0, "longitude_deg": 118.0},
@@ -40,7 +40,7 @@ def tts1_counters(data: bytes) -> list[int]:
 def emulator(tmp_path: Path):
     config = tmp_path / "emulated.yaml"
     config.write_text(yaml.safe_dump(CONFIG))
-    proc, ports = spawn_emulator(config, tmp_path / "ports.json", "1")
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", EmulatorRun("1", wait_readers=True))
     yield proc, ports, tmp_path / "ports.json"
     if proc.poll() is None:
         proc.kill()
@@ -127,9 +127,10 @@ def test_an_emulator_whose_harness_is_killed_writes_nothing_more_in_the_harness_
     config = tmp_path / "config.yaml"
     config.write_text(yaml.safe_dump(CONFIG))
     stats, ports = tmp_path / "emulator.json", tmp_path / "ports.json"
-    script = ("import time\nfrom pathlib import Path\nfrom emulators.process import spawn_emulator\n"
-              f"proc, _ = spawn_emulator(Path({str(config)!r}), Path({str(ports)!r}), '1', "
-              f"stats_file=Path({str(stats)!r}), hold=True)\nprint(proc.pid, flush=True)\ntime.sleep(600)\n")
+    script = ("import time\nfrom pathlib import Path\nfrom emulators.process import EmulatorRun, spawn_emulator\n"
+              f"run = EmulatorRun('1', wait_readers=True, hold=True, stats_file=Path({str(stats)!r}))\n"
+              f"proc, _ = spawn_emulator(Path({str(config)!r}), Path({str(ports)!r}), run)\n"
+              "print(proc.pid, flush=True)\ntime.sleep(600)\n")
     harness = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
                                cwd=Path(__file__).resolve().parents[1])
     emulator = int(harness.stdout.readline())

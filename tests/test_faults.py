@@ -22,7 +22,7 @@ from drivers.tts1 import Status, Tts1Codec
 from emulators.clocks import DeviceClock
 from emulators.faults import ByteDamage, CanDamage, FaultInjector
 from emulators.in_process import EmulatorThread
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from hil.config import Config, DeviceTiming, FaultConfig, parse_config
 
 RATE = 200.0
@@ -174,7 +174,7 @@ def test_stats_go_to_stderr_and_the_stats_file(tmp_path):
     config = tmp_path / "c.yaml"
     config.write_text(yaml.safe_dump(trial(duration=0.5, imu={"faults": {"drop_rate": 0.1}})))
     stats_file = tmp_path / "stats.json"
-    proc, ports = spawn_emulator(config, tmp_path / "ports.json", stats_file=stats_file)
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", EmulatorRun(wait_readers=True, stats_file=stats_file))
     readers = [threading.Thread(target=read_raw, args=(ports[k], bytearray())) for k in ("imu", "turntable_data")]
     for r in readers:
         r.start()

@@ -17,6 +17,7 @@ from hil.pipeline.progress import Taken
 from hil.samples import AlignedBatch
 from hil.trial.rate_steps import RateSequence
 from hil.trial.ratetest_runner import scale_factor_document, scale_factor_steps
+from hil.trial.ratetest_settings import RateTestSettings
 from hil.units import DEG
 
 ACUTROL = Path(__file__).resolve().parent.parent / "configs" / "ratetest_acutrol.yaml"
@@ -40,7 +41,8 @@ def test_a_step_whose_gyro_flags_its_clipping_is_gone_through_marked_saturated_a
     sim = ServoSimulation.from_config(cfg)
     client = sim.command_client(cfg.turntable)
     period = 1.0 / cfg.imu_rate_hz
-    sequence = RateSequence(scale_factor_steps(cfg, cfg.scale_factor, tuple(client.gimbals)), client, period)
+    settings = RateTestSettings.of(cfg)
+    sequence = RateSequence(scale_factor_steps(settings, tuple(client.gimbals)), client, period)
     client.apply_limits()
     sequence.start()
     while not sequence.done and sim.samples < 60.0 / period:  # as the live trial's pipeline hands them over
@@ -49,7 +51,7 @@ def test_a_step_whose_gyro_flags_its_clipping_is_gone_through_marked_saturated_a
         sequence.on_progress(SimpleNamespace(taken=(Taken(runs, batch.t, batch.angles),), samples=lambda: list(runs)))
     client.close()
     assert sequence.done and sequence.failure is None
-    doc = scale_factor_document(cfg, sequence.windows(), "completed")
+    doc = scale_factor_document(settings, sequence.windows(), "completed")
     json.dumps(doc, allow_nan=False)  # a window without samples has null figures, not NaN
     x = doc["axes"]["x"]
     left = {s["rate_dps"]: s["left_out"] for s in x["steps"] if s["saturated"]}

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from hil.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +73,7 @@ def test_a_port_that_cannot_be_opened_is_one_line_with_its_url(tmp_path, capsys)
 
 def test_every_sample_rejected_for_five_seconds_ends_the_trial_naming_the_unit_key(tmp_path, capsys):
     device = _config(tmp_path, "device", imu={"options": {"accel_unit": "g"}})
-    proc, ports = spawn_emulator(device, tmp_path / "ports.json", "max", 60.0)
+    proc, ports = spawn_emulator(device, tmp_path / "ports.json", EmulatorRun("max", 60.0, wait_readers=True))
     try:
         harness = _config(tmp_path, "harness", imu={"source": "serial", "port": ports["imu"],
                                                      "options": {"accel_unit": "m/s^2"}},
@@ -116,7 +116,7 @@ def test_a_viewer_that_fails_to_start_is_one_line_and_leaves_no_emulator_behind(
 
 def test_swapped_ports_end_the_trial_with_one_line_naming_the_port(tmp_path, capsys):
     device = _config(tmp_path, "device")
-    proc, ports = spawn_emulator(device, tmp_path / "ports.json", "1", 30.0, wait_readers=False)  # streams as hardware
+    proc, ports = spawn_emulator(device, tmp_path / "ports.json", EmulatorRun("1", 30.0))  # streams as hardware
     try:
         lab = yaml.safe_load((ROOT / "configs" / "lab_swing.yaml").read_text())
         lab["imu"]["port"] = ports["turntable_data"]

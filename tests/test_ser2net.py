@@ -16,7 +16,7 @@ import yaml
 from drivers.acutrol_controller import AcutrolController
 from drivers.table_controller import TableError
 from drivers.transport import SerialTransport, TransportError, serial_url
-from emulators.process import spawn_emulator
+from emulators.process import EmulatorRun, spawn_emulator
 from hil.cli import main
 from hil.config import load_config
 
@@ -90,7 +90,7 @@ def emulator(tmp_path: Path):
     """The emulated devices at real-time speed, running longer than any trial here; their ports."""
     config = tmp_path / "emulated.yaml"
     config.write_text(yaml.safe_dump(emulated_config()))
-    proc, ports = spawn_emulator(config, tmp_path / "ports.json", "1", duration=120.0,
+    proc, ports = spawn_emulator(config, tmp_path / "ports.json", EmulatorRun("1", 120.0, wait_readers=True),
                                  log_file=tmp_path / "emulator.log")
     try:
         yield ports

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from emulators.bench import device_streams
-from emulators.process import spawn_emulator, stop_emulator
+from emulators.process import EmulatorRun, spawn_emulator, stop_emulator
 from hil.cli import main
 from hil.config import parse_config
 from hil.outputs.result_schema import UnitsResult
@@ -139,7 +139,7 @@ def test_an_optional_unit_whose_port_cannot_be_opened_is_filed_absent_and_the_ot
     devices streaming in their own process, and the index files it as ABSENT, a skipped test in junit.xml."""
     cfg = units_config(duration_s=60.0)
     devices = write(tmp_path, {**cfg, "units": [cfg["units"][0], cfg["units"][2]]}, "devices.yaml")
-    proc, ports = spawn_emulator(devices, tmp_path / "ports.json", "1", 30.0, wait_readers=False)
+    proc, ports = spawn_emulator(devices, tmp_path / "ports.json", EmulatorRun("1", 30.0))
     try:
         lab = lab_units({**cfg, "units": [cfg["units"][0], cfg["units"][2]]}, ports)
         absent = {**cfg["units"][1], "optional": True,
@@ -202,14 +202,16 @@ def test_a_units_trial_ends_a_unit_whose_imu_or_the_table_is_silent_for_the_outa
     """The other units' data keep a unit's fan-out busy: its own IMU, or the shared table, silent for
     ``output.outage_limit_s`` (or silent from the start for 15 s) ends its trial, naming the stream and port."""
     from drivers.reader import DeviceReader
-    from drivers.transport import open_transport
     from hil.trial.live import LiveTrial, TrialAborted, TrialHooks
+    from hil.trial.rig import data_links, table_transport
+    from hil.vocabulary import DevicePorts
 
     cfg = parse_config(units_config(), units=True).unit_configs()["kvh-a"]
     cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"outage_limit_s": 3.0}),
                                  "imu": cfg.imu.model_copy(update={"options": {"check_config": False}})})
-    table = DeviceReader(open_transport("/dev/table", "table", 115200))
-    trial = LiveTrial(cfg, "", tmp_path, None, {"imu": "/dev/imu-a", "turntable_data": "/dev/table"},
+    ports = DevicePorts("/dev/imu-a", "/dev/table")
+    table = DeviceReader(table_transport(cfg, ports))
+    trial = LiveTrial(cfg, "", tmp_path, None, data_links(cfg, ports, table.transport),
                       hooks=TrialHooks(table_reader=table))
     try:
         assert [r.transport.stream for r in trial.readers] == ["imu"] and table.raw_listeners == [trial.fanout]

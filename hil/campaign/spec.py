@@ -30,6 +30,7 @@ from hil.inputs import resolve_path
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.settings import PipelineSettings
 from hil.trial.calibration_outcome import checked_schedule
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.outcome import TrialSetupError
 
 
@@ -178,7 +179,7 @@ def _check_point(config: dict, label: str, source: str, kind: str) -> Config:
         cfg.emulated_only(source, "hil campaign")
         for trial in cfg.unit_configs().values() or [cfg]:
             if kind == "calibration":
-                checked_schedule(trial)
+                checked_schedule(CalibrationSettings.of(trial))
                 ServoSimulation.from_config(trial)
             else:
                 Simulation.from_config(trial)

@@ -94,8 +94,8 @@ def _noise(args: argparse.Namespace, out: Path) -> int:
         doc = run_noise(NoiseSource(args.source, args.config, args.duration, args.quiet), out,
                         AllanSettings(taus=args.taus, detrend=args.detrend), figure=not args.no_figures,
                         export=args.export, view=view,
-                        record=lambda cfg: noise_record(given, args.source, cfg, args.started,
-                                                        datetime.now(timezone.utc)))
+                        record=lambda block: noise_record(given, args.source, block, args.started,
+                                                          datetime.now(timezone.utc)))
     except AcquisitionFailed as exc:
         print(f"hil: noise: {exc}", file=sys.stderr)
         return exc.exit_code

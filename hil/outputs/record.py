@@ -90,15 +90,15 @@ def recorded_block(recording: Path, block: RecordConfig) -> RecordConfig:
     return block.model_copy(update={key: recorded[key] or None for key in RecordConfig.model_fields if key in recorded})
 
 
-def noise_record(given: dict[str, str | None], source: str | Path, config: Config | None, started: datetime,
+def noise_record(given: dict[str, str | None], source: str | Path, block: RecordConfig | None, started: datetime,
                  ended: datetime) -> dict[str, Any]:
-    """noise.json's record: the ``record`` block of the source's ``config`` (a config source's, as loaded for the
-    run; for a recording the one its trial started with, for a CSV none) overridden by the options ``given``
+    """noise.json's record: the ``record`` ``block`` of the source's config (a config source's, as loaded for the
+    run; None: for a recording the one its trial started with, for a CSV none) overridden by the options ``given``
     (dut_serial, operator, station), the source's digest when it is a file (a config, a shipped config's name
     included, or a CSV; None for a run directory), no ports or controller of its own."""
     path = resolve_path(source)
     recording = path / "recording.mcap" if path.is_dir() else path
-    block = config.record if config is not None else recorded_block(recording, RecordConfig())
+    block = block if block is not None else recorded_block(recording, RecordConfig())
     fields = block.model_dump() | {key: value for key, value in given.items() if value is not None}
     text = path.read_text(errors="replace") if path.is_file() and path.suffix in (".yaml", ".yml", ".csv") else None
     return {**run_record(fields, text, started, ended), "source": str(source), "ports": None, "controller": None}

@@ -35,8 +35,8 @@ class Expected:
         imu = settings.imu
         check = ("imu.can.dbc and imu.can.signals" if IMU_CODECS.get(imu.protocol).link == "can"
                  else "imu.baudrate and imu.protocol")
-        return {IMU: cls("imu port", "imu", imu.protocol, "imu.protocol", check),
-                TABLE: cls("turntable data port", "table", settings.turntable.data_protocol, "turntable.data_protocol",
+        return {IMU: cls("imu port", IMU, imu.protocol, "imu.protocol", check),
+                TABLE: cls("turntable data port", TABLE, settings.turntable.data_protocol, "turntable.data_protocol",
                            "turntable.baudrate and turntable.data_port")}
 
 

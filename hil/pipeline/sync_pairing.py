@@ -48,7 +48,7 @@ from hil.pipeline.motion_match import MIN_INTERVALS, PairedMotion, TableRotation
 from hil.pipeline.pairing_streams import Samples, StreamPairing, joined, part, shifted
 from hil.pipeline.receive_times import STILL_S, ReceiveTimes
 from hil.samples import ImuSamples, TableSamples
-from hil.vocabulary import PairedBy
+from hil.vocabulary import PairedBy, Stream, StreamEventKind
 
 WINDOW_S = 10.0  # host seconds of reads behind a stream's receive-time baseline
 SUSPECT_READS = 4  # late reads in a row that break a pairing
@@ -99,8 +99,8 @@ class SyncPairing:
         self.rate = rate_hz
         self.host_rate = None if time_scale is None else rate_hz * time_scale  # pulses per host second
         self.table_step = table_step
-        self.imu = StreamPairing("imu", wire_s[0] * rate_hz)
-        self.table = StreamPairing("table", wire_s[1] * rate_hz, offset=0)  # the table's count is the pulse line
+        self.imu = StreamPairing(Stream.IMU, wire_s[0] * rate_hz)
+        self.table = StreamPairing(Stream.TABLE, wire_s[1] * rate_hz, offset=0)  # the table's count is the pulse line
         self.receive = ReceiveTimes(self.host_rate, self.imu, self.table, imu_modulus)
         self.motion = PairedMotion(rate_hz, HISTORY_S, rotations)
         self.report = SyncReport()
@@ -134,8 +134,8 @@ class SyncPairing:
 
     def event(self, stream: str, kind: str) -> None:
         """A reader's event: a reconnected port is paired anew (the device may have restarted)."""
-        s = self.imu if stream == "imu" else self.table
-        if kind == "reconnected" and s.offset is not None:
+        s = self.imu if stream == Stream.IMU else self.table
+        if kind == StreamEventKind.RECONNECTED and s.offset is not None:
             self._break(s, "reconnected after an outage")
 
     def flush(self) -> tuple[TableSamples | None, ImuSamples | None]:

@@ -11,14 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from drivers.registry import POWER_SUPPLIES
-from drivers.scpi_supply import ScpiSupply, SupplyError, SupplySettings
+from drivers.scpi_supply import ScpiSupply, SupplyError
 from hil.config import Config
-from hil.config_environment import PowerConfig
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED
 from hil.plan.state import PlanState
+from hil.trial.rig import open_supply
 from hil.trial.stop_signals import StopSignals
 
 POLL_S = 0.1  # how often a wait looks for a stop signal
@@ -47,19 +46,8 @@ class PlanPower:
 
     def __enter__(self) -> PlanPower:
         """Connect to the supply (start the emulated one first); one that cannot be reached is bad input."""
-        if self.settings is None:
-            return self
-        resource = self.settings.port
-        if self.settings.source == "emulator":
-            from emulators.scpi_supply import EmulatedSupply, SupplyState
-
-            self.server = EmulatedSupply(SupplyState(self.settings.load_a, self.settings.options.channel or 1))
-            resource = self.server.resource
-        try:
-            self.supply = supply_driver(self.settings, resource).open()
-        except SupplyError as exc:
-            self._close()
-            raise InputError(f"environment.power: {exc}") from None
+        if self.settings is not None:
+            self.supply, self.server = open_supply(self.settings)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -140,11 +128,3 @@ class PlanPower:
             offset = turn_on_offset_ug(errors.turn_on_bias_ug, (self.config.trial.seed, step.index))
             self.bias_ug = (np.asarray(errors.accel_bias_ug) + offset).tolist()
 
-
-def supply_driver(settings: PowerConfig, resource: str) -> ScpiSupply:
-    """The driver of ``environment.power`` for the supply at ``resource``, not yet open: the class its ``controller``
-    names in :data:`drivers.registry.POWER_SUPPLIES` (``scpi``, or a plug-in of ``turntable_hil.power_supplies``;
-    the emulated supply speaks SCPI), given the settings to write."""
-    options = settings.options
-    cls = POWER_SUPPLIES.get(settings.controller or "scpi")
-    return cls(resource, SupplySettings(options.voltage_v, options.current_limit_a, options.channel))

@@ -29,7 +29,7 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
 
     plan = load_plan(args.plan)
     speed = parse_speed(args.speed)
-    power, chamber = PlanPower(plan.config, speed), PlanChamber(plan.config, speed)
+    power, chamber = PlanPower(plan.config, speed), PlanChamber(plan.config.environment.chamber, speed)
     power.check(plan)
     chamber.check(plan)
     if args.dry_run:
@@ -42,7 +42,7 @@ def run_plan(args: argparse.Namespace, commands: Commands) -> int:
         state = PlanState.open(out, plan, args.resume)
         view = _view(args, out, plan)
         ctx = StepContext(out, plan.name, state.doc["run"], args, commands, view)
-        devices = Devices(power, chamber, PlanTable(plan.config))
+        devices = Devices(power, chamber, PlanTable(plan.config.turntable))
         try:
             with StopSignals() as stop, power, chamber, devices.table:  # left in reverse: the table Off first
                 power.restore(plan, state)

@@ -10,8 +10,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from drivers.registry import CHAMBERS
-from hil.config import Config
+from hil.config_environment import ChamberConfig
 from hil.inputs import InputError
 from hil.plan.spec import Plan, Step
 from hil.plan.steps import ENDED_EARLY, INTERRUPTED
@@ -21,10 +20,10 @@ POLL_S = 5.0  # trial seconds between two readings of the chamber
 
 
 class PlanChamber:
-    """The chamber of ``config`` for one plan run (none without ``environment.chamber``), at ``speed``."""
+    """The chamber of ``environment.chamber`` (None: none) for one plan run, at ``speed``."""
 
-    def __init__(self, config: Config, speed: float | None) -> None:
-        self.settings, self.speed = config.environment.chamber, speed
+    def __init__(self, settings: ChamberConfig | None, speed: float | None) -> None:
+        self.settings, self.speed = settings, speed
         self.controller = self.emulated = None
         self.set_point_c: float | None = None  # the last soak's, which the trial steps after it run at
         self.t = 0.0  # the emulated chamber's trial time
@@ -41,7 +40,7 @@ class PlanChamber:
 
     def __exit__(self, *exc: object) -> None:
         """The chamber to its ``on_exit`` and closed."""
-        from hil.trial.chamber import release_chamber
+        from hil.trial.rig import release_chamber
 
         if self.controller is not None:
             release_chamber(self.controller, self.settings)
@@ -84,18 +83,11 @@ class PlanChamber:
 
     def _open(self) -> None:
         """The chamber's controller, open (the emulated chamber started first, at the last set point)."""
-        if self.controller is not None:
-            return
-        cfg = self.settings
-        if cfg.source == "emulator":
-            from emulators.chamber import emulated_chamber
+        from hil.trial.rig import open_plan_chamber
 
-            start = cfg.set_point_c if self.set_point_c is None else self.set_point_c
-            self.emulated = emulated_chamber(cfg.model_copy(update={"set_point_c": start}))
-            port, cls, options = self.emulated.path, CHAMBERS.get("watlow-f4"), {}
-        else:
-            port, cls, options = cfg.port, CHAMBERS.get(cfg.controller), cfg.options
-        self.controller = cls(port, cls.Options.model_validate(options)).open()
+        if self.controller is None:
+            start = self.settings.set_point_c if self.set_point_c is None else self.set_point_c
+            self.controller, self.emulated = open_plan_chamber(self.settings, start)
 
     def _wait(self, seconds: float, stop: StopSignals) -> bool:
         """``seconds`` of trial time: the emulated chamber's moved on (paced at the plan's speed), a real one's

@@ -4,15 +4,15 @@ go to their ``on_exit``. An emulated trial's table (``command_port: emulator``) 
 
 from __future__ import annotations
 
-from hil.config import Config
+from hil.config import TurntableConfig
 
 
 class PlanTable:
-    """The table of ``config`` (none without a command port of its own), sent Off when the plan ends."""
+    """The ``turntable`` block's table (none without a command port of its own), sent Off when the plan ends."""
 
-    def __init__(self, config: Config) -> None:
-        port = config.turntable.command_port
-        self.table = config.turntable
+    def __init__(self, table: TurntableConfig) -> None:
+        port = table.command_port
+        self.table = table
         self.url = port if port and port != "emulator" else None
         self.exit_state: str | None = None
 
@@ -21,15 +21,7 @@ class PlanTable:
 
     def __exit__(self, *exc: object) -> None:
         """Every axis Off and the modes read back; what the table said in :attr:`exit_state`."""
-        from drivers.table_controller import TableError
-        from hil.trial.table_control import TableControl
+        from hil.trial.rig import table_off
 
-        if self.url is None:
-            return
-        try:
-            control = TableControl(self.url, self.table).open()
-        except TableError as exc:
-            self.exit_state = f"not confirmed: {exc}"
-            return
-        control.stop()
-        self.exit_state = f"not confirmed: {control.stop_error}" if control.stop_error else "every axis Off (read back)"
+        if self.url is not None:
+            self.exit_state = table_off(self.url, self.table)

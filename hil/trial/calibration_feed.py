@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from hil.config import Config
 from hil.estimation.accel_calibration import raw_force_residuals
 from hil.estimation.calibration_model import Window
 from hil.estimation.calibration_schedule import Dwell, Plateau, Schedule
 from hil.estimation.gyro_calibration import raw_rate_residuals
 from hil.frames import Earth, TableGeometry
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.units import DEG_PER_H, UG
 
 
@@ -44,12 +44,10 @@ def window_residual(window: Window, earth: Earth, geometry: TableGeometry) -> tu
     return (raw_force_residuals([window], earth, geometry)[0] if window.static else None), gyro
 
 
-def sequence_views(viewer, schedule: Schedule, cfg: Config) -> dict:
+def sequence_views(viewer, schedule: Schedule, settings: CalibrationSettings) -> dict:
     """The ``on_step`` and ``on_window`` arguments of a calibration sequence that log to ``viewer`` (none
-    without a viewer)."""
+    without a viewer), the residuals at the site and through the table's geometry of ``settings``."""
     if viewer is None:
         return {}
-    feed = CalibrationFeed(viewer, list(schedule.dwells) + list(schedule.plateaus),
-                           Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
-                           TableGeometry.from_config(cfg.turntable))
+    feed = CalibrationFeed(viewer, list(schedule.dwells) + list(schedule.plateaus), settings.earth, settings.geometry)
     return {"on_step": feed.on_step, "on_window": feed.on_window}

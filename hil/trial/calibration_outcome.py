@@ -13,12 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from drivers.table_controller import TableError
-from hil.config import Config
 from hil.estimation.accel_calibration import calibrate_accelerometers
 from hil.estimation.calibration_model import Window
 from hil.estimation.calibration_schedule import Schedule, check_limits, schedule_duration, schedule_from_config
 from hil.estimation.gyro_calibration import calibrate_gyros
-from hil.frames import Earth, TableGeometry
 from hil.outputs.calibration import calibration_document, write_calibration
 from hil.outputs.calibration_thermal import thermal_document, thermal_section
 from hil.outputs.calibration_report import (
@@ -33,6 +31,7 @@ from hil.outputs.figures import Draw, write_figures
 from hil.outputs.judgement import Judgement
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError
 from hil.trial.table_control import check_controller
@@ -45,31 +44,31 @@ EMULATED_MARGIN = 4.0
 UNFINISHED = "the devices stopped before the schedule ended"
 
 
-def checked_schedule(cfg: Config, where: str | None = None) -> Schedule:
+def checked_schedule(settings: CalibrationSettings, where: str | None = None) -> Schedule:
     """``calibration``'s schedule; raises :class:`TrialSetupError` (prefixed with ``where``) when a step lies
     outside ``turntable.limits`` or needs what ``turntable.controller`` cannot do."""
-    schedule = schedule_from_config(cfg.calibration)
+    schedule = schedule_from_config(settings.calibration)
     prefix = f"{where}: " if where else ""
     try:
-        check_limits(schedule, cfg.turntable.limits)
+        check_limits(schedule, settings.turntable.limits)
     except ValueError as exc:
         raise TrialSetupError(f"{prefix}{exc} (turntable.limits); nothing was sent") from None
     steps = list(schedule.dwells) + list(schedule.plateaus)
     gimbals = {g for k, g in enumerate(GIMBAL_AXES) if any(s.angles[k] for s in steps)}
     gimbals |= {GIMBAL_AXES[p.axis] for p in schedule.plateaus}
     try:
-        check_controller(cfg.turntable, {"position"} | ({"rate"} if schedule.plateaus else set()), gimbals)
+        check_controller(settings.turntable, {"position"} | ({"rate"} if schedule.plateaus else set()), gimbals)
     except TableError as exc:
         raise TrialSetupError(f"{prefix}{exc}") from None
     return schedule
 
 
-def emulated_length(cfg: Config, schedule: Schedule) -> float:
+def emulated_length(settings: CalibrationSettings, schedule: Schedule) -> float:
     """Trial seconds the emulated devices run for a schedule (see :data:`EMULATED_MARGIN`), at each of
     ``calibration.temperatures_c`` after a soak of at most ``calibration.soak.timeout_s``."""
-    length = EMULATED_MARGIN * schedule_duration(schedule, cfg.turntable.limits) + 120.0
-    temperatures = cfg.calibration.temperatures_c
-    return length if temperatures is None else len(temperatures) * (length + cfg.calibration.soak.timeout_s)
+    length = EMULATED_MARGIN * schedule_duration(schedule, settings.turntable.limits) + 120.0
+    temperatures = settings.calibration.temperatures_c
+    return length if temperatures is None else len(temperatures) * (length + settings.calibration.soak.timeout_s)
 
 
 @dataclass
@@ -86,12 +85,12 @@ class CalibrationOutcome(TrialOutcome):
         return TrialKind.CALIBRATION, self.calibration or {}, None
 
     @classmethod
-    def of_sequence(cls, outcome: TrialOutcome, sequence, truth: bool, unfinished: str = UNFINISHED
-                    ) -> CalibrationOutcome:
+    def of_sequence(cls, outcome: TrialOutcome, sequence, settings: CalibrationSettings,
+                    unfinished: str = UNFINISHED) -> CalibrationOutcome:
         """``outcome`` with the calibration of the windows of ``sequence`` (a
         :class:`~hil.trial.calibration_sequence.CalibrationSequence`, or None when it never started) when
-        the trial and the schedule completed; a completed trial whose schedule did not is ended early,
-        ``unfinished`` saying why. ``truth``: the IMU's errors are the config's (an emulated or simulated IMU)."""
+        the trial and the schedule completed, fitted with its trial's ``settings``; a completed trial whose
+        schedule did not is ended early, ``unfinished`` saying why."""
         fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(TrialOutcome)}
         if outcome.ended == COMPLETED and (sequence is None or not sequence.done):
             where = sequence.progress if sequence is not None else "not started"
@@ -100,7 +99,7 @@ class CalibrationOutcome(TrialOutcome):
             return cls(**fields)
 
         try:
-            document, residuals = fit_sequence(outcome.cfg, sequence, truth)
+            document, residuals = fit_sequence(settings, sequence)
         except ValueError as exc:  # a window whose samples were all lost (gated out, or gaps in the data)
             fields["result"]["ended"] = str(TrialEnd.early(exc))
             return cls(**fields)
@@ -124,38 +123,35 @@ class CalibrationOutcome(TrialOutcome):
         return judged
 
 
-def fit_sequence(cfg: Config, sequence, truth: bool) -> tuple[dict, Residuals]:
+def fit_sequence(settings: CalibrationSettings, sequence) -> tuple[dict, Residuals]:
     """The calibration of a completed sequence's windows: at one temperature (:func:`fit_windows`), or at each
     of a :class:`~hil.trial.calibration_thermal.ThermalSequence`'s with the terms' polynomials over them
     (:func:`~hil.outputs.calibration_thermal.thermal_document`, the residuals of every temperature in turn).
     ValueError for a window that lost its samples."""
     if not isinstance(sequence, ThermalSequence):
-        return fit_windows(cfg, sequence.windows(), truth)
-    fits = [fit_windows(cfg, point.sequence.windows(), truth) for point in sequence.points]
-    document = thermal_document(cfg.calibration.thermal_order, [point.record() for point in sequence.points],
-                                [doc for doc, _ in fits], cfg.imu.errors if truth else None,
-                                cfg.turntable.zero_offset_arcsec)
+        return fit_windows(settings, sequence.windows())
+    fits = [fit_windows(settings, point.sequence.windows()) for point in sequence.points]
+    document = thermal_document(settings.calibration.thermal_order, [point.record() for point in sequence.points],
+                                [doc for doc, _ in fits], settings.truth, settings.turntable.zero_offset_arcsec)
     parts = [residuals for _, residuals in fits]
     joined = [None if getattr(parts[0], f.name) is None else np.vstack([getattr(r, f.name) for r in parts])
               for f in dataclasses.fields(Residuals)]
     return document, Residuals(*joined)
 
 
-def fit_windows(cfg: Config, windows: list[Window], truth: bool) -> tuple[dict, Residuals]:
+def fit_windows(settings: CalibrationSettings, windows: list[Window]) -> tuple[dict, Residuals]:
     """Fit the accelerometers on the dwells and the gyros on every window (when there are plateaus);
-    calibration.json's document (with ``truth`` and ``truth.as_observed`` when ``truth``) and the residuals."""
-    calibration = cfg.calibration
-    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-    geometry = TableGeometry.from_config(cfg.turntable)
+    calibration.json's document (with ``truth`` and ``truth.as_observed`` when ``settings`` carry the IMU's
+    errors) and the residuals."""
+    calibration, earth, geometry = settings.calibration, settings.earth, settings.geometry
     accel = calibrate_accelerometers(windows, earth, geometry, calibration.accel_terms, calibration.rank_tolerance)
     gyro = None
     if any(not w.static for w in windows):
         gyro = calibrate_gyros(windows, earth, geometry, accel.refined.theta[15:18],
                                accel.refined.covariance[15:18, 15:18], calibration.gyro_terms,
                                calibration.rank_tolerance)
-    zero = cfg.turntable.zero_offset_arcsec
-    errors = cfg.imu.errors if truth else None
-    document = calibration_document(accel, gyro, windows, errors, zero if truth else None)
+    zero, errors = settings.turntable.zero_offset_arcsec, settings.truth
+    document = calibration_document(accel, gyro, windows, errors, None if errors is None else zero)
     if errors is not None:
         document["truth"]["as_observed"] = observed_truth(errors, zero, geometry.body_to_mount_matrix)
     return document, window_residuals(windows, accel, gyro, earth, geometry)

@@ -18,6 +18,7 @@ from hil.config import Config
 from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.calibration_sequence import CalibrationSequence
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.live import TrialHooks
 from hil.trial.live_runner import run_live
@@ -33,24 +34,25 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
                     quiet: bool = False) -> tuple[CalibrationOutcome, object]:
     """Run the schedule and calibrate; returns the outcome (with the calibration when the schedule
     completed; its :meth:`~CalibrationOutcome.write` writes the calibration outputs too) and the viewer."""
-    schedule = checked_schedule(cfg, str(config_path))
+    settings = CalibrationSettings.of(cfg)
+    schedule = checked_schedule(settings, str(config_path))
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "
                               "('emulator' for the emulated table)")
     is_emulated = emulated(cfg)
-    duration = emulated_length(cfg, schedule) if is_emulated else None
+    duration = emulated_length(settings, schedule) if is_emulated else None
     sequences: list[CalibrationSequence] = []
 
-    def commanded(control, cfg: Config, viewer, chamber) -> TrialHooks:
+    def commanded(control, viewer, chamber) -> TrialHooks:
         control.client.apply_limits()
 
         def schedule_sequence(steps) -> CalibrationSequence:
-            return CalibrationSequence(steps, control.client, 1.0 / cfg.imu_rate_hz,
-                                       **sequence_views(viewer, steps, cfg), lacking_max=lacking_max(cfg))
+            return CalibrationSequence(steps, control.client, settings.sample_period,
+                                       **sequence_views(viewer, steps, settings), lacking_max=settings.lacking_max)
 
-        thermal = cfg.calibration.temperatures_c is not None
-        sequence = ThermalSequence(cfg, schedule, control.client, chamber, schedule_sequence) if thermal \
-            else schedule_sequence(schedule)
+        thermal = settings.calibration.temperatures_c is not None
+        sequence = ThermalSequence(settings.calibration, schedule, control.client, chamber, schedule_sequence) \
+            if thermal else schedule_sequence(schedule)
         sequence.start()
         control.client.sync_output(True)
         sequences.append(sequence)
@@ -61,14 +63,7 @@ def run_calibration(cfg: Config, config_path: Path, out: Path, speed: str, viewe
                                quiet, commanded)
     for sequence in sequences:
         sequence.report_rest()  # the last window, when the data ended at its end, before the viewer closes
-    return CalibrationOutcome.of_sequence(outcome, sequences[0] if sequences else None, is_emulated), viewer
-
-
-def lacking_max(cfg: Config) -> float:
-    """The fraction of a window's samples that may be missing: what the trial may lack (``output.limits``'s
-    missing and gated fractions), all of it where neither is limited."""
-    limits = (cfg.limits.missing_max, cfg.limits.gated_max)
-    return 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
+    return CalibrationOutcome.of_sequence(outcome, sequences[0] if sequences else None, settings), viewer
 
 
 def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str, quiet: bool = False
@@ -78,28 +73,30 @@ def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str,
     on its own windows, through its own mounting."""
     from hil.trial.units_live import UnitsCommand, run_units_live
 
-    schedule = checked_schedule(cfg, str(config_path))
+    shared = CalibrationSettings.of(cfg)  # the units' calibration block and table, the units' own read below
+    schedule = checked_schedule(shared, str(config_path))
     if not cfg.turntable.command_port:
         raise TrialSetupError("turntable.command_port: hil calibrate commands the table; set its port "
                               "('emulator' for the emulated table)")
-    if cfg.calibration.temperatures_c is not None:
+    if shared.calibration.temperatures_c is not None:
         raise TrialSetupError("calibration.temperatures_c: a calibration over temperature takes one unit so far")
     is_emulated = emulated(cfg)
+    units = {name: CalibrationSettings.of(unit_cfg) for name, unit_cfg in cfg.unit_configs().items()}
     sequences: dict[str, CalibrationSequence] = {}
 
-    def unit(name: str, client, unit_cfg: Config) -> TrialHooks:
-        sequence = sequences[name] = CalibrationSequence(schedule, client, 1.0 / unit_cfg.imu_rate_hz,
-                                                         lacking_max=lacking_max(unit_cfg))
+    def unit(name: str, client, _unit_cfg: Config) -> TrialHooks:
+        sequence = sequences[name] = CalibrationSequence(schedule, client, units[name].sample_period,
+                                                         lacking_max=units[name].lacking_max)
         sequence.start()
         return TrialHooks(motion_check=sequence, finished=lambda: sequence.done, queue_items=QUEUE_ITEMS)
 
     command = UnitsCommand(arm=lambda control: control.client.apply_limits(), unit=unit,
                            started=lambda control: control.client.sync_output(True))
-    fixture = run_units_live(cfg, config_path, out, emulated_length(cfg, schedule) if is_emulated else None, speed,
-                             quiet, command)
+    fixture = run_units_live(cfg, config_path, out, emulated_length(shared, schedule) if is_emulated else None,
+                             speed, quiet, command)
     for sequence in sequences.values():
         sequence.report_rest()
     return FixtureOutcome(fixture.name, out, {name: CalibrationOutcome.of_sequence(outcome, sequences.get(name),
-                                                                                   is_emulated)
+                                                                                   units[name])
                                               for name, outcome in fixture.units.items()},
                           absent=fixture.absent)

@@ -34,6 +34,7 @@ from hil.pipeline.settings import PipelineSettings
 from hil.trial.calibration_feed import sequence_views
 from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule, emulated_length
 from hil.trial.calibration_sequence import CalibrationSequence
+from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.calibration_thermal import ThermalSequence
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.viewer_feed import Viewer, ViewerFeed, ViewerOptions, open_viewer, watched_chamber
@@ -43,14 +44,15 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
                                ) -> tuple[CalibrationOutcome, Viewer | None]:
     """The simulated calibration trial (module docstring); its outcome (with the calibration when the
     schedule completed) and the viewer ``options`` ask for (none by default)."""
-    schedule = checked_schedule(cfg)
+    settings = CalibrationSettings.of(cfg, simulated=True)
+    schedule = checked_schedule(settings)
     sim = ServoSimulation.from_config(cfg)
-    rate = cfg.imu_rate_hz
-    end = round(emulated_length(cfg, schedule) * rate)  # samples
+    rate = settings.imu_rate_hz
+    end = round(emulated_length(settings, schedule) * rate)  # samples
     step = cfg.block_samples
     viewer = open_viewer(dataclasses.replace(options or ViewerOptions(), layout="calibration"), cfg, out, blocking=True)
     client = sim.command_client(cfg.turntable)
-    sequence = simulated_sequence(cfg, schedule, sim, client, sequence_views(viewer, schedule, cfg), viewer)
+    sequence = simulated_sequence(settings, schedule, sim, client, sequence_views(viewer, schedule, settings), viewer)
     processor = TrialProcessor(PipelineSettings.of(cfg),
                                listeners=[ViewerFeed(viewer, snapshots=False).on_progress, sequence.on_progress])
     try:
@@ -78,25 +80,26 @@ def run_calibration_simulation(cfg: Config, config_text: str, out: Path, options
     ended = str(TrialEnd(COMPLETED) if stopped(sequence) is None else TrialEnd.early(stopped(sequence)))
     outcome = TrialOutcome.of(finished, cfg, config_text, out, ended, emulated_truth(cfg))
     unfinished = f"the schedule did not end within {end / rate:.0f} s of simulated time"
-    return CalibrationOutcome.of_sequence(outcome, sequence, True, unfinished), viewer
+    return CalibrationOutcome.of_sequence(outcome, sequence, settings, unfinished), viewer
 
 
-def simulated_sequence(cfg: Config, schedule: Schedule, sim: ServoSimulation, client, views: dict,
+def simulated_sequence(settings: CalibrationSettings, schedule: Schedule, sim: ServoSimulation, client, views: dict,
                        viewer: Viewer | None):
     """The calibration's sequence on the simulated table ``client``: the schedule's, or at each of
     ``calibration.temperatures_c`` a soak and the schedule, the chamber then a first-order model in this process
-    (:class:`emulators.chamber.SimulatedChamber`) whose air the simulated IMU follows (its readings and set points
-    to ``viewer`` too)."""
-    period = 1.0 / cfg.imu_rate_hz
+    (:class:`emulators.chamber.SimulatedChamber`, of ``settings.chamber``) whose air the simulated IMU follows (its
+    readings and set points to ``viewer`` too)."""
+    period = settings.sample_period
 
     def sequence(steps: Schedule) -> CalibrationSequence:
         return CalibrationSequence(steps, client, period, **views)
 
-    if cfg.calibration.temperatures_c is None:
+    if settings.calibration.temperatures_c is None:
         return sequence(schedule)
-    model = chamber_model(cfg.environment.chamber)
+    model = chamber_model(settings.chamber)
     sim.errors.follow_chamber(model.advance)
-    return ThermalSequence(cfg, schedule, client, watched_chamber(SimulatedChamber(model), None, viewer), sequence)
+    chamber = watched_chamber(SimulatedChamber(model), None, viewer)
+    return ThermalSequence(settings.calibration, schedule, client, chamber, sequence)
 
 
 def soak_unsampled(sim: ServoSimulation, sequence: ThermalSequence, processor: TrialProcessor, step: int,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.config import Config
+from hil.config import CalibrationConfig
 from hil.estimation.calibration_model import Window
 from hil.estimation.calibration_schedule import Schedule
 from hil.pipeline.progress import Progress
@@ -67,14 +67,14 @@ class TemperaturePoint:
 
 
 class ThermalSequence:
-    """Soak and schedule at each of ``cfg.calibration.temperatures_c`` through the table ``client`` and the
+    """Soak and schedule at each of ``calibration.temperatures_c`` through the table ``client`` and the
     ``chamber`` controller; ``sequence(schedule)`` makes each temperature's
     :class:`~hil.trial.calibration_sequence.CalibrationSequence`."""
 
-    def __init__(self, cfg: Config, schedule: Schedule, client, chamber,
+    def __init__(self, calibration: CalibrationConfig, schedule: Schedule, client, chamber,
                  sequence: Callable[[Schedule], CalibrationSequence]) -> None:
-        self.temperatures = list(cfg.calibration.temperatures_c)
-        self.settings = cfg.calibration.soak
+        self.temperatures = list(calibration.temperatures_c)
+        self.settings = calibration.soak
         self.schedule, self.client, self.chamber, self.make = schedule, client, chamber, sequence
         self.points: list[TemperaturePoint] = []
         self.soak: Soak | None = None

@@ -20,13 +20,11 @@ import time
 from dataclasses import dataclass
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 
 from drivers.codec import RawChunk, StreamEvent, check_baudrate
 from drivers.reader import DeviceReader
 from drivers.tap import RawListener
-from drivers.transport import Transport, open_transport
 from hil.config import Config
 from hil.estimation.online import Snapshot
 from hil.outputs.record import start_record
@@ -38,10 +36,10 @@ from hil.pipeline.settings import PipelineSettings
 from hil.pipeline.stream_watch import StreamWatch
 from hil.trial.imu_config import check_imu_config
 from hil.trial.latency_stats import LatencyStats
+from hil.trial.rig import DataLinks
 from hil.recording.recorder import Recorder, to_ns
 from hil.trial.table_control import MotionCheck
 from hil.trial.viewer_feed import Viewer, ViewerFeed
-from hil.vocabulary import Port
 
 QUEUE_ITEMS = 20_000  # ~25 s of chunks at 200 Hz x 2 streams (and more, as chunks hold several frames)
 SYNC_CHECK_S = 10.0  # trial s between the checks of the streams' lag (a cross-correlation over up to 60 s of data)
@@ -90,25 +88,6 @@ class Fanout(RawListener):
         drain()
 
 
-def transports(cfg: Config, ports: dict[str, Any] | None = None, table: Transport | None = None
-               ) -> dict[str, Transport]:
-    """The IMU and table transports, from the emulator's ports (ports.json) or from the config; ``table``: the
-    table's, already made (shared by several units)."""
-    ports = ports or {}
-    imu_port = ports.get(Port.IMU) or (cfg.imu.can.port if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port)
-    if not imu_port:
-        raise TrialAborted("imu: no port (set imu.port, or imu.source: emulator)")
-    return {IMU: open_transport(imu_port, IMU, cfg.imu.baudrate), TABLE: table or table_transport(cfg, ports)}
-
-
-def table_transport(cfg: Config, ports: dict[str, Any]) -> Transport:
-    """The table's data transport, from the emulator's ports (ports.json) or from the config."""
-    table_port = ports.get(Port.TABLE_DATA, cfg.turntable.data_port)
-    if not table_port:
-        raise TrialAborted("turntable: no data_port (set turntable.data_port, or turntable.source: emulator)")
-    return open_transport(table_port, TABLE, cfg.turntable.baudrate)
-
-
 def _warn(text: str) -> None:
     print(f"hil: WARNING: {text}", file=sys.stderr)
 
@@ -149,8 +128,8 @@ class TrialHooks:
 
 
 class LiveTrial:
-    """Acquire, record and estimate until the duration is reached, the devices stop, or a stop signal,
-    with the runner's :class:`TrialHooks`.
+    """Acquire, record and estimate from ``links`` (:meth:`hil.trial.rig.Rig.links`, opened by its readers) until
+    the duration is reached, the devices stop, or a stop signal, with the runner's :class:`TrialHooks`.
 
     ``time_scale`` is the emulator's speed. An outage of every device shorter than ``output.outage_limit_s``
     is ridden out (the readers reconnect), a longer one ends the trial early. A trial whose IMU samples are
@@ -159,9 +138,9 @@ class LiveTrial:
     the bytes decode as).
     """
 
-    def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None,
-                 ports: dict[str, Any] | None = None, viewer: Viewer | None = None, time_scale: float | None = 1.0,
-                 hooks: TrialHooks = TrialHooks()) -> None:
+    def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None, links: DataLinks,
+                 viewer: Viewer | None = None, time_scale: float | None = 1.0, hooks: TrialHooks = TrialHooks()
+                 ) -> None:
         self.cfg = cfg
         self.hooks = hooks
         self.sync_warned = False
@@ -181,15 +160,15 @@ class LiveTrial:
         self.processor = TrialProcessor(settings, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
         gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         shared = hooks.table_reader
-        opened = transports(cfg, ports, None if shared is None else shared.transport)
+        opened = links.transports
         codecs = settings.codecs()
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
-            check_baudrate("imu", codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
+            check_baudrate(IMU, codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
         check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
         self.stream_watch = StreamWatch.of(settings, {s: t.address for s, t in opened.items()})
         imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
-                                 record=start_record(cfg, config_text, ports, imu_config))  # once the trial can start
+                                 record=start_record(cfg, config_text, links.recorded_ports(), imu_config))
         self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()

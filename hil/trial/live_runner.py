@@ -5,6 +5,7 @@ viewer closed and the emulator reaped on every way out, signals included."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from pathlib import Path
 
@@ -20,11 +21,11 @@ from hil.trial.viewer_feed import ViewerOptions, open_viewer, watched_chamber
 from hil.viewer.console_progress import ConsoleProgress
 
 
-# Given the open table control, the config, the viewer (or None) and the open chamber controller (or None), starts
-# the table and returns the trial's hooks for it: what watches it (``motion_check``, a listener of the pipeline), and
-# for a trial the harness paces, ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it
+# Given the open table control, the viewer (or None) and the open chamber controller (or None), starts the table and
+# returns the trial's hooks for it: what watches it (``motion_check``, a listener of the pipeline), and for a trial
+# the harness paces, ``finished`` and ``queue_items``; the default arms ``turntable.motion`` and checks it
 # (:class:`MotionCheck`).
-Commanded = Callable[[object, Config, object, object], TrialHooks]
+Commanded = Callable[[object, object, object], TrialHooks]
 
 
 def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, speed: str,
@@ -47,7 +48,7 @@ def run_live(cfg: Config, config_path: Path, out: Path, duration: float | None, 
     config_text = config_path.read_text()
     with StopSignals() as signals:
         trial, ended = _acquire(_Request(cfg, config_path, config_text, out, duration, speed, time_scale, viewer, quiet),
-                                lambda: signals.received, commanded or _arm)
+                                lambda: signals.received, commanded or functools.partial(_arm, cfg))
         outcome = TrialOutcome.of(trial.finished, cfg, config_text, out, ended, emulated_truth(cfg))
     return outcome, trial.viewer
 
@@ -80,10 +81,10 @@ def _acquire(request: _Request, stop_requested, commanded: Commanded):
             with ConsoleProgress(duration, quiet=request.quiet) as progress:
                 hooks = TrialHooks()
                 if rig.table is not None:
-                    hooks = dataclasses.replace(commanded(rig.table, cfg, viewer, chamber), on_end=rig.table.stop)
+                    hooks = dataclasses.replace(commanded(rig.table, viewer, chamber), on_end=rig.table.stop)
                 hooks = dataclasses.replace(hooks, source_done=rig.source_done, on_progress=progress.update,
                                             on_warning=progress.warn, stop_requested=stop_requested)
-                trial = LiveTrial(cfg, request.config_text, out, duration, rig.ports, viewer, request.time_scale,
+                trial = LiveTrial(cfg, request.config_text, out, duration, rig.links(), viewer, request.time_scale,
                                   hooks)
                 return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
@@ -101,7 +102,7 @@ def _check_motion(cfg: Config) -> None:
         raise TrialSetupError(str(exc)) from None
 
 
-def _arm(control, cfg: Config, viewer, chamber) -> TrialHooks:
+def _arm(cfg: Config, control, viewer, chamber) -> TrialHooks:
     """``hil run``: the configured motion, checked against what the table reports."""
     control.arm()
     return TrialHooks(motion_check=MotionCheck(cfg.turntable, cfg.trial.rate_hz))

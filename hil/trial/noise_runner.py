@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from emulators.simulation import Simulation
-from hil.config import Config, ImuErrors, load_config
+from hil.config import Config, ImuErrors, RecordConfig, load_config
 from hil.estimation.allan import DEFAULT_LEVEL, AllanAnalysis, analyse
 from hil.estimation.allan_detrend import TEMPERATURE_DEGREE, linear_trend, temperature_trend
 from hil.estimation.allan_fit import TERM_NAMES
@@ -65,17 +65,37 @@ class AllanSettings:
 
 
 @dataclass(frozen=True)
+class NoiseSettings:
+    """What the analysis takes from a trial's config, read once by :meth:`NoiseSettings.of`: the trial's name, the
+    site and the table's geometry (a moving record's motion taken out) and the ``record`` block."""
+
+    trial_name: str
+    earth: Earth
+    geometry: TableGeometry
+    record: RecordConfig
+
+    @classmethod
+    def of(cls, cfg: Config) -> NoiseSettings:
+        """The settings of a one-unit :class:`hil.config.Config`."""
+        return cls(cfg.trial.name, Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
+                   TableGeometry.from_config(cfg.turntable), cfg.record)
+
+
+@dataclass(frozen=True)
 class NoiseRecord:
     """A trial's increments and what the analysis needs to know of the trial."""
 
     batch: AlignedBatch
     source: str  # "devices", "simulation", "recording" or "csv"
-    cfg: Config | None  # the trial's config (site, table): --config, else the recorded or simulated one
+    settings: NoiseSettings | None  # the trial's (site, table): --config's, else the recorded or simulated config's
 
     @property
-    def source_config(self) -> Config | None:
-        """The config the source was (simulated or acquired from its devices); None for a recording or a CSV."""
-        return self.cfg if self.source in ("simulation", "devices") else None
+    def source_record(self) -> RecordConfig | None:
+        """The ``record`` block of the config the source was (simulated or acquired from its devices); None for a
+        recording or a CSV."""
+        if self.settings is None or self.source not in ("simulation", "devices"):
+            return None
+        return self.settings.record
 
 
 def read_source(source: NoiseSource, out: Path) -> NoiseRecord:
@@ -85,21 +105,23 @@ def read_source(source: NoiseSource, out: Path) -> NoiseRecord:
     given = None if source.config is None else load_config(source.config)
     if path.is_dir() or path.suffix == ".mcap":
         batch, recorded = _replayed(path)
-        return NoiseRecord(batch, "recording", given or recorded)
+        return NoiseRecord(batch, "recording", NoiseSettings.of(given or recorded))
     if path.suffix == ".csv":
-        return NoiseRecord(read_increments_csv(path, given), "csv", given)
+        return NoiseRecord(read_increments_csv(path, given), "csv", None if given is None else NoiseSettings.of(given))
     cfg = load_config(resolve_path(path))
     if cfg.imu.source == cfg.turntable.source == "emulator":
         if duration is not None:  # --duration: the simulated trial's length too
             cfg = cfg.model_copy(update={"trial": cfg.trial.model_copy(update={"duration_s": duration})})
         return simulated(cfg)
 
-    return NoiseRecord(_replayed(acquire(cfg, path, out, duration, source.quiet))[0], "devices", cfg)
+    return NoiseRecord(_replayed(acquire(cfg, path, out, duration, source.quiet))[0], "devices",
+                       NoiseSettings.of(cfg))
 
 
 def simulated(cfg: Config) -> NoiseRecord:
     """The emulator's increments of a trial config, as ``hil simulate`` draws them."""
-    return NoiseRecord(_concatenated(list(Simulation.from_config(cfg).batches())), "simulation", cfg)
+    return NoiseRecord(_concatenated(list(Simulation.from_config(cfg).batches())), "simulation",
+                       NoiseSettings.of(cfg))
 
 
 def _replayed(path: Path) -> tuple[AlignedBatch, Config]:
@@ -207,11 +229,10 @@ def analyse_record(record: NoiseRecord, label: str, settings: AllanSettings = Al
         if batch.angles is None:
             raise TrialSetupError(f"{label}: the IMU moves and there are no table angles to take the motion out: "
                                   "the noise terms need a static trial, or the table's angles with the increments")
-        cfg = record.cfg
-        if cfg is None:
+        trial = record.settings
+        if trial is None:
             raise TrialSetupError(f"{label}: a moving trial's CSV needs --config for the site and the table geometry")
-        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-        dtheta, dv = motion_residuals(batch, TableGeometry.from_config(cfg.turntable), earth)
+        dtheta, dv = motion_residuals(batch, trial.geometry, trial.earth)
     temperature = np.full(len(batch), np.nan) if batch.temperature_c is None else batch.temperature_c
     missing, (dtheta, dv, temperature) = with_gaps(batch.t, period, dtheta, dv, temperature)
     removed, taken = (), {"kind": detrend}
@@ -247,13 +268,14 @@ def _temperature_coefficients(gyro: np.ndarray, accel: np.ndarray, about_c: floa
 
 
 def run_noise(source: NoiseSource, out: Path, settings: AllanSettings = AllanSettings(), *, figure: bool = True,
-              export: Path | None = None, view=None, record: Callable[[Config | None], dict] | None = None) -> dict:
+              export: Path | None = None, view=None, record: Callable[[RecordConfig | None], dict] | None = None
+              ) -> dict:
     """Analyse ``source`` with ``settings`` (its ``taus`` as ``--taus`` gives them, comma separated) and write
     OUT/noise.json, allan.png and report.html; returns the noise document. ``view`` (an
     :class:`~hil.viewer.allan_view.AllanView`, or None) is shown the curves as they form (:func:`show_forming`).
     A config that reads devices is acquired first (see :mod:`hil.trial.noise_acquisition`).
-    ``record(source_config)`` gives noise.json's ``record`` once the analysis is done (``source_config``:
-    :attr:`NoiseRecord.source_config`)."""
+    ``record(block)`` gives noise.json's ``record`` once the analysis is done (``block``:
+    :attr:`NoiseRecord.source_record`)."""
     try:
         settings = dataclasses.replace(settings, taus=parse_taus(settings.taus))
     except ValueError as exc:
@@ -263,9 +285,9 @@ def run_noise(source: NoiseSource, out: Path, settings: AllanSettings = AllanSet
         write_increments_csv(export, samples.batch)
     label = str(source.source)
     analysis = analyse_record(samples, label, settings)
-    analysis.doc["trial"] = {"name": samples.cfg.trial.name if samples.cfg else Path(source.source).stem}
+    analysis.doc["trial"] = {"name": samples.settings.trial_name if samples.settings else Path(source.source).stem}
     if record is not None:
-        analysis.doc["record"] = record(samples.source_config)
+        analysis.doc["record"] = record(samples.source_record)
     if view is not None:
         show_forming(view, samples, analysis, lambda part: analyse_record(part, label, settings))
     write_noise(out, analysis.doc, analysis.gyro, analysis.accel, figure=figure)

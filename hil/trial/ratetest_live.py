@@ -46,7 +46,7 @@ def live_steps(cfg: Config, plan, config_path: Path, out: Path, speed: str, quie
     duration = EMULATED_MARGIN * nominal + 120.0 if emulated(cfg) else None
     sequences: list[RateSequence] = []
 
-    def commanded(control, cfg: Config, viewer, chamber) -> TrialHooks:
+    def commanded(control, viewer, chamber) -> TrialHooks:
         control.client.apply_limits()
         sequence = RateSequence(steps, control.client, 1.0 / cfg.imu_rate_hz)
         sequence.start()

@@ -1,9 +1,10 @@
 """``hil ratetest scale-factor|frequency-response``: the rate-table tests (docs/ratetests.md).
 
 :func:`run_scale_factor` and :func:`run_frequency_response` take the trial's config and the test's settings
-(a config's ``scale_factor`` / ``frequency_response``, or a plan step's), check every step against the table's
-limits before anything is sent, command the steps (:mod:`hil.trial.rate_steps`) and fit the windows; they
-return the test's document (scale_factor.json, frequency_response.json), which
+(a config's ``scale_factor`` / ``frequency_response``, or a plan step's) and read what the test uses once
+(:class:`~hil.trial.ratetest_settings.RateTestSettings`), which the functions below them take; they check every
+step against the table's limits before anything is sent, command the steps (:mod:`hil.trial.rate_steps`) and fit
+the windows; they return the test's document (scale_factor.json, frequency_response.json), which
 :func:`hil.outputs.ratetest.write_ratetest` writes with its figure, report and junit.xml.
 
 The steps run by default in simulation (:func:`simulate_steps`, ``--simulate``): the emulated table's servo and
@@ -26,11 +27,11 @@ from hil.config import Config
 from hil.config_ratetests import FrequencyResponseSettings, ScaleFactorSettings
 from hil.estimation.frequency_response import DB, fit_response, model, response_at
 from hil.estimation.rate_scale_factor import RatePoint, fit_scale_factor
-from hil.frames import Earth, TableGeometry
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.samples import GIMBAL_AXES
 from hil.trial.outcome import TrialSetupError
 from hil.trial.rate_steps import RateSequence, RateStep, StepWindow, axis_in_body, placements
+from hil.trial.ratetest_settings import RateTestSettings
 from hil.units import DEG, DEG_PER_H, PPM
 
 # Runs the steps ``plan(gimbals)`` makes (the table's gimbals given) on a trial's devices: the windows and how it ended
@@ -47,54 +48,56 @@ LATCH_TOLERANCE = 0.05  # of an IMU period: a fitted delay within it (and 3 sigm
 LACKING_MAX = 0.01  # a rate step's window lacking more of its samples is left out of the fit
 
 
-def scale_factor_steps(cfg: Config, settings: ScaleFactorSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
-    """Both directions of every rate about each gyro axis; TrialSetupError naming the key for a rate beyond the
-    table's limit."""
+def scale_factor_steps(settings: RateTestSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
+    """Both directions of every rate of ``settings.scale_factor`` about each gyro axis; TrialSetupError naming
+    the key for a rate beyond the table's limit."""
     steps = []
-    for gyro, angles, axis in _placements(cfg, settings.axes, gimbals, "scale_factor.axes"):
-        limit = cfg.turntable.limits.rate_dps[axis]
-        for rate in settings.rates_dps:
+    test = settings.scale_factor
+    for gyro, angles, axis in _placements(settings, test.axes, gimbals, "scale_factor.axes"):
+        limit = settings.limits.rate_dps[axis]
+        for rate in test.rates_dps:
             if not 0.0 < rate <= limit:
                 raise TrialSetupError(f"scale_factor.rates_dps: {rate:g} deg/s is beyond turntable.limits.rate_dps "
                                       f"of the {GIMBAL_AXES[axis]} axis ({limit:g} deg/s); nothing was sent")
-            turns = max(1, math.floor(settings.dwell_s * rate / 360.0))
-            steps += [RateStep(gyro, angles, axis, turns * 360.0 / rate, settings.settle_s, rate=sign * rate * DEG)
+            turns = max(1, math.floor(test.dwell_s * rate / 360.0))
+            steps += [RateStep(gyro, angles, axis, turns * 360.0 / rate, test.settle_s, rate=sign * rate * DEG)
                       for sign in (1.0, -1.0)]
     return steps
 
 
-def frequency_steps(cfg: Config, settings: FrequencyResponseSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
-    """An oscillation at each frequency about each gyro axis, its amplitude within the table's rate and
-    acceleration limits; TrialSetupError naming the key for a frequency the IMU or the table cannot serve."""
+def frequency_steps(settings: RateTestSettings, gimbals: tuple[str, ...]) -> list[RateStep]:
+    """An oscillation at each frequency of ``settings.frequency_response`` about each gyro axis, its amplitude
+    within the table's rate and acceleration limits; TrialSetupError naming the key for a frequency the IMU or
+    the table cannot serve."""
     steps = []
-    limits = cfg.turntable.limits
-    for gyro, angles, axis in _placements(cfg, settings.axes, gimbals, "frequency_response.axes"):
-        for f in sorted(settings.frequencies_hz):
+    limits, test = settings.limits, settings.frequency_response
+    for gyro, angles, axis in _placements(settings, test.axes, gimbals, "frequency_response.axes"):
+        for f in sorted(test.frequencies_hz):
             w = 2.0 * math.pi * f
-            if not 0.0 < f < cfg.imu_rate_hz / 2.0:
+            if not 0.0 < f < settings.imu_rate_hz / 2.0:
                 raise TrialSetupError(f"frequency_response.frequencies_hz: {f:g} Hz is not below half the IMU's "
-                                      f"rate imu.rate_hz ({cfg.imu_rate_hz:g} Hz); nothing was sent")
-            if f * TABLE_SAMPLES_PER_CYCLE > cfg.trial.rate_hz:
+                                      f"rate imu.rate_hz ({settings.imu_rate_hz:g} Hz); nothing was sent")
+            if f * TABLE_SAMPLES_PER_CYCLE > settings.trial_rate_hz:
                 raise TrialSetupError(f"frequency_response.frequencies_hz: {f:g} Hz: the table reports its angles at "
-                                      f"trial.rate_hz ({cfg.trial.rate_hz:g} Hz), fewer than "
+                                      f"trial.rate_hz ({settings.trial_rate_hz:g} Hz), fewer than "
                                       f"{TABLE_SAMPLES_PER_CYCLE} a cycle; nothing was sent")
-            amplitude = min(settings.amplitude_deg, MARGIN * limits.rate_dps[axis] / w,
+            amplitude = min(test.amplitude_deg, MARGIN * limits.rate_dps[axis] / w,
                             MARGIN * limits.accel_dps2[axis] / w**2)
-            if amplitude * w < settings.min_rate_dps:
+            if amplitude * w < test.min_rate_dps:
                 raise TrialSetupError(
                     f"frequency_response.frequencies_hz: {f:g} Hz: turntable.limits.accel_dps2 of the "
                     f"{GIMBAL_AXES[axis]} axis ({limits.accel_dps2[axis]:g} deg/s^2) allows a rate amplitude of "
-                    f"{amplitude * w:.3g} deg/s, below frequency_response.min_rate_dps ({settings.min_rate_dps:g}); "
+                    f"{amplitude * w:.3g} deg/s, below frequency_response.min_rate_dps ({test.min_rate_dps:g}); "
                     "nothing was sent")
-            cycles = max(MIN_CYCLES, math.ceil(settings.dwell_s * f))
-            steps.append(RateStep(gyro, angles, axis, cycles / f, settings.settle_s, amplitude=amplitude * DEG,
+            cycles = max(MIN_CYCLES, math.ceil(test.dwell_s * f))
+            steps.append(RateStep(gyro, angles, axis, cycles / f, test.settle_s, amplitude=amplitude * DEG,
                                   frequency=f))
     return steps
 
 
-def _placements(cfg: Config, axes: list[str], gimbals: tuple[str, ...], key: str) -> list:
+def _placements(settings: RateTestSettings, axes: list[str], gimbals: tuple[str, ...], key: str) -> list:
     try:
-        return placements(gimbals, TableGeometry.from_config(cfg.turntable), axes, key)
+        return placements(gimbals, settings.geometry, axes, key)
     except ValueError as exc:
         raise TrialSetupError(str(exc)) from None
 
@@ -128,26 +131,25 @@ def simulate_steps(cfg: Config, plan) -> tuple[list[StepWindow], str]:
     return sequence.windows(), COMPLETED
 
 
-def _input_geometry(cfg: Config, step: RateStep) -> tuple[np.ndarray, float]:
+def _input_geometry(settings: RateTestSettings, step: RateStep) -> tuple[np.ndarray, float]:
     """The turning gimbal's unit vector in the body frame and the earth's rate about it (rad/s)."""
-    geometry = TableGeometry.from_config(cfg.turntable)
+    geometry = settings.geometry
     direction = axis_in_body(geometry, step.angles, step.axis)
     c_bn = geometry.attitude_matrix(np.array(step.angles))[0][0]
-    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
-    return direction, float(earth.omega_n @ (c_bn @ direction))
+    return direction, float(settings.earth.omega_n @ (c_bn @ direction))
 
 
-def rate_point(cfg: Config, window: StepWindow, period: float) -> RatePoint:
+def rate_point(settings: RateTestSettings, window: StepWindow, period: float) -> RatePoint:
     """A rate step's input (the encoder's whole turns over the window and the earth's rate about the axis, on
     the gyro) and the gyro's mean output with its 1-sigma (NaN for a window the pipeline took fewer than two
     samples of); saturated (:func:`saturation`) or not."""
     step = window.step
     gyro = window.dtheta[:, step.gyro] / period
-    saturated = saturation(window, gyro, period, cfg.scale_factor.gyro_range_dps)
+    saturated = saturation(window, gyro, period, settings.scale_factor.gyro_range_dps)
     n = len(window.t)
     if n < 2:
         return RatePoint(step.rate, math.nan, math.nan, math.nan, saturated)
-    direction, earth = _input_geometry(cfg, step)
+    direction, earth = _input_geometry(settings, step)
     table = float(np.sum(window.turn[:, step.axis]) / np.sum(window.dt))
     return RatePoint(step.rate, direction[step.gyro] * (table + earth), float(np.mean(gyro)),
                      float(np.std(gyro, ddof=1) / math.sqrt(n)), saturated)
@@ -166,17 +168,17 @@ def saturation(window: StepWindow, gyro: np.ndarray, period: float, range_dps: f
     return None
 
 
-def scale_factor_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
+def scale_factor_document(settings: RateTestSettings, windows: list[StepWindow], ended: str) -> dict:
     """scale_factor.json's document (docs/ratetests.md) of the windows."""
-    period = 1.0 / cfg.imu_rate_hz
+    period = 1.0 / settings.imu_rate_hz
     axes = {}
     for gyro in sorted({w.step.gyro for w in windows}):
-        points = [rate_point(cfg, w, period) for w in windows if w.step.gyro == gyro]
+        points = [rate_point(settings, w, period) for w in windows if w.step.gyro == gyro]
         axes["xyz"[gyro]] = _scale_factor_axis(points)
-    doc = {"test": "scale_factor", "trial": {"name": cfg.trial.name}, "ended": ended,
-           "settings": cfg.scale_factor.model_dump(), "axes": axes}
-    if cfg.imu.source == "emulator":
-        e = cfg.imu.errors
+    doc = {"test": "scale_factor", "trial": {"name": settings.trial_name}, "ended": ended,
+           "settings": settings.scale_factor.model_dump(), "axes": axes}
+    if settings.truth is not None:
+        e = settings.truth
         doc["truth"] = {"xyz"[k]: {"scale_factor_ppm": e.gyro_scale_ppm[k], "bias_dph": e.gyro_bias_dph[k],
                                    "asymmetry_ppm": abs(e.scale_asymmetry_ppm[k]),
                                    "asymmetry_signed_ppm": e.scale_asymmetry_ppm[k], "nonlinearity_ppm": 0.0}
@@ -207,37 +209,38 @@ def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def frequency_response_document(cfg: Config, windows: list[StepWindow], ended: str) -> dict:
+def frequency_response_document(settings: RateTestSettings, windows: list[StepWindow], ended: str) -> dict:
     """frequency_response.json's document (docs/ratetests.md) of the windows."""
-    period = 1.0 / cfg.imu_rate_hz
+    period = 1.0 / settings.imu_rate_hz
     axes = {}
     for gyro in sorted({w.step.gyro for w in windows}):
         mine = [w for w in windows if w.step.gyro == gyro]
         f = np.array([w.step.frequency for w in mine])
         measured = []
         for w in mine:
-            direction = axis_in_body(TableGeometry.from_config(cfg.turntable), w.step.angles, w.step.axis)
+            direction = axis_in_body(settings.geometry, w.step.angles, w.step.axis)
             table = w.turn[:, w.step.axis] * direction[gyro] / w.dt
             measured.append(response_at(w.t, w.dtheta[:, gyro] / period, table, w.step.frequency))
         ratio, sigma = np.array([m[0] for m in measured]), np.array([m[1] for m in measured])
         axes["xyz"[gyro]] = _response_axis(f, ratio, sigma, [w.step.amplitude / DEG for w in mine])
-        axes["xyz"[gyro]]["latch_check"] = latch_check(cfg, axes["xyz"[gyro]])
-    doc = {"test": "frequency_response", "trial": {"name": cfg.trial.name}, "ended": ended,
-           "settings": cfg.frequency_response.model_dump(), "axes": axes}
-    if cfg.imu.source == "emulator":
-        e = cfg.imu.errors
+        axes["xyz"[gyro]]["latch_check"] = latch_check(settings, axes["xyz"[gyro]])
+    doc = {"test": "frequency_response", "trial": {"name": settings.trial_name}, "ended": ended,
+           "settings": settings.frequency_response.model_dump(), "axes": axes}
+    if settings.truth is not None:
+        e = settings.truth
         doc["truth"] = {"bandwidth_hz": e.bandwidth_hz, "damping": e.damping if e.bandwidth_hz else None,
                         "delay_ms": e.delay_ms}
     return doc
 
 
-def latch_check(cfg: Config, axis: dict) -> str:
+def latch_check(settings: RateTestSettings, axis: dict) -> str:
     """Whether the fitted delay agrees with the latch delays the config states: the aligner puts each sample at
     its device's stated latch, so a delay beyond 3 sigma (and ``LATCH_TOLERANCE`` of a period) is the IMU's
     output lagging what ``imu.latch_delay_us`` says, or the stated latch delays being off."""
-    stated = f"imu.latch_delay_us {cfg.imu.latch_delay_us:g}, turntable.latch_delay_us {cfg.turntable.latch_delay_us:g}"
+    stated = (f"imu.latch_delay_us {settings.imu_latch_delay_us:g}, "
+              f"turntable.latch_delay_us {settings.table_latch_delay_us:g}")
     delay, sigma = axis["delay_ms"], axis["delay_sigma_ms"]
-    if abs(delay) <= 3.0 * sigma + LATCH_TOLERANCE * 1e3 / cfg.imu_rate_hz:
+    if abs(delay) <= 3.0 * sigma + LATCH_TOLERANCE * 1e3 / settings.imu_rate_hz:
         return f"agrees with the latch delays stated ({stated})"
     return (f"disagrees: the gyro {'lags' if delay > 0 else 'leads'} the encoder by {abs(delay):.3f} ms beyond the "
             f"latch delays stated ({stated}): the IMU's output delay, latch delays that are off, or streams paired a "
@@ -265,13 +268,15 @@ def run_scale_factor(cfg: Config, settings: ScaleFactorSettings, steps_run: Step
     """The scale factor test with ``settings``, its steps run by ``steps_run`` (by default in simulation, else
     e.g. :func:`hil.trial.ratetest_live.live_steps` with its trial's arguments); its document."""
     cfg = cfg.model_copy(update={"scale_factor": settings})
-    windows, ended = steps_run(cfg, lambda gimbals: scale_factor_steps(cfg, settings, gimbals))
-    return scale_factor_document(cfg, windows, ended)
+    rate_test = RateTestSettings.of(cfg)
+    windows, ended = steps_run(cfg, lambda gimbals: scale_factor_steps(rate_test, gimbals))
+    return scale_factor_document(rate_test, windows, ended)
 
 
 def run_frequency_response(cfg: Config, settings: FrequencyResponseSettings,
                            steps_run: StepsRun = simulate_steps) -> dict:
     """The frequency response test with ``settings``, its steps run by ``steps_run``; its document."""
     cfg = cfg.model_copy(update={"frequency_response": settings})
-    windows, ended = steps_run(cfg, lambda gimbals: frequency_steps(cfg, settings, gimbals))
-    return frequency_response_document(cfg, windows, ended)
+    rate_test = RateTestSettings.of(cfg)
+    windows, ended = steps_run(cfg, lambda gimbals: frequency_steps(rate_test, gimbals))
+    return frequency_response_document(rate_test, windows, ended)

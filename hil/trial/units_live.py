@@ -21,7 +21,7 @@ from drivers.transport import TransportError
 from emulators.process import parse_speed
 from hil.config import Config
 from hil.outputs.units_index import UNITS_DIR
-from hil.trial.live import LiveTrial, TrialHooks, table_transport
+from hil.trial.live import LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
@@ -29,7 +29,6 @@ from hil.trial.table_control import MotionCheck, TableControl
 from hil.trial.units import FixtureOutcome, unit_config_text
 from hil.trial.viewer_feed import ViewerOptions, bias_truth, fixture_view, open_viewer
 from hil.viewer.console_progress import ConsoleProgress, UnitsProgress
-from hil.vocabulary import Port
 
 JOIN_S = 0.2  # how often the main thread looks up from the units' threads (signals are taken meanwhile)
 
@@ -124,13 +123,13 @@ def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, 
         with Rig(cfg, setup.config_path, setup.out, setup.speed, setup.duration) as rig, \
                 ConsoleProgress(setup.duration, quiet=setup.quiet) as progress:
             hooks = TrialHooks(on_warning=progress.warn, stop_requested=stop_requested, source_done=rig.source_done)
-            table = DeviceReader(table_transport(cfg, rig.ports or {}),
+            table = DeviceReader(rig.table_transport(),
                                  gather_s=cfg.read_s if setup.time_scale is not None else 0.0)
             try:
                 if rig.table is not None:
                     setup.command.arm(rig.table)
                 absent: dict[str, tuple[str | None, str]] = {}
-                trials = _unit_trials(setup, rig.ports, dataclasses.replace(hooks, table_reader=table), rig.table,
+                trials = _unit_trials(setup, rig, dataclasses.replace(hooks, table_reader=table),
                                       UnitsProgress(progress, list(cfg.unit_configs())), absent, overview)
                 overview = _opened(overview, trials, progress.warn)
                 if rig.table is not None:
@@ -144,18 +143,16 @@ def _acquire(setup: _Setup, stop_requested) -> tuple[list[UnitTrial], dict[str, 
         raise TrialSetupError(str(exc)) from None
 
 
-def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: TableControl | None,
-                 progress: UnitsProgress, absent: dict[str, tuple[str | None, str]], overview) -> list[UnitTrial]:
-    """Each unit's trial on its own IMU port and the shared table reader: where the table is commanded, its hooks
-    from the command (the first present unit's commanding the table), its warnings named by the unit, its progress
-    in the console's one line, its snapshots to the fixture's ``overview`` too (None: none).
+def _unit_trials(setup: _Setup, rig: Rig, hooks: TrialHooks, progress: UnitsProgress,
+                 absent: dict[str, tuple[str | None, str]], overview) -> list[UnitTrial]:
+    """Each unit's trial on its own IMU port and the shared table reader (``hooks.table_reader``): where the table is
+    commanded, its hooks from the command (the first present unit's commanding the table), its warnings named by the
+    unit, its progress in the console's one line, its snapshots to the fixture's ``overview`` too (None: none).
     A unit whose port cannot be opened is refused naming the unit and the port; an optional one is left out, added
     to ``absent`` with its port's error, and warned of (every unit absent refuses the trial)."""
     trials: list[UnitTrial] = []
+    control = rig.table
     for k, (name, unit) in enumerate(setup.cfg.unit_configs().items()):
-        unit_ports = None
-        if ports is not None:
-            unit_ports = {Port.IMU: ports[Port.UNITS][name][Port.IMU], Port.TABLE_DATA: ports[Port.TABLE_DATA]}
         unit_hooks = hooks
         if control is not None:
             client = ListeningClient(control.client) if trials else control.client
@@ -176,7 +173,8 @@ def _unit_trials(setup: _Setup, ports: dict | None, hooks: TrialHooks, control: 
             options = dataclasses.replace(options, connect=trials[0].trial.viewer.grpc_url)
         view = open_viewer(options, unit, unit_out, blocking=False)
         try:
-            trial = LiveTrial(unit, text, unit_out, setup.duration, unit_ports, view, setup.time_scale, unit_hooks)
+            links = rig.unit_links(name, unit, hooks.table_reader.transport)
+            trial = LiveTrial(unit, text, unit_out, setup.duration, links, view, setup.time_scale, unit_hooks)
             _check_opens(trial)
         except TransportError as exc:
             if view is not None:

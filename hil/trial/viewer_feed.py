@@ -24,6 +24,7 @@ from hil.trial.outcome import TrialSetupError, emulated_truth
 from hil.units import HOUR, UG
 from hil.viewer.modes import ViewerOptions
 from hil.viewer.verdict import final_markdown
+from hil.vocabulary import Stream
 
 
 class Viewer(Protocol):
@@ -132,7 +133,8 @@ def flag_health(counts: StreamCounts) -> dict[str, dict[str, float]]:
     if "imu_invalid" not in counts.extra:
         return {}
     by_flag = counts.extra.get("imu_invalid_by_flag") or {}
-    return {"imu": {"invalid": counts.extra["imu_invalid"], **{FLAG_PREFIX + name: n for name, n in by_flag.items()}}}
+    flags = {FLAG_PREFIX + name: n for name, n in by_flag.items()}
+    return {Stream.IMU: {"invalid": counts.extra["imu_invalid"], **flags}}
 
 
 class ChamberFeed:

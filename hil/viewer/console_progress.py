@@ -12,6 +12,7 @@ from rich.progress import Progress, TextColumn
 
 from hil.estimation.online import Snapshot
 from hil.units import UG
+from hil.vocabulary import Stream
 
 PLAIN_S = 5.0  # s between the plain lines when stderr is not a terminal
 SEPARATOR = " | "
@@ -53,7 +54,7 @@ class ConsoleProgress:
         """Called by the trial about twice a second with the trial time (s), the latest snapshot and the
         stream health."""
         now = time.monotonic()
-        frames = {name: health[name]["frames"] for name in ("imu", "table")}
+        frames = {name: health[name]["frames"] for name in Stream}
         rates = {name: 0.0 for name in frames}
         if self._last is not None:
             then, before = self._last
@@ -80,7 +81,7 @@ class ConsoleProgress:
               rates: dict[str, float]) -> list[str]:
         """The status line's parts, most important first."""
         streams = []
-        for name in ("imu", "table"):
+        for name in Stream:
             faults = "".join(f" {key[0]}{health[name][key]:.0f}" for key in ("corrupt", "missing") if health[name][key])
             streams.append(f"{name} {rates[name]:.0f}Hz{faults}")
         p99 = health["aligner"].get("age_p99_ms")
