@@ -32,7 +32,7 @@ from emulators.clocks import counter_starts
 from emulators.process import EmulatorRun, spawn_emulator, stop_emulator
 from hil.config import load_config
 from hil.pipeline.progress import Progress
-from hil.trial.live import LiveTrial, TrialHooks
+from hil.trial.live import LiveSettings, LiveTrial, TrialHooks
 from hil.trial.rig import data_links
 from hil.vocabulary import DevicePorts
 
@@ -106,7 +106,7 @@ def main() -> None:
         emulator, ports = spawn_emulator(config, out / "ports.json", run)
         time.sleep(late)
         frames = FrameAges()
-        trial = LiveTrial(cfg, text, out, args.duration, data_links(cfg, DevicePorts.of(ports)), hooks=TrialHooks(
+        trial = LiveTrial(LiveSettings.of(cfg), text, out, args.duration, data_links(cfg, DevicePorts.of(ports)), hooks=TrialHooks(
             source_done=lambda: emulator.poll() is not None, listeners=(frames.on_progress,)))
         memory: list[tuple[float, float]] = []
 

@@ -27,7 +27,7 @@ from hil.trial.calibration_outcome import CalibrationOutcome, checked_schedule
 from hil.trial.calibration_sequence import CalibrationSequence, StepWindow
 from hil.trial.calibration_settings import CalibrationSettings
 from hil.trial.calibration_simulation import run_calibration_simulation
-from hil.trial.outcome import TrialOutcome
+from hil.trial.outcome import OutputSettings, TrialOutcome
 from hil.units import ARCSEC, DEG
 
 SHORT = {"dwell_s": 2, "plateau_s": 5}  # the live test's schedule with shorter windows
@@ -149,7 +149,7 @@ def test_a_window_whose_samples_were_all_lost_ends_the_trial_early_with_the_wind
     sequence._index = len(sequence.steps)  # the schedule went through
     t = np.arange(1, 301) / RATE_HZ  # the samples stop at 1.5 s
     sequence.keep(t, np.zeros((300, 3)), np.zeros((300, 3)), np.zeros((300, 3)))
-    outcome = TrialOutcome(cfg, "", tmp_path / "out", {"ended": "completed"}, [])
+    outcome = TrialOutcome(OutputSettings.of(cfg), "", tmp_path / "out", {"ended": "completed"}, [])
     calibrated = CalibrationOutcome.of_sequence(outcome, sequence, settings)
     assert calibrated.ended == ("early: calibration position 1: 800 of the 800 samples of its window 2.00..6.00 s "
                                 "were rejected or lost (more than 0.00%): no fit on it")

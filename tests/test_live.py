@@ -15,7 +15,7 @@ from hil.config import load_config
 from hil.recording.recorder import Recorder, read_recording
 from hil.recording.replay import open_recording
 from hil.trial.latency_stats import LatencyStats
-from hil.trial.live import LiveTrial, TrialAborted
+from hil.trial.live import LiveSettings, LiveTrial, TrialAborted
 from hil.trial.rig import data_links
 from hil.vocabulary import DevicePorts
 from hil.trial.offline import replay_recording
@@ -206,7 +206,7 @@ def test_a_live_trial_rides_out_an_outage_shorter_than_its_limit(tmp_path):
     cfg = load_config("configs/lab_swing.yaml")
     unasked = cfg.imu.model_copy(update={"options": {**cfg.imu.options, "check_config": False}})  # no port is opened
     cfg = cfg.model_copy(update={"output": cfg.output.model_copy(update={"outage_limit_s": 3.0}), "imu": unasked})
-    trial = LiveTrial(cfg, "", tmp_path, None, data_links(cfg, DevicePorts("/dev/imu", "/dev/table")))
+    trial = LiveTrial(LiveSettings.of(cfg), "", tmp_path, None, data_links(cfg, DevicePorts("/dev/imu", "/dev/table")))
     try:
         trial.fanout.last_arrival = 100.0  # the last data, monotonic s
         trial._check_alive(102.9, started=90.0)  # an outage of 2.9 s: the trial goes on

@@ -202,7 +202,7 @@ def test_a_units_trial_ends_a_unit_whose_imu_or_the_table_is_silent_for_the_outa
     """The other units' data keep a unit's fan-out busy: its own IMU, or the shared table, silent for
     ``output.outage_limit_s`` (or silent from the start for 15 s) ends its trial, naming the stream and port."""
     from drivers.reader import DeviceReader
-    from hil.trial.live import LiveTrial, TrialAborted, TrialHooks
+    from hil.trial.live import LiveSettings, LiveTrial, TrialAborted, TrialHooks
     from hil.trial.rig import data_links, table_transport
     from hil.vocabulary import DevicePorts
 
@@ -211,7 +211,7 @@ def test_a_units_trial_ends_a_unit_whose_imu_or_the_table_is_silent_for_the_outa
                                  "imu": cfg.imu.model_copy(update={"options": {"check_config": False}})})
     ports = DevicePorts("/dev/imu-a", "/dev/table")
     table = DeviceReader(table_transport(cfg, ports))
-    trial = LiveTrial(cfg, "", tmp_path, None, data_links(cfg, ports, table.transport),
+    trial = LiveTrial(LiveSettings.of(cfg), "", tmp_path, None, data_links(cfg, ports, table.transport),
                       hooks=TrialHooks(table_reader=table))
     try:
         assert [r.transport.stream for r in trial.readers] == ["imu"] and table.raw_listeners == [trial.fanout]

@@ -22,7 +22,7 @@ from hil.outputs.result import ENDED_EARLY, INTERRUPTED, trial_verdict
 from hil.pipeline.processor import TrialProcessor
 from hil.pipeline.settings import PipelineSettings
 from hil.samples import AlignedBatch
-from hil.trial.outcome import TrialOutcome
+from hil.trial.outcome import OutputSettings, TrialOutcome
 from tests.helpers import make_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,9 +92,11 @@ def test_an_estimate_holding_nan_is_not_a_completed_trial(tmp_path, capsys):
 
 def test_report_exits_as_the_trials_verdict(tmp_path, capsys):
     outcome = _simulated_outcome(tmp_path)
-    outcome.cfg = outcome.cfg.model_copy(update={"output": outcome.cfg.output.model_copy(
-        update={"limits": ReportLimits(bias_sigma_ug_max=1e-9)})})
-    outcome.config_text = outcome.cfg.model_dump_json()  # read back as YAML by hil report
+    cfg = make_config(duration=30.0)  # the trial's, with a limit it fails
+    failing = cfg.output.model_copy(update={"limits": ReportLimits(bias_sigma_ug_max=1e-9)})
+    cfg = cfg.model_copy(update={"output": failing})
+    outcome.settings = OutputSettings.of(cfg)
+    outcome.config_text = cfg.model_dump_json()  # read back as YAML by hil report
     assert outcome.exit_code(outcome.write(figures=False).verdict) == 3
     assert main(["report", str(outcome.out)]) == 3
     result = json.loads((outcome.out / "result.json").read_text())

@@ -47,8 +47,8 @@ def written(args: argparse.Namespace, outcome, figures=None):
 
     draw = write_figures if figures is None else figures.draw
     history = None if args.no_history or figures is None else _imported_meanwhile("hil.history.filing")
-    outcome.result["record"] = trial_record(outcome.cfg, outcome.config_text, args.started, datetime.now(timezone.utc),
-                                            outcome.out)
+    outcome.result["record"] = trial_record(outcome.settings.record, outcome.config_text, args.started,
+                                            datetime.now(timezone.utc), outcome.out)
     judged = outcome.write(figures=not args.no_figures, draw=draw)
     if not args.no_history:
         if history is not None:

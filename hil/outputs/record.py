@@ -9,6 +9,7 @@ import hashlib
 import json
 import socket
 import subprocess
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -43,34 +44,48 @@ def run_record(fields: dict[str, Any], config_text: str | None, started: datetim
             "host": socket.gethostname()}
 
 
-def _devices(cfg: Config, ports: dict[str, Any] | None) -> dict[str, Any]:
-    """The record's ``ports`` (``ports`` as found, else the config's) and ``controller`` (none without a command
-    port)."""
-    if ports is None:
+@dataclass(frozen=True)
+class RecordSource:
+    """What a trial's record takes from its config, read once by :meth:`of`: the ``record`` block, the ports the
+    config names (the record's when the devices were not found on others) and the table's controller (None without
+    a command port)."""
+
+    block: RecordConfig
+    ports: dict[str, Any]
+    controller: str | None
+
+    @classmethod
+    def of(cls, cfg: Config) -> RecordSource:
+        """The record's source of a one-unit config."""
         imu = cfg.imu.can.model_dump() if cfg.imu.source == "can" and cfg.imu.can else cfg.imu.port
         ports = {Port.IMU: imu, Port.TABLE_DATA: cfg.turntable.data_port, Port.TABLE_CMD: cfg.turntable.command_port}
-    return {"ports": ports, "controller": cfg.turntable.controller if cfg.turntable.command_port else None}
+        return cls(cfg.record, ports, cfg.turntable.controller if cfg.turntable.command_port else None)
+
+    def devices(self, ports: dict[str, Any] | None) -> dict[str, Any]:
+        """The record's ``ports`` (``ports`` as found, else the config's) and ``controller``."""
+        return {"ports": self.ports if ports is None else ports, "controller": self.controller}
 
 
-def trial_record(cfg: Config, config_text: str, started: datetime, ended: datetime, out: Path) -> dict[str, Any]:
-    """The record of a trial of ``cfg`` (its YAML ``config_text``) that ran from ``started`` to ``ended`` (aware
-    datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it started), else
-    the config's."""
+def trial_record(source: RecordSource, config_text: str, started: datetime, ended: datetime, out: Path
+                 ) -> dict[str, Any]:
+    """The record of a trial (its config's ``source``, its YAML ``config_text``) that ran from ``started`` to
+    ``ended`` (aware datetimes, UTC) into ``out``: the ports its recording says it read (those of the emulator it
+    started), else the config's."""
     recorded = _start_record(out / "recording.mcap") or {}
     ports, imu_config = (json.loads(recorded[key]) if recorded.get(key) else None for key in ("ports", "imu_config"))
-    return {**run_record(cfg.record.model_dump(), config_text, started, ended), **_devices(cfg, ports),
+    return {**run_record(source.block.model_dump(), config_text, started, ended), **source.devices(ports),
             "imu_config": imu_config}
 
 
-def start_record(cfg: Config, config_text: str, ports: dict[str, Any] | None,
+def start_record(source: RecordSource, config_text: str, ports: dict[str, Any] | None,
                  imu_config: dict[str, Any] | None = None) -> dict[str, Any]:
     """The record of a trial as it starts (the recording's metadata): :func:`trial_record`'s fields but
     ``ended_utc``, with the ``ports`` the devices were found on (None: the config's) and what the IMU said of its
     configuration (``imu_config``: :func:`hil.trial.imu_config.check_imu_config`; None: not asked)."""
     now = datetime.now(timezone.utc)
-    record = run_record(cfg.record.model_dump(), config_text, now, now)
+    record = run_record(source.block.model_dump(), config_text, now, now)
     del record["ended_utc"]
-    return {**record, **_devices(cfg, ports), "imu_config": imu_config}
+    return {**record, **source.devices(ports), "imu_config": imu_config}
 
 
 def _start_record(recording: Path) -> dict[str, str] | None:

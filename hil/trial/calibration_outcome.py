@@ -110,7 +110,7 @@ class CalibrationOutcome(TrialOutcome):
         """The residual figure (when calibrated), the trial's outputs, then calibration.json with the trial's
         record and calibration.html headed by its verdict; returns the trial's judgement."""
         image = None
-        if self.calibration is not None and self.calibration["positions"] and figures and self.cfg.output.figures:
+        if self.calibration is not None and self.calibration["positions"] and figures and self.settings.figures:
             image = write_residual_figure(self.out, self.residuals)  # before the report, which leads with it
         judged = super().write(figures, draw)
         if self.calibration is not None:
@@ -118,7 +118,7 @@ class CalibrationOutcome(TrialOutcome):
                 self.calibration["record"] = self.result["record"]
             write_calibration(self.out / "calibration.json", self.calibration)
             thermal = "thermal" in self.calibration
-            extra = thermal_section(self.calibration, figures and self.cfg.output.figures) if thermal else ""
+            extra = thermal_section(self.calibration, figures and self.settings.figures) if thermal else ""
             write_calibration_report(self.out, self.calibration, self.result, judged.verdict, image, extra)
         return judged
 

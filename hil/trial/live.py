@@ -27,7 +27,7 @@ from drivers.reader import DeviceReader
 from drivers.tap import RawListener
 from hil.config import Config
 from hil.estimation.online import Snapshot
-from hil.outputs.record import start_record
+from hil.outputs.record import RecordSource, start_record
 from hil.outputs.result import COMPLETED, TrialEnd
 from hil.pipeline.decoding import IMU, TABLE
 from hil.pipeline.processor import TrialProcessor
@@ -127,6 +127,22 @@ class TrialHooks:
     table_reader: DeviceReader | None = None
 
 
+@dataclass(frozen=True)
+class LiveSettings:
+    """What a live trial takes from its one-unit config, read once by :meth:`of`: the pipeline's settings, the
+    table's frame rate (``trial.rate_hz``), ``output.outage_limit_s`` and the source of its record."""
+
+    pipeline: PipelineSettings
+    table_rate_hz: float
+    outage_limit_s: float
+    record: RecordSource
+
+    @classmethod
+    def of(cls, cfg: Config) -> LiveSettings:
+        """The live settings of a one-unit config."""
+        return cls(PipelineSettings.of(cfg), cfg.trial.rate_hz, cfg.output.outage_limit_s, RecordSource.of(cfg))
+
+
 class LiveTrial:
     """Acquire, record and estimate from ``links`` (:meth:`hil.trial.rig.Rig.links`, opened by its readers) until
     the duration is reached, the devices stop, or a stop signal, with the runner's :class:`TrialHooks`.
@@ -138,10 +154,10 @@ class LiveTrial:
     the bytes decode as).
     """
 
-    def __init__(self, cfg: Config, config_text: str, out: Path, duration: float | None, links: DataLinks,
+    def __init__(self, settings: LiveSettings, config_text: str, out: Path, duration: float | None, links: DataLinks,
                  viewer: Viewer | None = None, time_scale: float | None = 1.0, hooks: TrialHooks = TrialHooks()
                  ) -> None:
-        self.cfg = cfg
+        self.settings = settings
         self.hooks = hooks
         self.sync_warned = False
         self.out = out
@@ -156,19 +172,19 @@ class LiveTrial:
         listeners = [ViewerFeed(viewer, self._live_health).on_progress, *hooks.listeners]
         if hooks.motion_check is not None:
             listeners.append(self._check_motion)
-        settings = PipelineSettings.of(cfg)
-        self.processor = TrialProcessor(settings, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
-        gather = cfg.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
+        pipeline = settings.pipeline
+        self.processor = TrialProcessor(pipeline, duration, time_scale, listeners, offset_every_s=SYNC_CHECK_S)
+        gather = pipeline.read_s if time_scale is not None else 0.0  # at --speed max a read holds plenty anyway
         shared = hooks.table_reader
         opened = links.transports
-        codecs = settings.codecs()
+        codecs = pipeline.codecs()
         if opened[IMU].byte_stream:  # a real port's line too (the emulator checks its own)
-            check_baudrate(IMU, codecs[IMU].frame_bytes(), cfg.imu_rate_hz, cfg.imu.baudrate)
-        check_baudrate("turntable", codecs[TABLE].frame_bytes(), cfg.trial.rate_hz, cfg.turntable.baudrate)
-        self.stream_watch = StreamWatch.of(settings, {s: t.address for s, t in opened.items()})
+            check_baudrate(IMU, codecs[IMU].frame_bytes(), pipeline.imu_rate_hz, pipeline.imu.baudrate)
+        check_baudrate("turntable", codecs[TABLE].frame_bytes(), settings.table_rate_hz, pipeline.turntable.baudrate)
+        self.stream_watch = StreamWatch.of(pipeline, {s: t.address for s, t in opened.items()})
         imu_config = check_imu_config(codecs[IMU], opened[IMU], hooks.on_warning)
         self.recorder = Recorder(out / "recording.mcap", config_text, duration=duration, time_scale=time_scale,
-                                 record=start_record(cfg, config_text, links.recorded_ports(), imu_config))
+                                 record=start_record(settings.record, config_text, links.recorded_ports(), imu_config))
         self.queue: queue.Queue = queue.Queue(hooks.queue_items)
         self.fanout = Fanout(self.recorder, self.queue)
         self.readers = [DeviceReader(t, raw_listeners=[self.fanout], gather_s=gather) for t in opened.values()
@@ -275,7 +291,7 @@ class LiveTrial:
             self.latency.fed(item.host_time, progress.aligned)
             if progress.updates != updates:
                 self.latency.updated(progress.waiting)
-        warning = None if self.sync_warned else lag_warning(progress.time_offset_s, self.cfg.imu_rate_hz)
+        warning = None if self.sync_warned else lag_warning(progress.time_offset_s, self.settings.pipeline.imu_rate_hz)
         if warning is not None:
             self.sync_warned = True
             self.hooks.on_warning(warning)
@@ -299,7 +315,7 @@ class LiveTrial:
         table_last = self._last_arrival(TABLE, now)
         if self.hooks.motion_check is not None and table_last and now - table_last > TABLE_WATCHDOG_S:
             raise TrialAborted(f"watchdog: no data from the commanded turntable for {TABLE_WATCHDOG_S:.0f} s")
-        limit = self.cfg.output.outage_limit_s
+        limit = self.settings.outage_limit_s
         if self.hooks.table_reader is not None:
             self._check_streams(now - started, now, limit)
         if last and now - last > limit:

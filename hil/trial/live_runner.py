@@ -12,7 +12,7 @@ from pathlib import Path
 from drivers.table_controller import InterlockError, LimitError, TableError
 from emulators.process import parse_speed
 from hil.config import Config
-from hil.trial.live import LiveTrial, TrialHooks
+from hil.trial.live import LiveSettings, LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
@@ -84,8 +84,8 @@ def _acquire(request: _Request, stop_requested, commanded: Commanded):
                     hooks = dataclasses.replace(commanded(rig.table, viewer, chamber), on_end=rig.table.stop)
                 hooks = dataclasses.replace(hooks, source_done=rig.source_done, on_progress=progress.update,
                                             on_warning=progress.warn, stop_requested=stop_requested)
-                trial = LiveTrial(cfg, request.config_text, out, duration, rig.links(), viewer, request.time_scale,
-                                  hooks)
+                trial = LiveTrial(LiveSettings.of(cfg), request.config_text, out, duration, rig.links(), viewer,
+                                  request.time_scale, hooks)
                 return trial, trial.run()
     except (TableError, LimitError, InterlockError) as exc:
         raise TrialSetupError(str(exc)) from None

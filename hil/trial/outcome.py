@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.config import Config, InputError
+from hil.config import Config, InputError, ReportLimits
 from hil.estimation.online import Snapshot
 from hil.outputs.figures import Draw, write_figures
 from hil.outputs.judgement import Judgement
+from hil.outputs.record import RecordSource
 from hil.outputs.result import (COMPLETED, TrialEnd, non_finite_figure, summary_text, trial_result,
                                verdict_exit_code)
 from hil.outputs.trial_outputs import write_trial_outputs
@@ -40,12 +41,27 @@ def emulated_truth(cfg: Config) -> dict | None:
     return {"accel_bias_ug": [float(b) for b in bias / UG], "accel_drift_ug_per_h": [float(d) for d in drift / UG]}
 
 
+@dataclass(frozen=True)
+class OutputSettings:
+    """What a finished trial's outputs take from its config, read once by :meth:`of`: ``output.limits``, whether
+    ``output.figures`` are drawn, and the source of its record."""
+
+    limits: ReportLimits
+    figures: bool
+    record: RecordSource
+
+    @classmethod
+    def of(cls, cfg: Config) -> OutputSettings:
+        """The output settings of a one-unit config."""
+        return cls(cfg.limits, cfg.output.figures, RecordSource.of(cfg))
+
+
 @dataclass
 class TrialOutcome:
-    """A finished trial: its config, where its outputs go, the result.json document, the snapshots and the IMU's
-    temperature at each (by its time)."""
+    """A finished trial: its output settings, config text and output directory, the result.json document, the
+    snapshots and the IMU's temperature at each (by its time)."""
 
-    cfg: Config
+    settings: OutputSettings
     config_text: str
     out: Path
     result: dict
@@ -68,7 +84,7 @@ class TrialOutcome:
             ended = str(TrialEnd.early(f"{figure} is not finite: the data holds values the estimator cannot take"))
         result = {"trial": result["trial"], "ended": ended, "calibration_applied": finished.calibration_applied,
                   **{k: v for k, v in result.items() if k != "trial"}}
-        return cls(cfg, config_text, out, result, finished.snapshots, finished.temperatures)
+        return cls(OutputSettings.of(cfg), config_text, out, result, finished.snapshots, finished.temperatures)
 
     def filed_as(self) -> tuple[str, dict, Path | None]:
         """How the history files this trial (docs/history.md): its kind, the document its figures are read from,
@@ -84,8 +100,8 @@ class TrialOutcome:
         """Write every output and print the summary (the figures drawn by ``draw``); returns the trial's judgement:
         its measurements and its verdict, PASS or FAIL against ``output.limits`` for a completed trial, else
         INTERRUPTED or ENDED EARLY."""
-        judged = write_trial_outputs(self.out, self.result, self.snapshots, self.cfg.limits,
-                                     self.config_text, figures=figures and self.cfg.output.figures, draw=draw,
+        judged = write_trial_outputs(self.out, self.result, self.snapshots, self.settings.limits,
+                                     self.config_text, figures=figures and self.settings.figures, draw=draw,
                                      temperatures=self.temperatures)
         print(summary_text(self.result, self.out))
         against = "against output.limits" if self.ended == COMPLETED else \

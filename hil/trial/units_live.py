@@ -21,7 +21,7 @@ from drivers.transport import TransportError
 from emulators.process import parse_speed
 from hil.config import Config
 from hil.outputs.units_index import UNITS_DIR
-from hil.trial.live import LiveTrial, TrialHooks
+from hil.trial.live import LiveSettings, LiveTrial, TrialHooks
 from hil.trial.outcome import TrialOutcome, TrialSetupError, emulated_truth
 from hil.trial.rig import Rig, emulated
 from hil.trial.stop_signals import StopSignals
@@ -174,7 +174,8 @@ def _unit_trials(setup: _Setup, rig: Rig, hooks: TrialHooks, progress: UnitsProg
         view = open_viewer(options, unit, unit_out, blocking=False)
         try:
             links = rig.unit_links(name, unit, hooks.table_reader.transport)
-            trial = LiveTrial(unit, text, unit_out, setup.duration, links, view, setup.time_scale, unit_hooks)
+            trial = LiveTrial(LiveSettings.of(unit), text, unit_out, setup.duration, links, view, setup.time_scale,
+                              unit_hooks)
             _check_opens(trial)
         except TransportError as exc:
             if view is not None:
