@@ -9,11 +9,12 @@ from pathlib import Path
 from typing import Any
 
 from hil.history.spool import file_spooled, keep
-from hil.history.store import History, HistoryError, resolve
+from hil.history.location import resolve
+from hil.history.store import History, HistoryError
 
 
 def file_trial(option: str | None, row: dict[str, Any]) -> None:
-    """Append ``row`` to the history ``option`` names (:func:`~hil.history.store.resolve`), then the rows
+    """Append ``row`` to the history ``option`` names (:func:`~hil.history.location.resolve`), then the rows
     spooled for it; a failure is one warning line on stderr, the row kept in the spool."""
     history = History(resolve(option))
     try:

@@ -12,7 +12,8 @@ from typing import Any
 from hil.history.filing import sync_spool
 from hil.history.page import write_history_page
 from hil.history.repeatability import history_summary
-from hil.history.store import History, HistoryError, resolve
+from hil.history.location import resolve
+from hil.history.store import History, HistoryError
 from hil.inputs import InputError
 
 LEFT_OUT_WORDS = {"replay": "replays of a trial", "not_completed": "not completed",

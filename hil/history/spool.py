@@ -12,7 +12,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from hil.history.store import History, data_dir
+from hil.history.location import data_dir
+from hil.history.store import History
 
 _HOST = socket.gethostname().replace(".", "_").replace("-", "_")  # a claim's name: STEM.HOST-PID.claim
 

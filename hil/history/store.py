@@ -16,7 +16,7 @@ import sqlalchemy as sa  # a dependency: SQLite needs nothing more, a server its
 from sqlalchemy.engine import URL, Connection, Engine
 from sqlalchemy.exc import ArgumentError
 
-from hil.history.location import ENV, HEAD, data_dir, default_location, resolve  # noqa: F401
+from hil.history.location import HEAD, default_location
 from hil.history.tables import COLUMNS, trials
 
 LOCK_TIMEOUT_S = 2.0  # how long a SQLite write waits for another writer's lock before it gives up
