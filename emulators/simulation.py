@@ -60,7 +60,7 @@ class Simulation:
 def emulated_world(cfg: Config) -> tuple[Truth, SensorErrorModel]:
     """The truth (site, table, the configured ``turntable.motion``) and the IMU's errors (seeded with
     ``trial.seed``) of a config, its temperature after the chamber held at ``environment.chamber.set_point_c``."""
-    earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+    earth = Earth.from_config(cfg.site)
     site = cfg.site
     truth = Truth(earth, TableGeometry.from_config(cfg.turntable), motion_from_config(cfg.turntable.motion),
                   (site.deflection_arcsec[0] * ARCSEC, site.deflection_arcsec[1] * ARCSEC),

@@ -20,9 +20,7 @@ import numpy as np
 from hil.units import DEG
 
 if TYPE_CHECKING:
-    from hil.config import (
-        TurntableConfig,  # the schema is needed for the annotation only
-    )
+    from hil.config import SiteConfig, TurntableConfig  # the schemas are needed for the annotations only
 
 EARTH_RATE = 7.2921151467e-5  # rad/s, WGS-84
 WGS84_A = 6378137.0  # m, semi-major axis
@@ -84,6 +82,11 @@ class Earth:
     @classmethod
     def from_degrees(cls, latitude_deg: float, height_m: float = 0.0) -> Earth:
         return cls(latitude_deg * DEG, height_m)
+
+    @classmethod
+    def from_config(cls, site: SiteConfig) -> Earth:
+        """The Earth at a config's ``site``."""
+        return cls.from_degrees(site.latitude_deg, site.height_m)
 
 
 def site_specific_force(earth: Earth, deflection: tuple[float, float] = (0.0, 0.0), anomaly: float = 0.0) -> np.ndarray:

@@ -36,7 +36,7 @@ class PipelineSettings:
     @classmethod
     def of(cls, cfg: Any) -> PipelineSettings:
         """The settings of a one-unit :class:`hil.config.Config`."""
-        earth = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m)
+        earth = Earth.from_config(cfg.site)
         return cls(earth, TableGeometry.from_config(cfg.turntable), cfg.imu, cfg.turntable, cfg.estimator,
                    cfg.imu_rate_hz, cfg.table_counter_rate_hz, cfg.table_counts_per_frame, cfg.block_samples,
                    cfg.reads_per_block, cfg.read_s, cfg.output.stream_timeout_s)

@@ -75,7 +75,7 @@ def refuse_implausible(path: Path, data: np.ndarray, lines: list[int], cfg: Conf
     that turn faster than the table can (:func:`_implausible_angles`). Without ``cfg``, standard gravity and the
     default rate limits."""
     limits = (cfg.turntable.limits if cfg else LimitsConfig()).rate_dps
-    gravity = Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m).g if cfg else G0
+    gravity = Earth.from_config(cfg.site).g if cfg else G0
     problem = _implausible_increments(data, limits, gravity)
     if problem is None and data.shape[1] > len(INCREMENT_COLUMNS):
         problem = _implausible_angles(data, limits)

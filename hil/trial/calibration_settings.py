@@ -41,6 +41,6 @@ class CalibrationSettings:
         limits = (cfg.limits.missing_max, cfg.limits.gated_max)
         lacking_max = 1.0 if limits == (None, None) else sum(v or 0.0 for v in limits)
         truth = cfg.imu.errors if simulated or cfg.imu.source == "emulator" else None
-        return cls(cfg.calibration, cfg.turntable, Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
+        return cls(cfg.calibration, cfg.turntable, Earth.from_config(cfg.site),
                    TableGeometry.from_config(cfg.turntable), cfg.imu_rate_hz, lacking_max, cfg.environment.chamber,
                    truth)

@@ -77,7 +77,7 @@ class NoiseSettings:
     @classmethod
     def of(cls, cfg: Config) -> NoiseSettings:
         """The settings of a one-unit :class:`hil.config.Config`."""
-        return cls(cfg.trial.name, Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
+        return cls(cfg.trial.name, Earth.from_config(cfg.site),
                    TableGeometry.from_config(cfg.turntable), cfg.record)
 
 

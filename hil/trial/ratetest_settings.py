@@ -31,7 +31,7 @@ class RateTestSettings:
     @classmethod
     def of(cls, cfg: Config) -> RateTestSettings:
         """The settings of a one-unit :class:`hil.config.Config`."""
-        return cls(cfg.trial.name, Earth.from_degrees(cfg.site.latitude_deg, cfg.site.height_m),
+        return cls(cfg.trial.name, Earth.from_config(cfg.site),
                    TableGeometry.from_config(cfg.turntable), cfg.turntable.limits, cfg.imu_rate_hz, cfg.trial.rate_hz,
                    cfg.imu.latch_delay_us, cfg.turntable.latch_delay_us, cfg.scale_factor, cfg.frequency_response,
                    cfg.imu.errors if cfg.imu.source == "emulator" else None)
