@@ -81,12 +81,13 @@ def run_units_calibration(cfg: Config, config_path: Path, out: Path, speed: str,
     if shared.calibration.temperatures_c is not None:
         raise TrialSetupError("calibration.temperatures_c: a calibration over temperature takes one unit so far")
     is_emulated = emulated(cfg)
-    units = {name: CalibrationSettings.of(unit_cfg) for name, unit_cfg in cfg.unit_configs().items()}
+    units: dict[str, CalibrationSettings] = {}  # each unit's own, read from its config as its trial is made
     sequences: dict[str, CalibrationSequence] = {}
 
-    def unit(name: str, client, _unit_cfg: Config) -> TrialHooks:
-        sequence = sequences[name] = CalibrationSequence(schedule, client, units[name].sample_period,
-                                                         lacking_max=units[name].lacking_max)
+    def unit(name: str, client, unit_cfg: Config) -> TrialHooks:
+        settings = units[name] = CalibrationSettings.of(unit_cfg)
+        sequence = sequences[name] = CalibrationSequence(schedule, client, settings.sample_period,
+                                                         lacking_max=settings.lacking_max)
         sequence.start()
         return TrialHooks(motion_check=sequence, finished=lambda: sequence.done, queue_items=QUEUE_ITEMS)
 
