@@ -158,11 +158,13 @@ def open_supply(cfg: PowerConfig):
     supply: ScpiSupply = cls(resource, SupplySettings(options.voltage_v, options.current_limit_a, options.channel))
     try:
         return supply.open(), server
-    except SupplyError as exc:
+    except BaseException as exc:  # the connection and the emulated supply closed on every way out, as the chamber's
         supply.close()
         if server is not None:
             server.close()
-        raise InputError(f"environment.power: {exc}") from None
+        if isinstance(exc, SupplyError):
+            raise InputError(f"environment.power: {exc}") from None
+        raise
 
 
 def table_off(url: str, turntable) -> str:
