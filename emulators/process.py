@@ -65,6 +65,11 @@ class EmulatorRun:
     stats_file: Path | None = None
     link_dir: Path | None = None
 
+    @property
+    def pace(self) -> float | None:
+        """The multiple of real time, None for ``max`` (:func:`parse_speed`)."""
+        return parse_speed(self.speed)
+
     def arguments(self) -> list[str]:
         """These options on the command line of ``python -m emulators``."""
         args = ["--speed", self.speed]
@@ -97,12 +102,11 @@ def run_emulator(cfg: Config, run: EmulatorRun = EmulatorRun(), ports_file: Path
     owner = _Owner(os.getppid())
     with _SignalsStop(stop):
         try:
-            speed = parse_speed(run.speed)
-            bench = Bench(cfg, duration, speed, stop, run.wait_readers, run.link_dir)
+            bench = Bench(cfg, duration, run.pace, stop, run.wait_readers, run.link_dir)
             print(json.dumps(bench.names()), flush=True)
             if ports_file is not None:
                 _write_json(ports_file, bench.names())
-            stats = _pulse_train(bench, speed, stop, run, lambda ended: owner.write(run.stats_file, ended.as_dict()))
+            stats = _pulse_train(bench, stop, run, lambda ended: owner.write(run.stats_file, ended.as_dict()))
             owner.write(run.stats_file, stats.as_dict())
             return stats
         finally:
@@ -112,7 +116,7 @@ def run_emulator(cfg: Config, run: EmulatorRun = EmulatorRun(), ports_file: Path
                 ports_file.unlink(missing_ok=True)
 
 
-def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, run: EmulatorRun,
+def _pulse_train(bench: Bench, stop: threading.Event, run: EmulatorRun,
                  train_ended: Callable[[EmulatorStats], None]) -> EmulatorStats:
     """The pulse train of :func:`run_emulator` until done or stopped, the bytes written left to the readers,
     and with ``run.hold`` the devices kept up until stopped (``train_ended`` told of the train's statistics first);
@@ -120,7 +124,7 @@ def _pulse_train(bench: Bench, speed: float | None, stop: threading.Event, run: 
     hold = run.hold
     if run.wait_readers and not wait_for_readers(bench.ptys(), stop):
         return bench.stats(0, 0.0, True)
-    clock = SyncClock(speed)
+    clock = SyncClock(run.pace)
     pulses = bench.pulse_loop(clock, stop)
     # held devices wait for their reader however slow: the stats file then means "all was read"
     for writer in bench.writers.values():
